@@ -1,0 +1,32 @@
+// eval.hpp — evaluating a scene's SDF: a tape (post-order list of 32-bit (node, sign) words, see
+// sdf_math.h) run on a small value stack. The full tree is the tape Scene::full_tape: evaluating
+// it at every query is the paper's naive baseline.
+//
+// Thread-safety: all functions are pure; batch functions run on oneTBB.
+#pragma once
+
+#include <functional>
+#include <span>
+
+#include "scene.hpp"
+
+namespace sdfprune {
+
+struct EvalOptions {
+    int threads = 0;  // worker threads; 0 = all hardware threads
+};
+
+// Evaluates `tape` at p. `stack` must hold scene.max_stack floats.
+float eval_tape(const Scene& scene, std::span<const uint32_t> tape, vec3 p, float* stack);
+
+// The full tree's value at p (allocates its stack; use eval_points for many points).
+float eval_point(const Scene& scene, vec3 p);
+
+// The full tree's values at many points, in parallel. out.size() must equal points.size().
+void eval_points(const Scene& scene, std::span<const vec3> points, std::span<float> out,
+                 const EvalOptions& options = {});
+
+// Runs fn() with at most `threads` oneTBB workers (0 = no limit).
+void with_threads(int threads, const std::function<void()>& fn);
+
+}  // namespace sdfprune

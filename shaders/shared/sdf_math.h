@@ -1,0 +1,199 @@
+// sdf_math.h — the math of sdfprune, written once: primitive SDFs, the blending kernel, the
+// unified CSG operator, the pruning test and the tape-word packing (DESIGN.md §2–3).
+// It is valid C++20 (through glsl_compat.hpp) and GLSL 450, so the CPU backend and the Vulkan
+// shaders cannot drift. Rules for this file: value parameters only, no recursion, no templates,
+// no swizzles (C++ has none), float literals with an 'f' suffix, every id defined here once.
+#ifndef SDFPRUNE_SDF_MATH_H
+#define SDFPRUNE_SDF_MATH_H
+
+#ifdef __cplusplus
+#include "glsl_compat.hpp"
+#define SDFPRUNE_FN inline
+#define SDFPRUNE_CONST inline constexpr
+namespace sdfprune::math {
+using namespace sdfprune::glsl;
+#else
+#define SDFPRUNE_FN
+#define SDFPRUNE_CONST const
+#endif
+
+// ---- ids, defined once ----------------------------------------------------------------------
+// Primitive kinds (a node's kind < kPrimitiveKindCount means it is a primitive).
+SDFPRUNE_CONST uint kPrimSphere = 0u;
+SDFPRUNE_CONST uint kPrimBox = 1u;
+SDFPRUNE_CONST uint kPrimCylinder = 2u;
+SDFPRUNE_CONST uint kPrimCone = 3u;
+SDFPRUNE_CONST uint kPrimCapsule = 4u;
+SDFPRUNE_CONST uint kPrimTorus = 5u;
+SDFPRUNE_CONST uint kPrimitiveKindCount = 6u;
+// Operator kinds, stored in the same field as the primitive kinds.
+SDFPRUNE_CONST uint kOpUnion = 16u;
+SDFPRUNE_CONST uint kOpIntersection = 17u;
+SDFPRUNE_CONST uint kOpDifference = 18u;
+
+// Pruning decisions for one operator in one cell.
+SDFPRUNE_CONST uint kKeepBoth = 0u;
+SDFPRUNE_CONST uint kLeftWins = 1u;
+SDFPRUNE_CONST uint kRightWins = 2u;
+
+// ---- tape words: 31-bit node index + sign bit --------------------------------------------------
+SDFPRUNE_CONST uint kTapeSignBit = 0x80000000u;
+SDFPRUNE_CONST uint kTapeNodeMask = 0x7fffffffu;
+
+SDFPRUNE_FN uint tape_word(uint node, bool negate) {
+    return negate ? (node | kTapeSignBit) : node;
+}
+SDFPRUNE_FN uint tape_node(uint word) { return word & kTapeNodeMask; }
+SDFPRUNE_FN bool tape_negated(uint word) { return (word & kTapeSignBit) != 0u; }
+SDFPRUNE_FN float tape_sign(uint word) { return tape_negated(word) ? -1.0f : 1.0f; }
+
+// ---- primitives ------------------------------------------------------------------------------
+// One primitive in std430 layout: rows of the world->local 3x4 affine map, then three parameter
+// vectors whose meaning depends on the kind (see Scene in include/sdfprune/scene.hpp):
+//   sphere   a.x radius
+//   box      a.xyz half sides, b = corner radii (x>0,z>0 / x>0,z<0 / x<0,z>0 / x<0,z<0),
+//            c.x top (+y) edge rounding, c.y bottom (-y) edge rounding
+//   cylinder a.x half height (y), a.y radius
+//   cone     a.x base radius (at y = -h), a.y half height h
+//   capsule  a.x half length of the inner segment (y), a.y radius
+//   torus    a.x major radius (in xz), a.y minor radius
+struct PrimitiveParams {
+    vec4 row0;
+    vec4 row1;
+    vec4 row2;
+    vec4 a;
+    vec4 b;
+    vec4 c;
+};
+
+SDFPRUNE_FN vec3 to_local(PrimitiveParams prm, vec3 p) {
+    return vec3(prm.row0.x * p.x + prm.row0.y * p.y + prm.row0.z * p.z + prm.row0.w,
+                prm.row1.x * p.x + prm.row1.y * p.y + prm.row1.z * p.z + prm.row1.w,
+                prm.row2.x * p.x + prm.row2.y * p.y + prm.row2.z * p.z + prm.row2.w);
+}
+
+SDFPRUNE_FN float sd_sphere(vec3 q, float radius) { return length(q) - radius; }
+
+// 2D rectangle (half sizes hs) with one corner radius per quadrant of p = (x, z).
+SDFPRUNE_FN float sd_rounded_rect(vec2 p, vec2 hs, vec4 radii) {
+    float r = p.x > 0.0f ? (p.y > 0.0f ? radii.x : radii.y) : (p.y > 0.0f ? radii.z : radii.w);
+    vec2 q = abs(p) - hs + r;
+    return min(max(q.x, q.y), 0.0f) + length(max(q, 0.0f)) - r;
+}
+
+// Extrudes a 2D distance d along y to |y| <= h, rounding the rim by `rounding`.
+SDFPRUNE_FN float sd_extrude(float d, float y, float h, float rounding) {
+    vec2 q = vec2(d + rounding, abs(y) - (h - rounding));
+    return min(max(q.x, q.y), 0.0f) + length(max(q, 0.0f)) - rounding;
+}
+
+SDFPRUNE_FN float sd_box(vec3 q, vec3 hs, vec4 corner_radii, float round_top, float round_bottom) {
+    float d2 = sd_rounded_rect(vec2(q.x, q.z), vec2(hs.x, hs.z), corner_radii);
+    float rounding = q.y > 0.0f ? round_top : round_bottom;
+    return sd_extrude(d2, q.y, hs.y, rounding);
+}
+
+SDFPRUNE_FN float sd_cylinder(vec3 q, float half_height, float radius) {
+    vec2 d = abs(vec2(length(vec2(q.x, q.z)), q.y)) - vec2(radius, half_height);
+    return min(max(d.x, d.y), 0.0f) + length(max(d, 0.0f));
+}
+
+// Cone with its base disc (radius) at y = -h and its apex at y = +h.
+SDFPRUNE_FN float sd_cone(vec3 q, float radius, float h) {
+    vec2 p = vec2(length(vec2(q.x, q.z)) - radius, q.y + h);
+    vec2 e = vec2(-radius, 2.0f * h);
+    vec2 d = p - e * clamp(dot(p, e) / dot(e, e), 0.0f, 1.0f);
+    float dist = length(d);
+    if (max(d.x, d.y) > 0.0f) return dist;
+    return -min(dist, p.y);
+}
+
+SDFPRUNE_FN float sd_capsule(vec3 q, float half_length, float radius) {
+    return length(vec3(q.x, q.y - clamp(q.y, -half_length, half_length), q.z)) - radius;
+}
+
+SDFPRUNE_FN float sd_torus(vec3 q, float major, float minor) {
+    return length(vec2(length(vec2(q.x, q.z)) - major, q.y)) - minor;
+}
+
+SDFPRUNE_FN float eval_primitive_local(uint kind, PrimitiveParams prm, vec3 q) {
+    if (kind == kPrimSphere) return sd_sphere(q, prm.a.x);
+    if (kind == kPrimBox)
+        return sd_box(q, vec3(prm.a.x, prm.a.y, prm.a.z), prm.b, prm.c.x, prm.c.y);
+    if (kind == kPrimCylinder) return sd_cylinder(q, prm.a.x, prm.a.y);
+    if (kind == kPrimCone) return sd_cone(q, prm.a.x, prm.a.y);
+    if (kind == kPrimCapsule) return sd_capsule(q, prm.a.x, prm.a.y);
+    return sd_torus(q, prm.a.x, prm.a.y);
+}
+
+SDFPRUNE_FN float eval_primitive(uint kind, PrimitiveParams prm, vec3 p) {
+    return eval_primitive_local(kind, prm, to_local(prm, p));
+}
+
+// ---- operators -------------------------------------------------------------------------------
+// The quadratic blending kernel phi(x, k) = max(k - x, 0)^2 / (4k); 0 when k = 0.
+SDFPRUNE_FN float blend_kernel(float x, float k) {
+    if (k <= 0.0f) return 0.0f;
+    float m = max(k - x, 0.0f);
+    return m * m / (4.0f * k);
+}
+
+// s = +1: union; s = -1: intersection (a difference is an intersection whose right operand
+// was negated by its tape sign). a and b are the operands with their signs applied.
+SDFPRUNE_FN float apply_operator(float s, float k, float a, float b) {
+    return s * (min(s * a, s * b) - blend_kernel(abs(a - b), k));
+}
+
+SDFPRUNE_FN float operator_s(uint kind) { return kind == kOpUnion ? 1.0f : -1.0f; }
+
+// ---- pruning ---------------------------------------------------------------------------------
+// Relative safety margin of the pruning test: float rounding in the values at the cell centre
+// can never make an operator look decided when it is not.
+SDFPRUNE_CONST float kPruneMarginRel = 4e-6f;
+SDFPRUNE_CONST float kPruneMarginAbs = 1e-6f;
+
+// Decides one operator over a cell, given a conservative range [lo, hi] of each (signed) operand
+// over the cell. If one operand is below the other by more than k everywhere (in the operator's
+// min-space), it wins everywhere and the kernel is zero everywhere: the operator can be replaced
+// by it. With ranges centre ± L·R this is the paper's test |A − B| > (L_a + L_b)·R + k.
+SDFPRUNE_FN uint prune_decision(float s, float k, float a_lo, float a_hi, float b_lo, float b_hi) {
+    // Into min-space: the union of s·a and s·b.
+    float ua_lo = s > 0.0f ? a_lo : -a_hi;
+    float ua_hi = s > 0.0f ? a_hi : -a_lo;
+    float ub_lo = s > 0.0f ? b_lo : -b_hi;
+    float ub_hi = s > 0.0f ? b_hi : -b_lo;
+    float margin = kPruneMarginAbs +
+                   kPruneMarginRel * (abs(a_lo) + abs(a_hi) + abs(b_lo) + abs(b_hi) + k);
+    if (ua_hi + k + margin < ub_lo) return kLeftWins;
+    if (ub_hi + k + margin < ua_lo) return kRightWins;
+    return kKeepBoth;
+}
+
+// Lower (x) and upper (y) bound of an undecided operator over a cell from its operands' ranges.
+SDFPRUNE_FN vec2 operator_range(float s, float k, float a_lo, float a_hi, float b_lo, float b_hi) {
+    float ua_lo = s > 0.0f ? a_lo : -a_hi;
+    float ua_hi = s > 0.0f ? a_hi : -a_lo;
+    float ub_lo = s > 0.0f ? b_lo : -b_hi;
+    float ub_hi = s > 0.0f ? b_hi : -b_lo;
+    float gap = max(max(ua_lo - ub_hi, ub_lo - ua_hi), 0.0f);
+    float lo = min(ua_lo, ub_lo) - blend_kernel(gap, k);
+    float hi = min(ua_hi, ub_hi);
+    return s > 0.0f ? vec2(lo, hi) : vec2(-hi, -lo);
+}
+
+// Range over an axis-aligned cell (centre cc, half sizes hs) of a primitive whose world->local
+// map is a similarity of scale `scale` sending `centre` to the local origin, given f0 = the local
+// SDF at the origin and rho = the radius of a local ball around the origin holding the shape.
+// Uses |q| - rho <= f(q) <= |q| + f0 (f is 1-Lipschitz); exact for a sphere (f0 = -r, rho = r).
+SDFPRUNE_FN vec2 similarity_range(vec3 centre, float scale, float f0, float rho, vec3 cc, vec3 hs) {
+    vec3 d = abs(centre - cc);
+    float near_dist = length(max(d - hs, 0.0f));
+    float far_dist = length(d + hs);
+    return vec2(scale * near_dist - rho, scale * far_dist + f0);
+}
+
+#ifdef __cplusplus
+}  // namespace sdfprune::math
+#endif
+
+#endif  // SDFPRUNE_SDF_MATH_H

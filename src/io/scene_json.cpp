@@ -1,0 +1,535 @@
+// scene_json.cpp — the reference JSON scene format: a streaming (SAX) loader on RapidJSON's
+// iterative parser, with an explicit frame stack instead of recursion, and a writer that walks
+// the tree with an explicit stack. Field reference: README.md, "Scene format".
+#include <rapidjson/error/en.h>
+#include <rapidjson/reader.h>
+#include <rapidjson/stringbuffer.h>
+#include <rapidjson/writer.h>
+
+#include <charconv>
+#include <cmath>
+
+#include "sdfprune/io.hpp"
+
+namespace sdfprune {
+namespace {
+
+enum class Field : uint8_t {
+    None,
+    Unknown,
+    NodeType,
+    Matrix,
+    BlendMode,
+    BlendRadius,
+    LeftChild,
+    RightChild,
+    PrimitiveType,
+    Radius,
+    Height,
+    Sides,
+    Bevel,
+    RoundX,
+    RoundY,
+    Color,
+    MajorRadius,
+    MinorRadius,
+    AabbMin,
+    AabbMax,
+};
+
+struct FieldInfo {
+    const char* name;
+    Field field;
+    char type;       // 's' string, 'n' number, 'a' array of numbers, 'o' object
+    uint8_t count;   // arrays: exact number of entries
+};
+
+constexpr FieldInfo kFields[] = {
+    {"nodeType", Field::NodeType, 's', 0},      {"matrix", Field::Matrix, 'a', 12},
+    {"blendMode", Field::BlendMode, 's', 0},    {"blendRadius", Field::BlendRadius, 'n', 0},
+    {"leftChild", Field::LeftChild, 'o', 0},    {"rightChild", Field::RightChild, 'o', 0},
+    {"primitiveType", Field::PrimitiveType, 's', 0}, {"radius", Field::Radius, 'n', 0},
+    {"height", Field::Height, 'n', 0},          {"sides", Field::Sides, 'a', 3},
+    {"bevel", Field::Bevel, 'a', 4},            {"round_x", Field::RoundX, 'n', 0},
+    {"round_y", Field::RoundY, 'n', 0},         {"color", Field::Color, 'a', 3},
+    {"major_radius", Field::MajorRadius, 'n', 0}, {"minor_radius", Field::MinorRadius, 'n', 0},
+    {"aabb_min", Field::AabbMin, 'a', 3},       {"aabb_max", Field::AabbMax, 'a', 3},
+};
+
+const FieldInfo* field_info(Field f) {
+    for (const FieldInfo& i : kFields)
+        if (i.field == f) return &i;
+    return nullptr;
+}
+
+const char* type_name(char t) {
+    switch (t) {
+        case 's': return "a string";
+        case 'n': return "a number";
+        case 'a': return "an array of numbers";
+        default: return "an object";
+    }
+}
+
+uint32_t bit(Field f) { return 1u << uint32_t(f); }
+
+// One node while it is being read.
+struct RawNode {
+    SceneNodeDesc desc;
+    uint32_t parent = kNone;
+    bool is_right = false;
+    uint8_t node_type = 0;  // 0 unset, 1 primitive, 2 operator
+    uint32_t prim_kind = kNone, op_kind = kNone;
+    uint32_t seen = 0;
+};
+
+struct Frame {
+    enum Kind : uint8_t { Node, Array, Skip } kind;
+    Field field = Field::None;  // Node: the key being read; Array: the field being filled
+    uint32_t node = kNone;
+    uint32_t count = 0;  // Array: entries so far; Skip: nesting depth
+};
+
+// Thrown inside the handler and turned into a false return: RapidJSON then stops parsing.
+struct ParseFailure {
+    std::string message;
+};
+
+class SceneHandler {
+public:
+    std::vector<RawNode> nodes;
+    Aabb aabb;
+    std::string error;  // set when a handler call returned false
+    size_t depth = 0;
+
+    bool StartObject() { return guard([&] { start_object(); }); }
+    bool EndObject(rapidjson::SizeType) { return guard([&] { end_object(); }); }
+    bool StartArray() { return guard([&] { start_array(); }); }
+    bool EndArray(rapidjson::SizeType) { return guard([&] { end_array(); }); }
+    bool Key(const char* s, rapidjson::SizeType n, bool) {
+        return guard([&] { key(std::string_view(s, n)); });
+    }
+    bool String(const char* s, rapidjson::SizeType n, bool) {
+        return guard([&] { string(std::string_view(s, n)); });
+    }
+    bool Int(int v) { return guard([&] { number(v); }); }
+    bool Uint(unsigned v) { return guard([&] { number(v); }); }
+    bool Int64(int64_t v) { return guard([&] { number(double(v)); }); }
+    bool Uint64(uint64_t v) { return guard([&] { number(double(v)); }); }
+    bool Double(double v) { return guard([&] { number(v); }); }
+    bool RawNumber(const char*, rapidjson::SizeType, bool) { return false; }
+    bool Null() { return guard([&] { scalar("null"); }); }
+    bool Bool(bool) { return guard([&] { scalar("a boolean"); }); }
+
+    // The JSON pointer of a node, with long runs elided so messages stay one short line.
+    std::string node_path(uint32_t node) const {
+        std::vector<bool> steps;  // true = rightChild, from the node up
+        for (uint32_t n = node; n != kNone && nodes[n].parent != kNone; n = nodes[n].parent)
+            steps.push_back(nodes[n].is_right);
+        std::string path;
+        const size_t total = steps.size();
+        for (size_t i = 0; i < total; ++i) {
+            if (total > 12 && i == 4) {
+                path += "/...(" + std::to_string(total - 10) + " more levels)...";
+                i = total - 7;
+                continue;
+            }
+            path += steps[total - 1 - i] ? "/rightChild" : "/leftChild";
+        }
+        return path.empty() ? "/" : path;
+    }
+
+private:
+    std::vector<Frame> frames_;
+
+    template <class F>
+    bool guard(F&& f) {
+        try {
+            f();
+            return true;
+        } catch (const ParseFailure& e) {
+            error = e.message;
+            return false;
+        }
+    }
+
+    [[noreturn]] void fail(const std::string& what) const {
+        uint32_t node = kNone;
+        Field field = Field::None;
+        for (auto it = frames_.rbegin(); it != frames_.rend(); ++it) {
+            if (field == Field::None && it->kind != Frame::Skip) field = it->field;
+            if (it->kind == Frame::Node) {
+                node = it->node;
+                field = it->field == Field::None ? field : it->field;
+                break;
+            }
+        }
+        std::string where = node == kNone ? "/" : node_path(node);
+        const FieldInfo* fi = field_info(field);
+        if (fi) where += (where == "/" ? "" : "/") + std::string(fi->name);
+        throw ParseFailure{where + ": " + what};
+    }
+
+    void enter() {
+        if (++depth > kMaxJsonDepth)
+            fail("nesting deeper than " + std::to_string(kMaxJsonDepth) + " levels");
+    }
+
+    Frame& top() { return frames_.back(); }
+
+    // The field of the current node awaiting a value of JSON type `type`; nullptr to ignore.
+    const FieldInfo* expect(char type, const char* got) {
+        Frame& f = top();
+        if (f.field == Field::Unknown) return nullptr;
+        if (f.field == Field::None) fail("unexpected value");  // cannot happen in valid SAX
+        const FieldInfo* fi = field_info(f.field);
+        if (fi->type != type) fail("expected " + std::string(type_name(fi->type)) + ", got " + got);
+        return fi;
+    }
+
+    void start_object() {
+        enter();
+        if (frames_.empty()) {
+            if (!nodes.empty()) fail("more than one top-level value");
+            nodes.push_back({});
+            frames_.push_back({Frame::Node, Field::None, 0, 0});
+            return;
+        }
+        Frame& f = top();
+        if (f.kind == Frame::Skip) {
+            ++f.count;
+            return;
+        }
+        if (f.kind == Frame::Array) fail("expected a number, got an object");
+        if (!expect('o', "an object")) {
+            frames_.push_back({Frame::Skip, Field::None, kNone, 1});
+            return;
+        }
+        if (nodes.size() >= kMaxNodes) fail("too many nodes");
+        const uint32_t parent = f.node, child = uint32_t(nodes.size());
+        const bool right = f.field == Field::RightChild;
+        nodes.push_back({});
+        nodes[child].parent = parent;
+        nodes[child].is_right = right;
+        (right ? nodes[parent].desc.right : nodes[parent].desc.left) = child;
+        f.field = Field::None;
+        frames_.push_back({Frame::Node, Field::None, child, 0});
+    }
+
+    void end_object() {
+        --depth;
+        Frame& f = top();
+        if (f.kind == Frame::Skip) {
+            if (--f.count == 0) frames_.pop_back();
+            return;
+        }
+        finish_node(f.node);
+        frames_.pop_back();
+    }
+
+    void start_array() {
+        enter();
+        if (frames_.empty()) fail("the top-level value must be an object (a node)");
+        Frame& f = top();
+        if (f.kind == Frame::Skip) {
+            ++f.count;
+            return;
+        }
+        if (f.kind == Frame::Array) fail("expected a number, got an array");
+        if (!expect('a', "an array")) {
+            frames_.push_back({Frame::Skip, Field::None, kNone, 1});
+            return;
+        }
+        frames_.push_back({Frame::Array, f.field, f.node, 0});
+        f.field = Field::None;
+    }
+
+    void end_array() {
+        --depth;
+        Frame& f = top();
+        if (f.kind == Frame::Skip) {
+            if (--f.count == 0) frames_.pop_back();
+            return;
+        }
+        const FieldInfo* fi = field_info(f.field);
+        if (f.count != fi->count)
+            fail("expected " + std::to_string(fi->count) + " numbers, got " +
+                 std::to_string(f.count));
+        frames_.pop_back();
+    }
+
+    void key(std::string_view name) {
+        Frame& f = top();
+        if (f.kind == Frame::Skip) return;
+        Field field = Field::Unknown;
+        for (const FieldInfo& i : kFields)
+            if (name == i.name) field = i.field;
+        if (field != Field::Unknown) {
+            RawNode& n = nodes[f.node];
+            if (n.seen & bit(field)) fail("duplicate field \"" + std::string(name) + "\"");
+            n.seen |= bit(field);
+        }
+        f.field = field;
+    }
+
+    void string(std::string_view s) {
+        if (frames_.empty()) fail("the top-level value must be an object (a node)");
+        Frame& f = top();
+        if (f.kind == Frame::Skip) return;
+        if (f.kind == Frame::Array) fail("expected a number, got a string");
+        const FieldInfo* fi = expect('s', "a string");
+        if (fi) {
+            RawNode& n = nodes[f.node];
+            std::string quoted(1, '"');
+            quoted.append(s.substr(0, 64)).push_back('"');
+            if (fi->field == Field::NodeType) {
+                if (s == "primitive") n.node_type = 1;
+                else if (s == "binaryOperator") n.node_type = 2;
+                else fail("unknown node type " + quoted + " (primitive, binaryOperator)");
+            } else if (fi->field == Field::BlendMode) {
+                n.op_kind = operator_kind_from_name(s);
+                if (n.op_kind == kNone) fail("unknown blend mode " + quoted + " (union, inter, sub)");
+            } else {
+                n.prim_kind = primitive_kind_from_name(s);
+                if (n.prim_kind == kNone)
+                    fail("unknown primitive type " + quoted +
+                         " (sphere, box, cylinder, cone, capsule, torus)");
+            }
+        }
+        f.field = Field::None;
+    }
+
+    void number(double v) {
+        if (frames_.empty()) fail("the top-level value must be an object (a node)");
+        Frame& f = top();
+        if (f.kind == Frame::Skip) return;
+        const float x = float(v);
+        if (f.kind == Frame::Array) {
+            const FieldInfo* fi = field_info(f.field);
+            if (f.count >= fi->count)
+                fail("expected " + std::to_string(fi->count) + " numbers, got more");
+            if (!std::isfinite(x)) fail("numbers must be finite float values");
+            store_array(nodes[f.node], f.field, f.count++, x);
+            return;
+        }
+        const FieldInfo* fi = expect('n', "a number");
+        if (fi) {
+            if (!std::isfinite(x)) fail("numbers must be finite float values");
+            PrimitiveShape& s = nodes[f.node].desc.shape;
+            switch (fi->field) {
+                case Field::BlendRadius: nodes[f.node].desc.blend = x; break;
+                case Field::Radius: s.radius = x; break;
+                case Field::Height: s.height = x; break;
+                case Field::RoundX: s.round_x = x; break;
+                case Field::RoundY: s.round_y = x; break;
+                case Field::MajorRadius: s.major_radius = x; break;
+                default: s.minor_radius = x; break;
+            }
+        }
+        f.field = Field::None;
+    }
+
+    void scalar(const char* got) {
+        if (frames_.empty()) fail("the top-level value must be an object (a node)");
+        Frame& f = top();
+        if (f.kind == Frame::Skip) return;
+        if (f.kind == Frame::Array) fail(std::string("expected a number, got ") + got);
+        if (f.field != Field::Unknown) expect('-', got);
+        f.field = Field::None;
+    }
+
+    void store_array(RawNode& n, Field field, uint32_t i, float x) {
+        switch (field) {
+            case Field::Matrix: n.desc.matrix.m[i] = x; break;
+            case Field::Sides: n.desc.shape.sides[int(i)] = x; break;
+            case Field::Bevel: n.desc.shape.bevel[int(i)] = x; break;
+            case Field::Color: n.desc.color[int(i)] = x; break;
+            case Field::AabbMin: aabb.min[int(i)] = x; break;
+            default: aabb.max[int(i)] = x; break;
+        }
+    }
+
+    void require(const RawNode& n, Field field) {
+        if (!(n.seen & bit(field)))
+            fail("missing field \"" + std::string(field_info(field)->name) + "\"");
+    }
+
+    void finish_node(uint32_t index) {
+        RawNode& n = nodes[index];
+        top().field = Field::None;
+        if (index == 0) {
+            require(n, Field::AabbMin);
+            require(n, Field::AabbMax);
+        }
+        require(n, Field::NodeType);
+        require(n, Field::Matrix);
+        if (n.node_type == 2) {
+            for (Field f : {Field::BlendMode, Field::BlendRadius, Field::LeftChild,
+                            Field::RightChild})
+                require(n, f);
+            n.desc.kind = n.op_kind;
+        } else {
+            require(n, Field::PrimitiveType);
+            n.desc.kind = n.prim_kind;
+            switch (n.prim_kind) {
+                case math::kPrimSphere: require(n, Field::Radius); break;
+                case math::kPrimBox: require(n, Field::Sides); break;
+                case math::kPrimTorus:
+                    require(n, Field::MajorRadius);
+                    require(n, Field::MinorRadius);
+                    break;
+                default:
+                    require(n, Field::Radius);
+                    require(n, Field::Height);
+                    break;
+            }
+        }
+        if (std::string e = validate_node(n.desc); !e.empty()) fail(e);
+    }
+};
+
+}  // namespace
+
+Scene parse_scene(std::string_view json, const std::string& name) {
+    SceneHandler h;
+    rapidjson::Reader reader;
+    // A NUL-terminated copy is not needed: MemoryStream reads exactly the given bytes.
+    rapidjson::MemoryStream ms(json.data(), json.size());
+    rapidjson::EncodedInputStream<rapidjson::UTF8<>, rapidjson::MemoryStream> is(ms);
+    constexpr unsigned kFlags = rapidjson::kParseIterativeFlag | rapidjson::kParseFullPrecisionFlag;
+    rapidjson::ParseResult r = reader.Parse<kFlags>(is, h);
+    if (r.IsError()) {
+        if (!h.error.empty()) throw SceneError(name + ": " + h.error);
+        throw SceneError(name + ": invalid JSON at byte " + std::to_string(r.Offset()) + ": " +
+                         rapidjson::GetParseError_En(r.Code()));
+    }
+    if (h.nodes.empty()) throw SceneError(name + ": the top-level value must be an object (a node)");
+    std::vector<SceneNodeDesc> descs;
+    descs.reserve(h.nodes.size());
+    for (const RawNode& n : h.nodes) descs.push_back(n.desc);
+    try {
+        // The root is description 0; build_scene walks from it.
+        return build_scene(descs, 0, h.aabb);
+    } catch (const SceneNodeError& e) {
+        throw SceneError(name + ": " + h.node_path(e.node) + ": " + e.reason);
+    } catch (const SceneError& e) {
+        throw SceneError(name + ": " + e.what());
+    }
+}
+
+Scene load_scene(const std::string& path) {
+    std::string text;
+    try {
+        text = read_file(path);
+    } catch (const IoError& e) {
+        throw SceneError(e.what());
+    }
+    return parse_scene(text, path);
+}
+
+namespace {
+
+using JsonWriter = rapidjson::Writer<rapidjson::StringBuffer>;
+
+void write_float(JsonWriter& w, float x) {
+    char buf[32];
+    auto res = std::to_chars(buf, buf + sizeof buf, x);
+    w.RawValue(buf, size_t(res.ptr - buf), rapidjson::kNumberType);
+}
+
+void write_floats(JsonWriter& w, const char* key, const float* v, int n) {
+    w.Key(key);
+    w.StartArray();
+    for (int i = 0; i < n; ++i) write_float(w, v[i]);
+    w.EndArray();
+}
+
+void write_vec(JsonWriter& w, const char* key, vec3 v) {
+    const float a[3] = {v.x, v.y, v.z};
+    write_floats(w, key, a, 3);
+}
+
+void write_number(JsonWriter& w, const char* key, float x) {
+    w.Key(key);
+    write_float(w, x);
+}
+
+void write_primitive_fields(JsonWriter& w, const Scene& sc, uint32_t node) {
+    const uint32_t p = sc.primitive[node];
+    const uint32_t kind = sc.kind[node];
+    const PrimitiveShape& s = sc.shape[p];
+    w.Key("primitiveType");
+    w.String(primitive_kind_name(kind));
+    switch (kind) {
+        case math::kPrimSphere: write_number(w, "radius", s.radius); break;
+        case math::kPrimBox: {
+            write_vec(w, "sides", s.sides);
+            const float b[4] = {s.bevel.x, s.bevel.y, s.bevel.z, s.bevel.w};
+            write_floats(w, "bevel", b, 4);
+            break;
+        }
+        case math::kPrimTorus:
+            write_number(w, "major_radius", s.major_radius);
+            write_number(w, "minor_radius", s.minor_radius);
+            break;
+        default:
+            write_number(w, "height", s.height);
+            write_number(w, "radius", s.radius);
+            break;
+    }
+    write_number(w, "round_x", s.round_x);
+    write_number(w, "round_y", s.round_y);
+    write_vec(w, "color", sc.color[p]);
+}
+
+}  // namespace
+
+std::string scene_to_json(const Scene& sc) {
+    rapidjson::StringBuffer buf;
+    JsonWriter w(buf);
+    struct Step {
+        uint32_t node;
+        uint8_t stage;  // 0: open and fields; 1: right child next; 2: close
+    };
+    std::vector<Step> stack{{sc.root(), 0}};
+    while (!stack.empty()) {
+        const Step s = stack.back();
+        stack.pop_back();
+        const uint32_t n = s.node;
+        const bool op = !sc.is_primitive(n);
+        if (s.stage == 0) {
+            w.StartObject();
+            if (n == sc.root()) {
+                write_vec(w, "aabb_min", sc.aabb.min);
+                write_vec(w, "aabb_max", sc.aabb.max);
+            }
+            w.Key("nodeType");
+            w.String(op ? "binaryOperator" : "primitive");
+            write_floats(w, "matrix", sc.local[n].m, 12);
+            if (!op) {
+                write_primitive_fields(w, sc, n);
+                w.EndObject();
+                continue;
+            }
+            w.Key("blendMode");
+            w.String(operator_kind_name(sc.kind[n]));
+            write_number(w, "blendRadius", sc.blend[n]);
+            w.Key("leftChild");
+            stack.push_back({n, 1});
+            stack.push_back({sc.left[n], 0});
+        } else if (s.stage == 1) {
+            w.Key("rightChild");
+            stack.push_back({n, 2});
+            stack.push_back({sc.right[n], 0});
+        } else {
+            w.EndObject();
+        }
+    }
+    return std::string(buf.GetString(), buf.GetSize()) + "\n";
+}
+
+void save_scene(const Scene& scene, const std::string& path) {
+    write_file_atomic(path, scene_to_json(scene));
+}
+
+}  // namespace sdfprune

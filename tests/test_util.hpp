@@ -1,0 +1,40 @@
+// test_util.hpp — helpers shared by the tests: locating the reference scenes, running the CLI.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+
+namespace sdfprune::test {
+
+// The reference scenes folder ($SDFPRUNE_SCENES, else ../shared/scenes), or "" when absent.
+inline std::string scenes_dir() {
+    if (const char* env = std::getenv("SDFPRUNE_SCENES"); env && *env)
+        return std::filesystem::is_directory(env) ? env : "";
+    return std::filesystem::is_directory(SDFPRUNE_DEFAULT_SCENES) ? SDFPRUNE_DEFAULT_SCENES : "";
+}
+
+// Path of a reference scene, or skips the calling test with a message when it is absent.
+#define SDFPRUNE_REQUIRE_SCENE(var, file)                                                  \
+    std::string var;                                                                       \
+    do {                                                                                   \
+        const std::string dir_ = ::sdfprune::test::scenes_dir();                           \
+        if (dir_.empty() || !std::filesystem::exists(dir_ + "/" + (file)))                 \
+            GTEST_SKIP() << "reference scene " << (file)                                   \
+                         << " not found (set SDFPRUNE_SCENES or put ../shared beside the " \
+                            "checkout)";                                                   \
+        var = dir_ + "/" + (file);                                                         \
+    } while (0)
+
+struct CliResult {
+    int status = -1;
+    std::string out;  // stdout
+    std::string err;  // stderr
+};
+
+// Runs the sdfprune CLI with `args` (shell-quoted by the caller) and captures its output.
+CliResult run_cli(const std::string& args);
+
+}  // namespace sdfprune::test

@@ -1,0 +1,27 @@
+// command.hpp — how the CLI's subcommands plug into main: each file registers its CLI11
+// subcommand and the function that runs it. Conventions: --help everywhere; with --json the last
+// stdout line is exactly one JSON object; exit 0 ok, 2 bad input (one-line message), 1 internal.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "json_line.hpp"
+#include "sdfprune/scene.hpp"
+
+namespace sdfprune::cli {
+
+struct Command {
+    CLI::App* app;
+    std::function<int()> run;
+};
+
+void add_info(CLI::App& app, std::vector<Command>& commands);
+
+// Loads a scene argument: a file path, or "builtin:NAME" for a scene made in code.
+Scene load_scene_arg(const std::string& arg);
+
+}  // namespace sdfprune::cli
