@@ -24,6 +24,7 @@ struct vec3 {
     constexpr float operator[](int i) const { return i == 0 ? x : (i == 1 ? y : z); }
     constexpr float& operator[](int i) { return i == 0 ? x : (i == 1 ? y : z); }
     constexpr vec2 xz() const { return {x, z}; }
+    constexpr bool operator==(const vec3&) const = default;
 };
 
 // 16-byte aligned like GLSL's std430 vec4, so shared structs have one layout on both sides.
@@ -34,6 +35,7 @@ struct alignas(16) vec4 {
     constexpr vec3 xyz() const { return {x, y, z}; }
     constexpr float operator[](int i) const { return i == 0 ? x : i == 1 ? y : i == 2 ? z : w; }
     constexpr float& operator[](int i) { return i == 0 ? x : i == 1 ? y : i == 2 ? z : w; }
+    constexpr bool operator==(const vec4&) const = default;
 };
 
 // clang-format off

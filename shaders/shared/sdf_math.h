@@ -170,15 +170,10 @@ SDFPRUNE_FN uint prune_decision(float s, float k, float a_lo, float a_hi, float 
 }
 
 // Lower (x) and upper (y) bound of an undecided operator over a cell from its operands' ranges.
+// Every operator is non-decreasing in both operands (d/da of the smooth min is in [1/2, 1]), so
+// its range over a box of operand values is spanned by the box's two extreme corners.
 SDFPRUNE_FN vec2 operator_range(float s, float k, float a_lo, float a_hi, float b_lo, float b_hi) {
-    float ua_lo = s > 0.0f ? a_lo : -a_hi;
-    float ua_hi = s > 0.0f ? a_hi : -a_lo;
-    float ub_lo = s > 0.0f ? b_lo : -b_hi;
-    float ub_hi = s > 0.0f ? b_hi : -b_lo;
-    float gap = max(max(ua_lo - ub_hi, ub_lo - ua_hi), 0.0f);
-    float lo = min(ua_lo, ub_lo) - blend_kernel(gap, k);
-    float hi = min(ua_hi, ub_hi);
-    return s > 0.0f ? vec2(lo, hi) : vec2(-hi, -lo);
+    return vec2(apply_operator(s, k, a_lo, b_lo), apply_operator(s, k, a_hi, b_hi));
 }
 
 // Range over an axis-aligned cell (centre cc, half sizes hs) of a primitive whose world->local

@@ -64,6 +64,16 @@ vec3 local_half_extents(uint32_t kind, const PrimitiveShape& s) {
     }
 }
 
+// Radius of a ball about the local origin that holds the primitive.
+float local_bounding_radius(uint32_t kind, const PrimitiveShape& s) {
+    switch (kind) {
+        case math::kPrimSphere: return s.radius;
+        case math::kPrimCapsule: return s.height / 2 + s.radius;
+        case math::kPrimTorus: return s.major_radius + s.minor_radius;
+        default: return math::length(local_half_extents(kind, s));
+    }
+}
+
 PrimitiveBound primitive_bound(uint32_t kind, const PrimitiveShape& shape,
                                const math::PrimitiveParams& params, const Affine& world) {
     PrimitiveBound b;
@@ -81,7 +91,7 @@ PrimitiveBound primitive_bound(uint32_t kind, const PrimitiveShape& shape,
     if (!similarity) return b;
     b.centre = world.inverse().apply(vec3(0.0f));
     b.f0 = math::eval_primitive_local(kind, params, vec3(0.0f));
-    b.rho = math::length(local_half_extents(kind, shape));
+    b.rho = local_bounding_radius(kind, shape);
     // Rounding of the centre and the scale is absorbed into a slightly looser scale/rho.
     b.scale = float(std::sqrt(s2) * (1 - 2e-6));
     b.rho *= 1 + 1e-6f;

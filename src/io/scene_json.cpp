@@ -240,8 +240,9 @@ private:
             frames_.push_back({Frame::Skip, Field::None, kNone, 1});
             return;
         }
-        frames_.push_back({Frame::Array, f.field, f.node, 0});
-        f.field = Field::None;
+        const Frame array{Frame::Array, f.field, f.node, 0};
+        f.field = Field::None;  // before push_back, which may move the frames
+        frames_.push_back(array);
     }
 
     void end_array() {

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "json_line.hpp"
+#include "sdfprune/prune.hpp"
 #include "sdfprune/scene.hpp"
 
 namespace sdfprune::cli {
@@ -20,6 +21,11 @@ struct Command {
 };
 
 void add_info(CLI::App& app, std::vector<Command>& commands);
+void add_stats(CLI::App& app, std::vector<Command>& commands);
+
+// The pruning flags shared by every subcommand that prunes (--grid, --no-farfield, ...).
+void add_prune_options(CLI::App* sub, PruneOptions& options, bool& lipschitz_bounds);
+uint64_t peak_rss_bytes();
 
 // Loads a scene argument: a file path, or "builtin:NAME" for a scene made in code.
 Scene load_scene_arg(const std::string& arg);

@@ -15,6 +15,7 @@ int main(int argc, char** argv) {
     app.set_version_flag("--version", "sdfprune 0.1.0");
     std::vector<cli::Command> commands;
     cli::add_info(app, commands);
+    cli::add_stats(app, commands);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -28,6 +29,9 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "sdfprune: %s\n", e.what());
         return 2;
     } catch (const IoError& e) {
+        std::fprintf(stderr, "sdfprune: %s\n", e.what());
+        return 2;
+    } catch (const std::invalid_argument& e) {
         std::fprintf(stderr, "sdfprune: %s\n", e.what());
         return 2;
     } catch (const std::bad_alloc&) {

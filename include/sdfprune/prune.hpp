@@ -1,0 +1,176 @@
+// prune.hpp — hierarchical Lipschitz pruning with far-field culling (DESIGN.md §3–5; Barbier et
+// al., "Lipschitz Pruning: Hierarchical Simplification of Primitive-Based SDFs", EG 2025).
+//
+// prune(scene, options) covers the scene's AABB with a grid of resolution³ box cells, built as
+// levels of factor³ subdivision (4³, 16³, 64³, 256³ by default). Every cell of the finest grid
+// ends up either
+//   - near-field: a tape (post-order (node, sign) words) that returns exactly the full tree's
+//     value everywhere in the cell, usually a handful of nodes, or
+//   - far-field: a constant c with sign(c) = sign(f) and |c| <= |f| everywhere in the cell,
+//     a safe sphere-tracing step.
+// Storage is sparse: only children of near-field cells exist; a child whose tape did not change
+// shares its parent's tape. Output is identical whatever the thread count.
+//
+// Thread-safety: a PrunedGrid is immutable; any number of threads may query it. It refers to
+// the Scene it was built from, which must outlive it.
+#pragma once
+
+#include <atomic>
+#include <functional>
+#include <span>
+#include <vector>
+
+#include "scene.hpp"
+
+namespace sdfprune {
+
+// How an operand's range over a cell is bounded in the pruning test.
+enum class CellBounds {
+    kLipschitz,  // the paper's: value at the centre ± L·R (R = half-diagonal)
+    kInterval,   // tighter and still exact: the Lipschitz range intersected with exact ranges
+                 // of primitives under similarity maps (over the box, not the ball) and ranges
+                 // propagated through operators; also tightens far-field constants
+};
+
+struct PruneOptions {
+    uint32_t resolution = 256;  // finest cells per axis (>= 1)
+    uint32_t factor = 4;        // subdivision per level (>= 2); levels: see grid_levels()
+    bool far_field = true;      // cull cells far from the surface to a constant
+    bool hierarchy = true;      // false: prune the full tree directly in every finest cell
+    float far_field_c = 2.0f;   // a cell is far-field when |f(centre)| > C·L·R (C >= 1)
+    CellBounds bounds = CellBounds::kInterval;
+    int threads = 0;            // 0 = all hardware threads
+    // Called from the calling thread with the fraction done in [0, 1]; may be empty.
+    std::function<void(double)> progress;
+    // When set and true, prune() stops early and throws PruneCancelled.
+    const std::atomic<bool>* cancel = nullptr;
+};
+
+struct PruneCancelled : std::runtime_error {
+    PruneCancelled() : std::runtime_error("pruning cancelled") {}
+};
+
+// Cells per axis of each level, coarse to fine: resolution = r0 · factor^k with the largest k
+// such that r0 >= 2 (256, 4 → 4 16 64 256; 128, 4 → 2 8 32 128; 100, 4 → 25 100). Without
+// hierarchy: just {resolution}.
+std::vector<uint32_t> grid_levels(uint32_t resolution, uint32_t factor, bool hierarchy = true);
+
+struct PruneStats {
+    uint32_t grid = 0;               // finest resolution
+    uint64_t cells = 0;              // grid³
+    uint64_t near_field_cells = 0;   // finest cells holding a tape
+    // Active primitives per finest cell over all cells, a far-field cell counting as 1 (the
+    // metric of the paper's Table 2).
+    double active_avg = 0, active_std = 0;
+    uint32_t active_max = 0;
+    // Tape length in nodes over near-field finest cells only.
+    double tape_avg = 0;
+    uint32_t tape_max = 0;
+    double near_field_prims_avg = 0;  // active primitives over near-field finest cells only
+    double prune_ms = 0;              // wall time of prune()
+    uint64_t prune_peak_bytes = 0;    // peak bytes held by pruning's own buffers
+    uint64_t tape_bytes = 0;          // bytes of the final structure (cells + tapes)
+    uint64_t cells_pruned = 0;        // cells whose tape was pruned, all levels
+    uint64_t tape_words_visited = 0;  // tape words processed by the pruning, all levels
+    std::vector<uint32_t> levels;
+};
+
+// One cell of a level.
+struct PrunedCell {
+    static constexpr uint32_t kFarField = 0xffffffffu;
+    uint32_t tape = kFarField;  // offset of the tape's header in PrunedGrid::tape_pool()
+    uint32_t children = 0;      // near-field, not finest: first cell of its child block
+    float value = 0;            // the tree's value at the cell centre
+    float bound = 0;            // far-field: constant valid over the whole cell
+};
+
+// What a finest cell holds.
+struct CellView {
+    bool far_field = true;
+    float constant = 0;                // far-field: sign(f)·(lower bound of |f|) in this cell
+    std::span<const uint32_t> tape;    // near-field
+    uint32_t primitives = 0;           // near-field: primitives in the tape
+};
+
+class PrunedGrid {
+public:
+    const Scene& scene() const { return *scene_; }
+    const Aabb& aabb() const { return scene_->aabb; }
+    uint32_t resolution() const { return levels_.back().res; }
+    vec3 cell_size() const { return cell_size_; }
+    const PruneStats& stats() const { return stats_; }
+    const PruneOptions& options() const { return options_; }
+
+    // Finest cell holding p; false when p lies outside the grid (then use the full tree).
+    bool cell_index(vec3 p, uint32_t& ix, uint32_t& iy, uint32_t& iz) const;
+    CellView cell(uint32_t ix, uint32_t iy, uint32_t iz) const;
+    vec3 cell_center(uint32_t ix, uint32_t iy, uint32_t iz) const;
+
+    // The pruned field at p: the cell's tape, or its far-field constant; outside the grid the
+    // full tree. `stack` must hold scene().max_stack floats.
+    float eval(vec3 p, float* stack) const;
+    // Batch version, in parallel (threads as in the options it was built with).
+    void eval_points(std::span<const vec3> points, std::span<float> out) const;
+
+    // Raw structure, for backends and tests: per level, its cells; the tape pool holds each
+    // tape as [length, primitive count, words...].
+    std::span<const PrunedCell> level_cells(uint32_t level) const { return levels_[level].cells; }
+    uint32_t level_count() const { return uint32_t(levels_.size()); }
+    uint32_t level_resolution(uint32_t level) const { return levels_[level].res; }
+    std::span<const uint32_t> tape_pool() const { return pool_; }
+    std::span<const uint32_t> tape_at(uint32_t offset) const {
+        return {pool_.data() + offset + 2, pool_[offset]};
+    }
+
+private:
+    friend PrunedGrid prune(const Scene&, const PruneOptions&);
+    struct Level {
+        uint32_t res = 0;     // cells per axis of the whole level
+        uint32_t factor = 0;  // cells per axis of one block (level 0: res)
+        std::vector<PrunedCell> cells;
+    };
+    const Scene* scene_ = nullptr;
+    PruneOptions options_;
+    std::vector<Level> levels_;
+    std::vector<uint32_t> pool_;
+    vec3 cell_size_;
+    float lipschitz_ = 1;  // of the root: bounds the far-field constants
+    PruneStats stats_;
+};
+
+PrunedGrid prune(const Scene& scene, const PruneOptions& options = {});
+
+// ---- the per-cell stages, exposed for tests ------------------------------------------------
+
+// An axis-aligned cell.
+struct CellBox {
+    vec3 centre;
+    vec3 half;      // half sizes
+    float radius;   // half-diagonal R = |half|
+};
+
+// Working memory of one pruning thread.
+struct CellScratch {
+    std::vector<float> value, lo, hi;
+    std::vector<uint32_t> left, right, decision, stack;
+    std::vector<uint8_t> alive, negate;
+    void reserve(size_t n);
+};
+
+// Stage 1: evaluates `tape` at the cell centre, bounds every entry over the cell and decides
+// every operator (math::kKeepBoth / kLeftWins / kRightWins). Returns the root's value.
+float evaluate_cell(const Scene& scene, std::span<const uint32_t> tape, const CellBox& box,
+                    CellBounds bounds, CellScratch& s);
+
+// Stage 2: whether the surface may be in the cell (false = far-field), and if not, the
+// far-field constant (sign of f, |c| <= |f| over the cell).
+bool is_near_field(const Scene& scene, std::span<const uint32_t> tape, const CellBox& box,
+                   float far_field_c, const CellScratch& s, float& constant);
+
+// Stage 3: the top-down pass: keeps active operators with no inactive ancestor and the
+// primitives under them, re-attaching kept nodes through skipped operators with composed signs.
+// Appends the pruned tape to `out`; returns the number of primitives in it.
+uint32_t compact_tape(const Scene& scene, std::span<const uint32_t> tape, CellScratch& s,
+                      std::vector<uint32_t>& out);
+
+}  // namespace sdfprune

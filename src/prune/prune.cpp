@@ -1,0 +1,327 @@
+// prune.cpp — the hierarchy (DESIGN.md §5): level by level, every child of a near-field cell
+// is pruned starting from its parent's tape, in parallel over fixed chunks of cells so that the
+// result does not depend on the thread count. Children of far-field cells are not stored.
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+
+#include "sdfprune/eval.hpp"
+#include "sdfprune/prune.hpp"
+
+namespace sdfprune {
+
+std::vector<uint32_t> grid_levels(uint32_t resolution, uint32_t factor, bool hierarchy) {
+    if (resolution == 0) throw std::invalid_argument("grid resolution must be >= 1");
+    if (factor < 2) throw std::invalid_argument("subdivision factor must be >= 2");
+    std::vector<uint32_t> levels{resolution};
+    if (!hierarchy) return levels;
+    while (levels.back() % factor == 0 && levels.back() / factor >= 2)
+        levels.push_back(levels.back() / factor);
+    std::reverse(levels.begin(), levels.end());
+    return levels;
+}
+
+namespace {
+
+// Cells pruned per parallel task: fixed, so chunk boundaries (and the output) never depend on
+// the number of threads.
+constexpr uint32_t kChunkCells = 1024;
+
+// Tape offsets inside a chunk's own buffer are marked with this bit until the chunk is merged.
+constexpr uint32_t kLocalTape = 0x80000000u;
+
+struct ChunkOut {
+    std::vector<uint32_t> words;  // tapes as [length, primitives, words...]
+    // Finest level only: statistics of the chunk's near-field cells.
+    uint64_t near = 0, tape_sum = 0, prim_sum = 0, prim_sq_sum = 0;
+    uint32_t tape_max = 0, prim_max = 0;
+    uint64_t words_visited = 0, pruned = 0;
+};
+
+uint64_t bytes_of(const auto& v) { return uint64_t(v.capacity()) * sizeof(v[0]); }
+
+}  // namespace
+
+PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
+    const auto t0 = std::chrono::steady_clock::now();
+    if (!(opt.far_field_c >= 1.0f)) throw std::invalid_argument("far-field C must be >= 1");
+    PrunedGrid g;
+    g.scene_ = &sc;
+    g.options_ = opt;
+    g.lipschitz_ = sc.lipschitz[sc.root()];
+    const std::vector<uint32_t> res = grid_levels(opt.resolution, opt.factor, opt.hierarchy);
+    const uint32_t N = res.back();
+    const vec3 extent = sc.aabb.max - sc.aabb.min;
+    g.cell_size_ = extent / float(N);
+
+    // The full tape is the parent of level 0.
+    g.pool_.reserve(sc.size() + 2);
+    g.pool_.push_back(sc.size());
+    g.pool_.push_back(sc.primitive_count());
+    g.pool_.insert(g.pool_.end(), sc.full_tape.begin(), sc.full_tape.end());
+
+    tbb::enumerable_thread_specific<CellScratch> scratch;
+    PruneStats& st = g.stats_;
+    st.grid = N;
+    st.cells = uint64_t(N) * N * N;
+    st.levels = res;
+    uint64_t peak = 0;
+
+    // Far-field cells above the finest level count for all the finest cells they cover.
+    uint64_t far_finest = 0;
+    // Parents of the current level: for each block, its origin (in this level's cells) and tape.
+    struct Block {
+        uint32_t x, y, z;
+        uint32_t tape;
+    };
+    std::vector<Block> blocks{{0, 0, 0, 0}};
+
+    for (uint32_t li = 0; li < res.size(); ++li) {
+        const bool finest = li + 1 == res.size();
+        PrunedGrid::Level level;
+        level.res = res[li];
+        level.factor = li == 0 ? res[0] : res[li] / res[li - 1];
+        const uint32_t f = level.factor;
+        const uint64_t per_block = uint64_t(f) * f * f;
+        const uint64_t total = per_block * blocks.size();
+        if (total > 0xfffffffeull) throw std::length_error("too many cells in one level");
+        level.cells.resize(total);
+        const vec3 csize = extent / float(level.res);
+        CellBox proto;
+        proto.half = csize * 0.5f;
+        proto.radius = math::length(proto.half);
+
+        const uint32_t chunks = uint32_t((total + kChunkCells - 1) / kChunkCells);
+        std::vector<ChunkOut> outs(chunks);
+        std::atomic<bool> cancelled{false};
+        with_threads(opt.threads, [&] {
+            tbb::parallel_for(uint32_t(0), chunks, [&](uint32_t c) {
+                if (cancelled.load(std::memory_order_relaxed)) return;
+                if (opt.cancel && opt.cancel->load(std::memory_order_relaxed)) {
+                    cancelled = true;
+                    return;
+                }
+                CellScratch& s = scratch.local();
+                ChunkOut& out = outs[c];
+                const uint64_t begin = uint64_t(c) * kChunkCells;
+                const uint64_t end = std::min(total, begin + kChunkCells);
+                uint32_t last_local = kNone;  // the chunk's previous new tape, for sharing
+                for (uint64_t i = begin; i < end; ++i) {
+                    const Block& b = blocks[i / per_block];
+                    const uint32_t local = uint32_t(i % per_block);
+                    const uint32_t x = b.x + local % f, y = b.y + (local / f) % f,
+                                   z = b.z + local / (f * f);
+                    CellBox box = proto;
+                    box.centre = sc.aabb.min + vec3(float(x) + 0.5f, float(y) + 0.5f,
+                                                    float(z) + 0.5f) * csize;
+                    const std::span<const uint32_t> parent(g.pool_.data() + b.tape + 2,
+                                                           g.pool_[b.tape]);
+                    PrunedCell& cell = level.cells[i];
+                    cell.value = evaluate_cell(sc, parent, box, opt.bounds, s);
+                    out.words_visited += parent.size();
+                    ++out.pruned;
+                    float constant = 0;
+                    if (opt.far_field && !is_near_field(sc, parent, box, opt.far_field_c, s,
+                                                        constant)) {
+                        cell.tape = PrunedCell::kFarField;
+                        cell.bound = constant;
+                        continue;
+                    }
+                    const size_t at = out.words.size();
+                    out.words.push_back(0);
+                    out.words.push_back(0);
+                    const uint32_t prims = compact_tape(sc, parent, s, out.words);
+                    const uint32_t len = uint32_t(out.words.size() - at - 2);
+                    out.words[at] = len;
+                    out.words[at + 1] = prims;
+                    const auto same_as = [&](const uint32_t* other, uint32_t other_len) {
+                        return other_len == len &&
+                               std::equal(out.words.begin() + at + 2, out.words.end(), other);
+                    };
+                    if (len == parent.size()) {
+                        // Nothing pruned: share the parent's tape.
+                        out.words.resize(at);
+                        cell.tape = b.tape;
+                    } else if (last_local != kNone &&
+                               same_as(out.words.data() + last_local + 2,
+                                       out.words[last_local])) {
+                        out.words.resize(at);
+                        cell.tape = kLocalTape | last_local;
+                    } else {
+                        cell.tape = kLocalTape | uint32_t(at);
+                        last_local = uint32_t(at);
+                    }
+                    if (finest) {
+                        ++out.near;
+                        out.tape_sum += len;
+                        out.tape_max = std::max(out.tape_max, len);
+                        out.prim_sum += prims;
+                        out.prim_sq_sum += uint64_t(prims) * prims;
+                        out.prim_max = std::max(out.prim_max, prims);
+                    }
+                }
+            });
+        });
+        if (cancelled) throw PruneCancelled();
+
+        // Merge the chunks' tapes into the pool, in chunk order (deterministic).
+        uint64_t chunk_bytes = 0;
+        std::vector<uint64_t> base(chunks);
+        uint64_t offset = g.pool_.size();
+        for (uint32_t c = 0; c < chunks; ++c) {
+            base[c] = offset;
+            offset += outs[c].words.size();
+            chunk_bytes += bytes_of(outs[c].words);
+        }
+        if (offset >= kLocalTape) throw std::length_error("tape pool exceeds 2^31 words");
+        peak = std::max(peak, bytes_of(g.pool_) + chunk_bytes + bytes_of(level.cells) +
+                                  bytes_of(blocks) + [&] {
+                                      uint64_t b = 0;
+                                      for (const PrunedGrid::Level& l : g.levels_)
+                                          b += bytes_of(l.cells);
+                                      return b;
+                                  }());
+        g.pool_.reserve(offset);
+        for (uint32_t c = 0; c < chunks; ++c) {
+            g.pool_.insert(g.pool_.end(), outs[c].words.begin(), outs[c].words.end());
+            const uint64_t begin = uint64_t(c) * kChunkCells;
+            const uint64_t end = std::min(total, begin + kChunkCells);
+            for (uint64_t i = begin; i < end; ++i) {
+                uint32_t& t = level.cells[i].tape;
+                if (t != PrunedCell::kFarField && (t & kLocalTape))
+                    t = uint32_t(base[c] + (t & ~kLocalTape));
+            }
+            ChunkOut& o = outs[c];
+            st.near_field_cells += o.near;
+            st.tape_avg += double(o.tape_sum);
+            st.tape_max = std::max(st.tape_max, o.tape_max);
+            st.active_avg += double(o.prim_sum);
+            st.active_std += double(o.prim_sq_sum);
+            st.active_max = std::max(st.active_max, o.prim_max);
+            st.cells_pruned += o.pruned;
+            st.tape_words_visited += o.words_visited;
+            std::vector<uint32_t>().swap(o.words);
+        }
+
+        // Far-field cells of this level, and the next level's blocks: one per near-field cell.
+        const uint64_t below = uint64_t(N / level.res);
+        std::vector<Block> next;
+        for (uint64_t i = 0; i < total; ++i) {
+            PrunedCell& cell = level.cells[i];
+            if (cell.tape == PrunedCell::kFarField) {
+                if (!finest) far_finest += below * below * below;
+                else ++far_finest;
+                continue;
+            }
+            if (finest) continue;
+            const Block& b = blocks[i / per_block];
+            const uint32_t local = uint32_t(i % per_block);
+            const uint32_t nf = res[li + 1] / res[li];
+            cell.children = uint32_t(next.size() * nf * nf * nf);
+            next.push_back({(b.x + local % f) * nf, (b.y + (local / f) % f) * nf,
+                            (b.z + local / (f * f)) * nf, cell.tape});
+        }
+        blocks.swap(next);
+        g.levels_.push_back(std::move(level));
+        if (opt.progress) opt.progress(double(li + 1) / double(res.size()));
+    }
+
+    // Table 2 statistics: far-field cells count 1 active primitive.
+    const double cells = double(st.cells);
+    const double near_prims = st.active_avg, near_sq = st.active_std;
+    st.near_field_prims_avg = st.near_field_cells ? near_prims / double(st.near_field_cells) : 0;
+    st.tape_avg = st.near_field_cells ? st.tape_avg / double(st.near_field_cells) : 0;
+    st.active_avg = (near_prims + double(far_finest)) / cells;
+    const double mean_sq = (near_sq + double(far_finest)) / cells;
+    st.active_std = std::sqrt(std::max(0.0, mean_sq - st.active_avg * st.active_avg));
+    if (far_finest > 0) st.active_max = std::max(st.active_max, 1u);
+    st.tape_bytes = bytes_of(g.pool_);
+    for (const PrunedGrid::Level& l : g.levels_) st.tape_bytes += bytes_of(l.cells);
+    st.prune_peak_bytes = std::max(peak, st.tape_bytes);
+    for (const CellScratch& s : scratch)
+        st.prune_peak_bytes += bytes_of(s.value) * 3 + bytes_of(s.left) * 4 + bytes_of(s.alive) * 2;
+    st.prune_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                      .count();
+    return g;
+}
+
+bool PrunedGrid::cell_index(vec3 p, uint32_t& ix, uint32_t& iy, uint32_t& iz) const {
+    const uint32_t N = resolution();
+    const vec3 q = p - scene_->aabb.min;
+    uint32_t idx[3];
+    for (int a = 0; a < 3; ++a) {
+        const float t = q[a] / cell_size_[a];
+        if (!(t >= 0.0f) || !(t <= float(N))) return false;
+        idx[a] = std::min(uint32_t(t), N - 1);
+    }
+    ix = idx[0];
+    iy = idx[1];
+    iz = idx[2];
+    return true;
+}
+
+vec3 PrunedGrid::cell_center(uint32_t ix, uint32_t iy, uint32_t iz) const {
+    return scene_->aabb.min +
+           vec3(float(ix) + 0.5f, float(iy) + 0.5f, float(iz) + 0.5f) * cell_size_;
+}
+
+CellView PrunedGrid::cell(uint32_t ix, uint32_t iy, uint32_t iz) const {
+    const uint32_t N = resolution();
+    uint32_t block_start = 0;
+    for (uint32_t li = 0; li < levels_.size(); ++li) {
+        const Level& l = levels_[li];
+        const uint32_t scale = N / l.res;
+        const uint32_t x = (ix / scale) % l.factor, y = (iy / scale) % l.factor,
+                       z = (iz / scale) % l.factor;
+        const PrunedCell& c = l.cells[block_start + (z * l.factor + y) * l.factor + x];
+        CellView v;
+        if (c.tape == PrunedCell::kFarField) {
+            // A tighter constant for this finest cell than the coarse cell's: the Lipschitz
+            // bound from the coarse centre over the distance to this cell's far corner.
+            const vec3 coarse = scene_->aabb.min +
+                                vec3(float(ix / scale) + 0.5f, float(iy / scale) + 0.5f,
+                                     float(iz / scale) + 0.5f) * (cell_size_ * float(scale));
+            const vec3 d = math::abs(cell_center(ix, iy, iz) - coarse) + cell_size_ * 0.5f;
+            const float reach = lipschitz_ * math::length(d) * (1.0f + 1e-5f) +
+                                math::kPruneMarginAbs;
+            const float lipschitz_bound = std::fabs(c.value) - reach;
+            v.far_field = true;
+            v.constant = c.value > 0 ? std::max(c.bound, lipschitz_bound)
+                                     : std::min(c.bound, -lipschitz_bound);
+            return v;
+        }
+        if (li + 1 == levels_.size()) {
+            v.far_field = false;
+            v.tape = tape_at(c.tape);
+            v.primitives = pool_[c.tape + 1];
+            return v;
+        }
+        block_start = c.children;
+    }
+    return {};
+}
+
+float PrunedGrid::eval(vec3 p, float* stack) const {
+    uint32_t x, y, z;
+    if (!cell_index(p, x, y, z)) return eval_tape(*scene_, scene_->full_tape, p, stack);
+    const CellView c = cell(x, y, z);
+    return c.far_field ? c.constant : eval_tape(*scene_, c.tape, p, stack);
+}
+
+void PrunedGrid::eval_points(std::span<const vec3> points, std::span<float> out) const {
+    if (out.size() != points.size()) throw std::invalid_argument("eval_points: size mismatch");
+    with_threads(options_.threads, [&] {
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 256),
+                          [&](const tbb::blocked_range<size_t>& r) {
+                              std::vector<float> stack(scene_->max_stack);
+                              for (size_t i = r.begin(); i != r.end(); ++i)
+                                  out[i] = eval(points[i], stack.data());
+                          });
+    });
+}
+
+}  // namespace sdfprune

@@ -1,0 +1,137 @@
+// prune_cell.cpp — pruning one cell (DESIGN.md §3–4): evaluate the parent's tape at the cell
+// centre with a range per entry, decide each operator, test the far field, then the top-down
+// pass that compacts the tape. The math of the tests lives in sdf_math.h.
+#include <algorithm>
+#include <cmath>
+
+#include "sdfprune/prune.hpp"
+
+namespace sdfprune {
+
+void CellScratch::reserve(size_t n) {
+    if (value.size() >= n) return;
+    for (auto* v : {&value, &lo, &hi}) v->resize(n);
+    for (auto* v : {&left, &right, &decision, &stack}) v->resize(n);
+    alive.resize(n);
+    negate.resize(n);
+}
+
+float evaluate_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box,
+                    CellBounds bounds, CellScratch& s) {
+    s.reserve(tape.size());
+    const bool interval = bounds == CellBounds::kInterval;
+    const float R = box.radius;
+    uint32_t top = 0;
+    for (uint32_t i = 0; i < tape.size(); ++i) {
+        const uint32_t w = tape[i];
+        const uint32_t n = math::tape_node(w);
+        const uint32_t kind = sc.kind[n];
+        const float spread = sc.lipschitz[n] * R;
+        float v, lo, hi;
+        if (kind < math::kPrimitiveKindCount) {
+            const uint32_t p = sc.primitive[n];
+            v = math::eval_primitive(kind, sc.params[p], box.centre);
+            lo = v - spread;
+            hi = v + spread;
+            const PrimitiveBound& b = sc.bound[p];
+            if (interval && b.scale > 0) {
+                const vec2 r = math::similarity_range(b.centre, b.scale, b.f0, b.rho, box.centre,
+                                                      box.half);
+                lo = std::max(lo, r.x);
+                hi = std::min(hi, r.y);
+            }
+        } else {
+            const uint32_t r = s.stack[--top];
+            const uint32_t l = s.stack[--top];
+            s.left[i] = l;
+            s.right[i] = r;
+            const float sgn = math::operator_s(kind), k = sc.blend[n];
+            const uint32_t d = math::prune_decision(sgn, k, s.lo[l], s.hi[l], s.lo[r], s.hi[r]);
+            s.decision[i] = d;
+            v = math::apply_operator(sgn, k, s.value[l], s.value[r]);
+            if (d == math::kLeftWins) {
+                lo = s.lo[l];
+                hi = s.hi[l];
+            } else if (d == math::kRightWins) {
+                lo = s.lo[r];
+                hi = s.hi[r];
+            } else if (interval) {
+                const vec2 r2 = math::operator_range(sgn, k, s.lo[l], s.hi[l], s.lo[r], s.hi[r]);
+                lo = std::max(v - spread, r2.x);
+                hi = std::min(v + spread, r2.y);
+            } else {
+                lo = v - spread;
+                hi = v + spread;
+            }
+        }
+        if (math::tape_negated(w)) {
+            v = -v;
+            std::swap(lo, hi);
+            lo = -lo;
+            hi = -hi;
+        }
+        s.value[i] = v;
+        s.lo[i] = lo;
+        s.hi[i] = hi;
+        s.stack[top++] = i;
+    }
+    return s.value[tape.size() - 1];
+}
+
+bool is_near_field(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box,
+                   float far_field_c, const CellScratch& s, float& constant) {
+    const uint32_t root = uint32_t(tape.size() - 1);
+    const float v = s.value[root];
+    const float L = sc.lipschitz[math::tape_node(tape[root])];
+    // The paper's test |f(c)| > C·L·R says: over the cell, |f| stays above (C − 1)·L·R, since
+    // the Lipschitz range is f(c) ± L·R. With tighter ranges (CellBounds::kInterval) the same
+    // guarantee is tested on the range itself, so far-field constants keep |c| >= (C − 1)·L·R.
+    const float clearance = (far_field_c - 1.0f) * L * box.radius;
+    const float margin = math::kPruneMarginAbs +
+                         math::kPruneMarginRel * (std::fabs(v) + L * box.radius);
+    const float lo = s.lo[root] - margin, hi = s.hi[root] + margin;
+    if (lo > clearance && lo > 0.0f) {
+        constant = lo;
+        return false;
+    }
+    if (hi < -clearance && hi < 0.0f) {
+        constant = hi;
+        return false;
+    }
+    return true;
+}
+
+uint32_t compact_tape(const Scene& sc, std::span<const uint32_t> tape, CellScratch& s,
+                      std::vector<uint32_t>& out) {
+    const uint32_t n = uint32_t(tape.size());
+    std::fill_n(s.alive.begin(), n, uint8_t(0));
+    s.alive[n - 1] = 1;
+    s.negate[n - 1] = math::tape_negated(tape[n - 1]) ? 1 : 0;
+    // Parents come after their children: a reverse sweep decides every parent first.
+    for (uint32_t i = n; i-- > 0;) {
+        if (!s.alive[i] || sc.is_primitive(math::tape_node(tape[i]))) continue;
+        const uint32_t l = s.left[i], r = s.right[i];
+        const uint32_t d = s.decision[i];
+        if (d == math::kKeepBoth) {
+            s.alive[l] = s.alive[r] = 1;
+            s.negate[l] = math::tape_negated(tape[l]);
+            s.negate[r] = math::tape_negated(tape[r]);
+            continue;
+        }
+        // Skipped: the winner stands in for this operator, taking its composed sign along.
+        const uint32_t win = d == math::kLeftWins ? l : r;
+        s.alive[i] = 2;  // visited but not emitted
+        s.alive[win] = 1;
+        s.negate[win] = s.negate[i] ^ (math::tape_negated(tape[win]) ? 1 : 0);
+    }
+    uint32_t prims = 0;
+    for (uint32_t i = 0; i < n; ++i) {
+        if (s.alive[i] != 1) continue;
+        const uint32_t node = math::tape_node(tape[i]);
+        prims += sc.is_primitive(node) ? 1 : 0;
+        out.push_back(math::tape_word(node, s.negate[i] != 0));
+    }
+    return prims;
+}
+
+}  // namespace sdfprune

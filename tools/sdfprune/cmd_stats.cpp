@@ -1,0 +1,114 @@
+// cmd_stats.cpp — `sdfprune stats SCENE`: prune the scene and report the pruning's quality
+// (the paper's Table 2 metric and the tape metric), time and memory.
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <cstdio>
+
+#include "command.hpp"
+#include "sdfprune/prune.hpp"
+
+namespace sdfprune::cli {
+
+uint64_t peak_rss_bytes() {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    return uint64_t(u.ru_maxrss) * 1024;
+}
+
+void add_prune_options(CLI::App* sub, PruneOptions& o, bool& lipschitz_bounds) {
+    sub->add_option("--grid", o.resolution, "finest grid resolution (cells per axis)")
+        ->capture_default_str()
+        ->check(CLI::Range(1u, 4096u));
+    sub->add_option("--factor", o.factor, "subdivision factor between levels")
+        ->capture_default_str()
+        ->check(CLI::Range(2u, 64u));
+    sub->add_flag("--no-farfield{false}", o.far_field,
+                  "ablation: never cull far cells to a constant");
+    sub->add_flag("--no-hierarchy{false}", o.hierarchy,
+                  "ablation: prune the full tree directly in every finest cell");
+    sub->add_option("--farfield-c", o.far_field_c,
+                    "far-field threshold C: a cell is far when |f| > C·L·R at its centre")
+        ->capture_default_str()
+        ->check(CLI::Range(1.0f, 1000.0f));
+    sub->add_flag("--lipschitz-bounds", lipschitz_bounds,
+                  "use the paper's centre ± L·R ranges only (no exact primitive ranges)");
+    sub->add_option("--threads", o.threads, "worker threads (0 = all cores)")
+        ->capture_default_str()
+        ->check(CLI::Range(0, 1024));
+}
+
+void add_stats(CLI::App& app, std::vector<Command>& commands) {
+    struct Args {
+        std::string scene;
+        PruneOptions prune;
+        bool lipschitz = false;
+        bool json = false;
+    };
+    auto args = std::make_shared<Args>();
+    CLI::App* sub = app.add_subcommand(
+        "stats", "Prune a scene over its grid and report active primitives per cell (the "
+                 "paper's Table 2 metric), tape lengths, time and memory.");
+    sub->add_option("SCENE", args->scene, "scene file (.json) or builtin:NAME")->required();
+    add_prune_options(sub, args->prune, args->lipschitz);
+    sub->add_flag("--json", args->json, "print the figures as one JSON object on the last line");
+    sub->footer(
+        "Examples:\n  sdfprune stats scenes/molecule.json\n"
+        "  sdfprune stats scenes/trees.json --grid 128 --no-farfield --json");
+    commands.push_back({sub, [args] {
+        const Scene sc = load_scene_arg(args->scene);
+        PruneOptions o = args->prune;
+        if (args->lipschitz) o.bounds = CellBounds::kLipschitz;
+        if (!o.hierarchy && !args->json)
+            std::fprintf(stderr, "pruning the full tree in all %u³ cells (no hierarchy)...\n",
+                         o.resolution);
+        const PrunedGrid g = prune(sc, o);
+        const PruneStats& s = g.stats();
+        if (args->json) {
+            std::string levels;
+            for (uint32_t r : s.levels) levels += (levels.empty() ? "" : "x") + std::to_string(r);
+            JsonLine j;
+            j.add("scene", args->scene)
+                .add("nodes", sc.size())
+                .add("grid", s.grid)
+                .add("levels", levels)
+                .add("bounds", args->lipschitz ? "lipschitz" : "interval")
+                .add("far_field", o.far_field)
+                .add("hierarchy", o.hierarchy)
+                .add("farfield_c", o.far_field_c)
+                .add("cells", s.cells)
+                .add("near_field_cells", s.near_field_cells)
+                .add("active_avg", s.active_avg)
+                .add("active_std", s.active_std)
+                .add("active_max", s.active_max)
+                .add("near_field_active_avg", s.near_field_prims_avg)
+                .add("tape_avg", s.tape_avg)
+                .add("tape_max", s.tape_max)
+                .add("prune_ms", s.prune_ms)
+                .add("prune_peak_bytes", s.prune_peak_bytes)
+                .add("tape_bytes", s.tape_bytes)
+                .add("tape_words_visited", s.tape_words_visited)
+                .add("peak_rss_bytes", peak_rss_bytes());
+            std::printf("%s\n", j.str().c_str());
+            return 0;
+        }
+        std::string levels;
+        for (uint32_t r : s.levels) levels += (levels.empty() ? "" : " -> ") + std::to_string(r) + "³";
+        std::printf("%s: %u nodes, grid %s%s%s\n", args->scene.c_str(), sc.size(), levels.c_str(),
+                    o.far_field ? "" : ", no far field", o.hierarchy ? "" : ", no hierarchy");
+        std::printf("  active primitives per cell (all cells, far = 1)  %.4f ± %.4f, max %u\n",
+                    s.active_avg, s.active_std, s.active_max);
+        std::printf("  near-field cells          %llu of %llu (%.2f %%), %.2f primitives each\n",
+                    (unsigned long long)s.near_field_cells, (unsigned long long)s.cells,
+                    100.0 * double(s.near_field_cells) / double(s.cells), s.near_field_prims_avg);
+        std::printf("  tape length (near-field)  %.2f nodes avg, %u max (full tree: %u)\n",
+                    s.tape_avg, s.tape_max, sc.size());
+        std::printf("  pruning                   %.1f ms, peak %.1f MB in pruning buffers\n",
+                    s.prune_ms, double(s.prune_peak_bytes) / 1e6);
+        std::printf("  pruned grid               %.1f MB; process peak RSS %.1f MB\n",
+                    double(s.tape_bytes) / 1e6, double(peak_rss_bytes()) / 1e6);
+        return 0;
+    }});
+}
+
+}  // namespace sdfprune::cli
