@@ -154,6 +154,7 @@ struct CellScratch {
     std::vector<float> value, lo, hi;
     std::vector<uint32_t> left, right, decision, stack;
     std::vector<uint8_t> alive, negate;
+    std::vector<uint32_t> octant;  // the tape of the octant being split (prune.cpp)
     void reserve(size_t n);
 };
 

@@ -96,6 +96,8 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
         proto.radius = math::length(proto.half);
 
         const uint32_t chunks = uint32_t((total + kChunkCells - 1) / kChunkCells);
+        // Split blocks into octants first when the factor allows and chunks hold whole blocks.
+        const bool split = opt.hierarchy && f >= 4 && f % 2 == 0 && kChunkCells % per_block == 0;
         std::vector<ChunkOut> outs(chunks);
         std::atomic<bool> cancelled{false};
         with_threads(opt.threads, [&] {
@@ -110,26 +112,22 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                 const uint64_t begin = uint64_t(c) * kChunkCells;
                 const uint64_t end = std::min(total, begin + kChunkCells);
                 uint32_t last_local = kNone;  // the chunk's previous new tape, for sharing
-                for (uint64_t i = begin; i < end; ++i) {
-                    const Block& b = blocks[i / per_block];
-                    const uint32_t local = uint32_t(i % per_block);
-                    const uint32_t x = b.x + local % f, y = b.y + (local / f) % f,
-                                   z = b.z + local / (f * f);
-                    CellBox box = proto;
-                    box.centre = sc.aabb.min + vec3(float(x) + 0.5f, float(y) + 0.5f,
-                                                    float(z) + 0.5f) * csize;
-                    const std::span<const uint32_t> parent(g.pool_.data() + b.tape + 2,
-                                                           g.pool_[b.tape]);
+                const vec3 origin = sc.aabb.min;
+
+                // Prunes cell i from `parent` (referenced as parent_ref when shared); returns
+                // false for a far-field cell.
+                const auto prune_cell = [&](uint64_t i, std::span<const uint32_t> parent,
+                                            const auto& parent_ref, const CellBox& box) {
                     PrunedCell& cell = level.cells[i];
                     cell.value = evaluate_cell(sc, parent, box, opt.bounds, s);
                     out.words_visited += parent.size();
                     ++out.pruned;
                     float constant = 0;
-                    if (opt.far_field && !is_near_field(sc, parent, box, opt.far_field_c, s,
-                                                        constant)) {
+                    if (opt.far_field &&
+                        !is_near_field(sc, parent, box, opt.far_field_c, s, constant)) {
                         cell.tape = PrunedCell::kFarField;
                         cell.bound = constant;
-                        continue;
+                        return;
                     }
                     const size_t at = out.words.size();
                     out.words.push_back(0);
@@ -138,17 +136,13 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                     const uint32_t len = uint32_t(out.words.size() - at - 2);
                     out.words[at] = len;
                     out.words[at + 1] = prims;
-                    const auto same_as = [&](const uint32_t* other, uint32_t other_len) {
-                        return other_len == len &&
-                               std::equal(out.words.begin() + at + 2, out.words.end(), other);
-                    };
                     if (len == parent.size()) {
                         // Nothing pruned: share the parent's tape.
                         out.words.resize(at);
-                        cell.tape = b.tape;
-                    } else if (last_local != kNone &&
-                               same_as(out.words.data() + last_local + 2,
-                                       out.words[last_local])) {
+                        cell.tape = parent_ref();
+                    } else if (last_local != kNone && out.words[last_local] == len &&
+                               std::equal(out.words.begin() + at + 2, out.words.end(),
+                                          out.words.begin() + last_local + 2)) {
                         out.words.resize(at);
                         cell.tape = kLocalTape | last_local;
                     } else {
@@ -162,6 +156,95 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                         out.prim_sum += prims;
                         out.prim_sq_sum += uint64_t(prims) * prims;
                         out.prim_max = std::max(out.prim_max, prims);
+                    }
+                };
+                const auto cell_box = [&](uint32_t x, uint32_t y, uint32_t z) {
+                    CellBox box = proto;
+                    box.centre = origin + vec3(float(x) + 0.5f, float(y) + 0.5f,
+                                               float(z) + 0.5f) * csize;
+                    return box;
+                };
+
+                if (!split) {
+                    for (uint64_t i = begin; i < end; ++i) {
+                        const Block& b = blocks[i / per_block];
+                        const uint32_t local = uint32_t(i % per_block);
+                        const std::span<const uint32_t> parent(g.pool_.data() + b.tape + 2,
+                                                               g.pool_[b.tape]);
+                        prune_cell(i, parent, [&] { return b.tape; },
+                                   cell_box(b.x + local % f, b.y + (local / f) % f,
+                                            b.z + local / (f * f)));
+                    }
+                    return;
+                }
+                // Each block in two steps: its 8 octants are pruned first (not stored), then
+                // each cell from its octant's tape. Shorter parent tapes for the cells, same
+                // guarantees: a tape valid in an octant is valid in every cell inside it.
+                const uint32_t hf = f / 2;
+                for (uint64_t bi = begin / per_block; bi < end / per_block; ++bi) {
+                    const Block& b = blocks[bi];
+                    const std::span<const uint32_t> parent(g.pool_.data() + b.tape + 2,
+                                                           g.pool_[b.tape]);
+                    for (uint32_t o = 0; o < 8; ++o) {
+                        const uint32_t ox = (o & 1) * hf, oy = ((o >> 1) & 1) * hf,
+                                       oz = ((o >> 2) & 1) * hf;
+                        CellBox obox;
+                        obox.half = proto.half * float(hf);
+                        obox.radius = proto.radius * float(hf);
+                        obox.centre = origin + vec3(float(b.x + ox) + 0.5f * float(hf),
+                                                    float(b.y + oy) + 0.5f * float(hf),
+                                                    float(b.z + oz) + 0.5f * float(hf)) * csize;
+                        const float ov = evaluate_cell(sc, parent, obox, opt.bounds, s);
+                        out.words_visited += parent.size();
+                        float oconst = 0;
+                        const bool far = opt.far_field && !is_near_field(sc, parent, obox,
+                                                                          opt.far_field_c, s,
+                                                                          oconst);
+                        std::span<const uint32_t> otape = parent;
+                        uint32_t oref = b.tape;
+                        if (!far) {
+                            s.octant.clear();
+                            compact_tape(sc, parent, s, s.octant);
+                            if (s.octant.size() < parent.size()) {
+                                otape = s.octant;
+                                oref = kNone;  // stored on first use
+                            }
+                        }
+                        const auto octant_ref = [&] {
+                            if (oref == kNone) {
+                                oref = kLocalTape | uint32_t(out.words.size());
+                                out.words.push_back(uint32_t(s.octant.size()));
+                                out.words.push_back(0);
+                                out.words.insert(out.words.end(), s.octant.begin(),
+                                                 s.octant.end());
+                                uint32_t prims = 0;
+                                for (uint32_t w : s.octant)
+                                    prims += sc.is_primitive(math::tape_node(w)) ? 1 : 0;
+                                out.words[(oref & ~kLocalTape) + 1] = prims;
+                            }
+                            return oref;
+                        };
+                        for (uint32_t lz = oz; lz < oz + hf; ++lz)
+                            for (uint32_t ly = oy; ly < oy + hf; ++ly)
+                                for (uint32_t lx = ox; lx < ox + hf; ++lx) {
+                                    const uint64_t i = bi * per_block + (lz * f + ly) * f + lx;
+                                    const CellBox box = cell_box(b.x + lx, b.y + ly, b.z + lz);
+                                    if (!far) {
+                                        // otape may be s.octant: the cell's pruning uses the
+                                        // other scratch arrays only.
+                                        prune_cell(i, otape, octant_ref, box);
+                                        continue;
+                                    }
+                                    // A far octant makes far cells: its constant holds in each;
+                                    // the centre value is a conservative stand-in (same sign,
+                                    // never larger in magnitude) moved from the octant centre.
+                                    PrunedCell& cell = level.cells[i];
+                                    const float reach =
+                                        g.lipschitz_ * math::length(box.centre - obox.centre);
+                                    cell.tape = PrunedCell::kFarField;
+                                    cell.bound = oconst;
+                                    cell.value = ov > 0 ? ov - reach : ov + reach;
+                                }
                     }
                 }
             });
