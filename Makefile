@@ -3,7 +3,8 @@ BUILD ?= build
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 PACKAGES = build-essential cmake ninja-build pkg-config libtbb-dev libcli11-dev rapidjson-dev \
-           libgtest-dev libbenchmark-dev valgrind clang-format
+           libgtest-dev libbenchmark-dev libpng-dev libopenvdb-dev libboost-iostreams-dev \
+           valgrind clang-format
 
 .PHONY: setup build test run bench sanitize format clean
 

@@ -7,6 +7,7 @@
 // e.g. "scene.json: /leftChild/rightChild: radius must be > 0 (got -1)".
 #pragma once
 
+#include <functional>
 #include <string>
 #include <string_view>
 
@@ -36,5 +37,11 @@ void write_file_atomic(const std::string& path, std::string_view bytes);
 // writable); creates nothing. For refusing bad output paths before long work.
 void check_writable(const std::string& path);
 std::string read_file(const std::string& path);
+// For writers that need a path (libraries that open files themselves): calls write(tmp) with a
+// temporary path beside `path`, then renames it over `path`; on any exception removes the
+// temporary file and rethrows. Checks that `path` is writable first.
+void write_atomic_with(const std::string& path, const std::function<void(const std::string&)>& write);
+// The lower-case extension of a path including the dot (".png"), or "" if none.
+std::string extension_of(const std::string& path);
 
 }  // namespace sdfprune

@@ -74,4 +74,31 @@ void write_file_atomic(const std::string& path, std::string_view bytes) {
     }
 }
 
+void write_atomic_with(const std::string& path,
+                       const std::function<void(const std::string&)>& write) {
+    check_writable(path);
+    std::string tmp = path + ".tmp-XXXXXX";
+    const int fd = ::mkstemp(tmp.data());
+    if (fd < 0) throw IoError(path + ": cannot create: " + std::strerror(errno));
+    ::close(fd);
+    try {
+        write(tmp);
+    } catch (...) {
+        ::unlink(tmp.c_str());
+        throw;
+    }
+    ::chmod(tmp.c_str(), 0644);
+    if (::rename(tmp.c_str(), path.c_str()) != 0) {
+        const std::string why = std::strerror(errno);
+        ::unlink(tmp.c_str());
+        throw IoError(path + ": cannot write: " + why);
+    }
+}
+
+std::string extension_of(const std::string& path) {
+    std::string ext = std::filesystem::path(path).extension().string();
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return ext;
+}
+
 }  // namespace sdfprune

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <thread>
 
 #include "sdfprune/eval.hpp"
 #include "sdfprune/prune.hpp"
@@ -100,8 +101,20 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
         const bool split = opt.hierarchy && f >= 4 && f % 2 == 0 && kChunkCells % per_block == 0;
         std::vector<ChunkOut> outs(chunks);
         std::atomic<bool> cancelled{false};
+        std::atomic<uint32_t> chunks_done{0};
+        const std::thread::id caller = std::this_thread::get_id();
+        // Progress is reported by the calling thread, which takes part in the parallel loop.
+        const auto report = [&] {
+            const uint32_t done = ++chunks_done;
+            if (opt.progress && std::this_thread::get_id() == caller)
+                opt.progress((double(li) + double(done) / chunks) / double(res.size()));
+        };
         with_threads(opt.threads, [&] {
             tbb::parallel_for(uint32_t(0), chunks, [&](uint32_t c) {
+                struct OnExit {
+                    const decltype(report)& f;
+                    ~OnExit() { f(); }
+                } on_exit{report};
                 if (cancelled.load(std::memory_order_relaxed)) return;
                 if (opt.cancel && opt.cancel->load(std::memory_order_relaxed)) {
                     cancelled = true;

@@ -64,4 +64,8 @@ void add_info(CLI::App& app, std::vector<Command>& commands) {
     }});
 }
 
+namespace {
+const CommandRegistrar registrar(10, add_info);
+}  // namespace
+
 }  // namespace sdfprune::cli

@@ -111,4 +111,8 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
     }});
 }
 
+namespace {
+const CommandRegistrar registrar(20, add_stats);
+}  // namespace
+
 }  // namespace sdfprune::cli

@@ -20,8 +20,14 @@ struct Command {
     std::function<int()> run;
 };
 
-void add_info(CLI::App& app, std::vector<Command>& commands);
-void add_stats(CLI::App& app, std::vector<Command>& commands);
+// Each subcommand file registers itself with a static CommandRegistrar; `order` sorts the
+// subcommands in --help.
+using AddCommand = void (*)(CLI::App& app, std::vector<Command>& commands);
+struct CommandRegistrar {
+    CommandRegistrar(int order, AddCommand add);
+};
+// The registered subcommands, sorted by order.
+std::vector<AddCommand> registered_commands();
 
 // The pruning flags shared by every subcommand that prunes (--grid, --no-farfield, ...).
 void add_prune_options(CLI::App* sub, PruneOptions& options, bool& lipschitz_bounds);

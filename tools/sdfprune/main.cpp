@@ -1,10 +1,31 @@
 // main.cpp — the sdfprune command-line tool: parses the subcommand and maps errors to exit codes
 // (2 for bad input or unwritable output with a one-line message, 1 for internal errors).
+#include <algorithm>
 #include <cstdio>
 #include <exception>
 
 #include "command.hpp"
 #include "sdfprune/io.hpp"
+
+namespace sdfprune::cli {
+namespace {
+std::vector<std::pair<int, AddCommand>>& registry() {
+    static std::vector<std::pair<int, AddCommand>> r;
+    return r;
+}
+}  // namespace
+
+CommandRegistrar::CommandRegistrar(int order, AddCommand add) { registry().push_back({order, add}); }
+
+std::vector<AddCommand> registered_commands() {
+    auto r = registry();
+    std::stable_sort(r.begin(), r.end(),
+                     [](const auto& a, const auto& b) { return a.first < b.first; });
+    std::vector<AddCommand> out;
+    for (const auto& [order, add] : r) out.push_back(add);
+    return out;
+}
+}  // namespace sdfprune::cli
 
 int main(int argc, char** argv) {
     using namespace sdfprune;
@@ -14,8 +35,7 @@ int main(int argc, char** argv) {
     app.require_subcommand(1);
     app.set_version_flag("--version", "sdfprune 0.1.0");
     std::vector<cli::Command> commands;
-    cli::add_info(app, commands);
-    cli::add_stats(app, commands);
+    for (cli::AddCommand add : cli::registered_commands()) add(app, commands);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

@@ -1,0 +1,80 @@
+// app.cpp — shared plumbing of the application subcommands.
+#include "app.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+
+#include "sdfprune/io.hpp"
+
+namespace sdfprune::cli {
+
+void add_app_options(CLI::App* sub, AppOptions& o) {
+    sub->add_option("--method", o.method,
+                    "pruned: the pruned grid (default); naive: the full tree at every query")
+        ->capture_default_str()
+        ->check(CLI::IsMember({"pruned", "naive"}));
+    add_prune_options(sub, o.prune, o.lipschitz_bounds);
+    sub->add_flag("--json", o.json, "print the figures as one JSON object on the last line");
+    sub->add_flag("--quiet", o.quiet, "no progress bar and no summary on stderr");
+}
+
+Prepared prepare(const std::string& scene_arg, const AppOptions& o) {
+    Prepared p;
+    p.scene = std::make_unique<Scene>(load_scene_arg(scene_arg));
+    if (!o.pruned()) return p;
+    PruneOptions po = o.prune;
+    if (o.lipschitz_bounds) po.bounds = CellBounds::kLipschitz;
+    Progress bar("pruning", o.quiet);
+    po.progress = [&bar](double f) { bar.update(f); };
+    p.grid = std::make_unique<PrunedGrid>(prune(*p.scene, po));
+    bar.done();
+    p.prune_ms = p.grid->stats().prune_ms;
+    return p;
+}
+
+std::string check_output(const std::string& path, std::initializer_list<const char*> extensions) {
+    const std::string ext = extension_of(path);
+    std::string known;
+    for (const char* e : extensions) {
+        if (ext == e) {
+            check_writable(path);
+            return ext;
+        }
+        known += (known.empty() ? "" : ", ") + std::string(e);
+    }
+    throw IoError(path + ": unknown output extension \"" + ext + "\" (expected " + known + ")");
+}
+
+Progress::Progress(std::string label, bool quiet)
+    : label_(std::move(label)),
+      enabled_(!quiet && ::isatty(STDERR_FILENO)),
+      start_(std::chrono::steady_clock::now()) {}
+
+Progress::~Progress() { done(); }
+
+void Progress::update(double fraction) {
+    if (!enabled_ || ms_since(start_) < 1000) return;
+    shown_ = true;
+    const int width = 30, filled = int(std::clamp(fraction, 0.0, 1.0) * width + 0.5);
+    std::fprintf(stderr, "\r%-12s [%s%s] %3d%%", label_.c_str(), std::string(filled, '#').c_str(),
+                 std::string(width - filled, '.').c_str(), int(fraction * 100 + 0.5));
+    std::fflush(stderr);
+}
+
+void Progress::done() {
+    if (shown_) {
+        update(1.0);
+        std::fprintf(stderr, "\n");
+        shown_ = false;
+    }
+    enabled_ = false;
+}
+
+double ms_since(std::chrono::steady_clock::time_point t0) {
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+        .count();
+}
+
+}  // namespace sdfprune::cli

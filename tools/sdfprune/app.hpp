@@ -1,0 +1,58 @@
+// app.hpp — what the application subcommands (render, discretize, mesh, eval) share: the
+// --method/--grid/... flags, loading and pruning, output checks, the progress bar.
+#pragma once
+
+#include <chrono>
+#include <initializer_list>
+#include <memory>
+#include <string>
+
+#include "command.hpp"
+#include "sdfprune/prune.hpp"
+
+namespace sdfprune::cli {
+
+struct AppOptions {
+    std::string method = "pruned";  // "pruned" or "naive" (the full tree at every query)
+    PruneOptions prune;
+    bool lipschitz_bounds = false;
+    bool json = false;
+    bool quiet = false;
+    bool pruned() const { return method == "pruned"; }
+};
+
+// Adds --method, --grid, --factor, --no-farfield, --no-hierarchy, --farfield-c,
+// --lipschitz-bounds, --threads, --json, --quiet.
+void add_app_options(CLI::App* sub, AppOptions& o);
+
+// A loaded scene and, for --method pruned, its pruned grid (prune_ms = 0 for naive).
+struct Prepared {
+    std::unique_ptr<Scene> scene;
+    std::unique_ptr<PrunedGrid> grid;
+    double prune_ms = 0;
+};
+Prepared prepare(const std::string& scene_arg, const AppOptions& o);
+
+// Refuses (IoError, exit status 2) an output path whose extension is not one of `extensions`
+// (lower case, with the dot) or that cannot be written; returns the extension.
+std::string check_output(const std::string& path, std::initializer_list<const char*> extensions);
+
+// A progress bar on stderr, shown only when stderr is a terminal, not --quiet, and the work has
+// lasted more than a second. update() is called from one thread.
+class Progress {
+public:
+    Progress(std::string label, bool quiet);
+    ~Progress();
+    void update(double fraction);
+    void done();
+
+private:
+    std::string label_;
+    bool enabled_;
+    bool shown_ = false;
+    std::chrono::steady_clock::time_point start_;
+};
+
+double ms_since(std::chrono::steady_clock::time_point t0);
+
+}  // namespace sdfprune::cli
