@@ -112,8 +112,16 @@ public:
     // Batch version, in parallel (threads as in the options it was built with).
     void eval_points(std::span<const vec3> points, std::span<float> out) const;
 
-    // Raw structure, for backends and tests: per level, its cells; the tape pool holds each
-    // tape as [length, primitive count, words...].
+    // The far-field constant of finest cell (ix, iy, iz) lying in far-field cell `c` of level
+    // `level`: the tighter of c.bound and the Lipschitz bound from c's centre value.
+    float far_field_constant(uint32_t level, const PrunedCell& c, uint32_t ix, uint32_t iy,
+                             uint32_t iz) const;
+
+    // Raw structure, for backends and tests. Level 0 holds level_resolution(0)³ cells in
+    // z-major order (index (z·r + y)·r + x). Each near-field cell of level l < last has its
+    // children in level l+1 at [children, children + f³), f = level_resolution(l+1) /
+    // level_resolution(l), in the same z-major order within the block; far-field cells have no
+    // children. The tape pool holds each tape as [length, primitive count, words...].
     std::span<const PrunedCell> level_cells(uint32_t level) const { return levels_[level].cells; }
     uint32_t level_count() const { return uint32_t(levels_.size()); }
     uint32_t level_resolution(uint32_t level) const { return levels_[level].res; }

@@ -365,6 +365,20 @@ vec3 PrunedGrid::cell_center(uint32_t ix, uint32_t iy, uint32_t iz) const {
            vec3(float(ix) + 0.5f, float(iy) + 0.5f, float(iz) + 0.5f) * cell_size_;
 }
 
+float PrunedGrid::far_field_constant(uint32_t level, const PrunedCell& c, uint32_t ix,
+                                     uint32_t iy, uint32_t iz) const {
+    // The Lipschitz bound from the coarse centre over the distance to this finest cell's far
+    // corner; tighter than the coarse cell's own constant for cells near its centre.
+    const uint32_t scale = resolution() / levels_[level].res;
+    const vec3 coarse = scene_->aabb.min + vec3(float(ix / scale) + 0.5f, float(iy / scale) + 0.5f,
+                                                float(iz / scale) + 0.5f) *
+                                               (cell_size_ * float(scale));
+    const vec3 d = math::abs(cell_center(ix, iy, iz) - coarse) + cell_size_ * 0.5f;
+    const float reach = lipschitz_ * math::length(d) * (1.0f + 1e-5f) + math::kPruneMarginAbs;
+    const float lipschitz_bound = std::fabs(c.value) - reach;
+    return c.value > 0 ? std::max(c.bound, lipschitz_bound) : std::min(c.bound, -lipschitz_bound);
+}
+
 CellView PrunedGrid::cell(uint32_t ix, uint32_t iy, uint32_t iz) const {
     const uint32_t N = resolution();
     uint32_t block_start = 0;
@@ -376,18 +390,8 @@ CellView PrunedGrid::cell(uint32_t ix, uint32_t iy, uint32_t iz) const {
         const PrunedCell& c = l.cells[block_start + (z * l.factor + y) * l.factor + x];
         CellView v;
         if (c.tape == PrunedCell::kFarField) {
-            // A tighter constant for this finest cell than the coarse cell's: the Lipschitz
-            // bound from the coarse centre over the distance to this cell's far corner.
-            const vec3 coarse = scene_->aabb.min +
-                                vec3(float(ix / scale) + 0.5f, float(iy / scale) + 0.5f,
-                                     float(iz / scale) + 0.5f) * (cell_size_ * float(scale));
-            const vec3 d = math::abs(cell_center(ix, iy, iz) - coarse) + cell_size_ * 0.5f;
-            const float reach = lipschitz_ * math::length(d) * (1.0f + 1e-5f) +
-                                math::kPruneMarginAbs;
-            const float lipschitz_bound = std::fabs(c.value) - reach;
             v.far_field = true;
-            v.constant = c.value > 0 ? std::max(c.bound, lipschitz_bound)
-                                     : std::min(c.bound, -lipschitz_bound);
+            v.constant = far_field_constant(li, c, ix, iy, iz);
             return v;
         }
         if (li + 1 == levels_.size()) {
