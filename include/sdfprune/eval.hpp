@@ -19,6 +19,11 @@ struct EvalOptions {
 // Evaluates `tape` at p. `stack` must hold scene.max_stack floats.
 float eval_tape(const Scene& scene, std::span<const uint32_t> tape, vec3 p, float* stack);
 
+// The albedo at p: primitives' colors blended through the operators by operator_weight_b, the
+// way smooth operators blend the shapes. Stacks must hold scene.max_stack entries each.
+vec3 eval_tape_color(const Scene& scene, std::span<const uint32_t> tape, vec3 p, float* stack,
+                     vec3* color_stack);
+
 // The full tree's value at p (allocates its stack; use eval_points for many points).
 float eval_point(const Scene& scene, vec3 p);
 

@@ -112,6 +112,21 @@ public:
     // Batch version, in parallel (threads as in the options it was built with).
     void eval_points(std::span<const vec3> points, std::span<float> out) const;
 
+    // Where p falls: the cell at the coarsest level that decides it (a far-field cell at any
+    // level, or a near-field finest cell), with its coordinates at that level. False outside
+    // the grid. Used by tracers to skip whole far-field blocks.
+    struct Located {
+        uint32_t level = 0;
+        uint32_t x = 0, y = 0, z = 0;
+        const PrunedCell* cell = nullptr;
+        bool far_field() const { return cell->tape == PrunedCell::kFarField; }
+    };
+    bool locate(vec3 p, Located& out) const;
+    // Size of a cell of level `level`.
+    vec3 level_cell_size(uint32_t level) const {
+        return cell_size_ * float(resolution() / levels_[level].res);
+    }
+
     // The far-field constant of finest cell (ix, iy, iz) lying in far-field cell `c` of level
     // `level`: the tighter of c.bound and the Lipschitz bound from c's centre value.
     float far_field_constant(uint32_t level, const PrunedCell& c, uint32_t ix, uint32_t iy,
@@ -136,12 +151,27 @@ private:
         uint32_t res = 0;     // cells per axis of the whole level
         uint32_t factor = 0;  // cells per axis of one block (level 0: res)
         std::vector<PrunedCell> cells;
+        // When finest-cells-per-cell and factor are powers of two, lookups use shifts.
+        bool pow2 = false;
+        uint32_t shift = 0, factor_bits = 0;
+        // Index within its block of the level cell holding finest cell (ix, iy, iz).
+        uint32_t local_index(uint32_t ix, uint32_t iy, uint32_t iz, uint32_t N) const {
+            if (pow2) {
+                const uint32_t m = factor - 1;
+                return ((((iz >> shift) & m) << factor_bits | ((iy >> shift) & m)) << factor_bits) |
+                       ((ix >> shift) & m);
+            }
+            const uint32_t scale = N / res;
+            return (((iz / scale) % factor) * factor + (iy / scale) % factor) * factor +
+                   (ix / scale) % factor;
+        }
     };
     const Scene* scene_ = nullptr;
     PruneOptions options_;
     std::vector<Level> levels_;
     std::vector<uint32_t> pool_;
     vec3 cell_size_;
+    vec3 inv_cell_size_;
     float lipschitz_ = 1;  // of the root: bounds the far-field constants
     PruneStats stats_;
 };

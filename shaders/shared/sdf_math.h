@@ -146,6 +146,13 @@ SDFPRUNE_FN float apply_operator(float s, float k, float a, float b) {
 
 SDFPRUNE_FN float operator_s(uint kind) { return kind == kOpUnion ? 1.0f : -1.0f; }
 
+// The weight of operand b in apply_operator's result (its partial derivative; a's is 1 − it):
+// used to blend the operands' colors the way the smooth operator blends their shapes.
+SDFPRUNE_FN float operator_weight_b(float s, float k, float a, float b) {
+    float h = k > 0.0f ? max(k - abs(a - b), 0.0f) / (2.0f * k) : 0.0f;
+    return s * b < s * a ? 1.0f - h : h;
+}
+
 // ---- pruning ---------------------------------------------------------------------------------
 // Relative safety margin of the pruning test: float rounding in the values at the cell centre
 // can never make an operator look decided when it is not.

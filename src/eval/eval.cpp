@@ -33,6 +33,32 @@ float eval_tape(const Scene& sc, std::span<const uint32_t> tape, vec3 p, float* 
     return stack[0];
 }
 
+vec3 eval_tape_color(const Scene& sc, std::span<const uint32_t> tape, vec3 p, float* stack,
+                     vec3* color_stack) {
+    uint32_t top = 0;
+    for (const uint32_t w : tape) {
+        const uint32_t n = math::tape_node(w);
+        const uint32_t k = sc.kind[n];
+        float v;
+        vec3 c;
+        if (k < math::kPrimitiveKindCount) {
+            v = math::eval_primitive(k, sc.params[sc.primitive[n]], p);
+            c = sc.color[sc.primitive[n]];
+        } else {
+            --top;
+            const float b = stack[top], a = stack[top - 1];
+            const float s = math::operator_s(k);
+            v = math::apply_operator(s, sc.blend[n], a, b);
+            const float wb = math::operator_weight_b(s, sc.blend[n], a, b);
+            c = color_stack[top - 1] * (1.0f - wb) + color_stack[top] * wb;
+            --top;
+        }
+        stack[top] = math::tape_negated(w) ? -v : v;
+        color_stack[top++] = c;
+    }
+    return color_stack[0];
+}
+
 float eval_point(const Scene& sc, vec3 p) {
     std::vector<float> stack(sc.max_stack);
     return eval_tape(sc, sc.full_tape, p, stack.data());

@@ -5,6 +5,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -58,6 +59,7 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     const uint32_t N = res.back();
     const vec3 extent = sc.aabb.max - sc.aabb.min;
     g.cell_size_ = extent / float(N);
+    g.inv_cell_size_ = vec3(1.0f / g.cell_size_.x, 1.0f / g.cell_size_.y, 1.0f / g.cell_size_.z);
 
     // The full tape is the parent of level 0.
     g.pool_.reserve(sc.size() + 2);
@@ -322,6 +324,12 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                             (b.z + local / (f * f)) * nf, cell.tape});
         }
         blocks.swap(next);
+        const uint32_t scale = N / level.res;
+        if (std::has_single_bit(scale) && std::has_single_bit(level.factor)) {
+            level.pow2 = true;
+            level.shift = uint32_t(std::countr_zero(scale));
+            level.factor_bits = uint32_t(std::countr_zero(level.factor));
+        }
         g.levels_.push_back(std::move(level));
         if (opt.progress) opt.progress(double(li + 1) / double(res.size()));
     }
@@ -350,7 +358,7 @@ bool PrunedGrid::cell_index(vec3 p, uint32_t& ix, uint32_t& iy, uint32_t& iz) co
     const vec3 q = p - scene_->aabb.min;
     uint32_t idx[3];
     for (int a = 0; a < 3; ++a) {
-        const float t = q[a] / cell_size_[a];
+        const float t = q[a] * inv_cell_size_[a];
         if (!(t >= 0.0f) || !(t <= float(N))) return false;
         idx[a] = std::min(uint32_t(t), N - 1);
     }
@@ -384,10 +392,7 @@ CellView PrunedGrid::cell(uint32_t ix, uint32_t iy, uint32_t iz) const {
     uint32_t block_start = 0;
     for (uint32_t li = 0; li < levels_.size(); ++li) {
         const Level& l = levels_[li];
-        const uint32_t scale = N / l.res;
-        const uint32_t x = (ix / scale) % l.factor, y = (iy / scale) % l.factor,
-                       z = (iz / scale) % l.factor;
-        const PrunedCell& c = l.cells[block_start + (z * l.factor + y) * l.factor + x];
+        const PrunedCell& c = l.cells[block_start + l.local_index(ix, iy, iz, N)];
         CellView v;
         if (c.tape == PrunedCell::kFarField) {
             v.far_field = true;
@@ -403,6 +408,24 @@ CellView PrunedGrid::cell(uint32_t ix, uint32_t iy, uint32_t iz) const {
         block_start = c.children;
     }
     return {};
+}
+
+bool PrunedGrid::locate(vec3 p, Located& out) const {
+    uint32_t ix, iy, iz;
+    if (!cell_index(p, ix, iy, iz)) return false;
+    const uint32_t N = resolution();
+    uint32_t block_start = 0;
+    for (uint32_t li = 0; li < levels_.size(); ++li) {
+        const Level& l = levels_[li];
+        const PrunedCell& c = l.cells[block_start + l.local_index(ix, iy, iz, N)];
+        if (c.tape == PrunedCell::kFarField || li + 1 == levels_.size()) {
+            const uint32_t scale = N / l.res;
+            out = {li, ix / scale, iy / scale, iz / scale, &c};
+            return true;
+        }
+        block_start = c.children;
+    }
+    return false;
 }
 
 float PrunedGrid::eval(vec3 p, float* stack) const {

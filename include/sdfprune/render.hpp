@@ -1,0 +1,70 @@
+// render.hpp — sphere-traced images of a scene (DESIGN.md §6): one primary and one shadow ray per
+// pixel, either on the pruned grid (far-field blocks skipped whole, near-field cells evaluated
+// with their tapes) or naively (the full tree at every step, the paper's baseline). Both use
+// the same tracer, evaluator and threading, so their time ratio measures the pruning alone.
+//
+// Thread-safety: render() is reentrant; it runs on oneTBB.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "prune.hpp"
+
+namespace sdfprune {
+
+struct Camera {
+    vec3 eye;
+    vec3 target;
+    vec3 up{0.0f, 1.0f, 0.0f};
+    float fov_degrees = 40;  // vertical field of view
+};
+
+// A camera looking at `target` (default: the AABB's centre) from angles yaw (about +y, 0 = from
+// +z) and pitch (up from the xz plane), in degrees, at `distance` (<= 0: far enough for the
+// AABB's bounding sphere to fit the view).
+Camera orbit_camera(const Aabb& aabb, float yaw_degrees, float pitch_degrees, float distance,
+                    float fov_degrees, const vec3* target = nullptr);
+
+enum class Shading {
+    kShaded,   // albedo from the primitives' colors, diffuse light, hard shadow, ambient
+    kNormals,  // 0.5 + 0.5·n
+    kHeatmap,  // node evaluations per pixel, log scale, with a legend
+};
+
+struct RenderOptions {
+    uint32_t width = 1920, height = 1080;
+    Camera camera;
+    Shading shading = Shading::kShaded;
+    bool shadows = true;
+    int threads = 0;  // 0 = all cores
+    // Heatmap scale maximum (node evaluations per pixel); 0 = the image's own maximum.
+    double heatmap_max = 0;
+    std::function<void(double)> progress;  // called from the calling thread, fraction done
+};
+
+struct Image {
+    uint32_t width = 0, height = 0;
+    std::vector<uint8_t> rgb;  // row-major from the top, 3 bytes per pixel
+};
+
+struct RenderStats {
+    double trace_ms = 0;
+    double steps_avg = 0;     // tracing steps per pixel (primary + shadow)
+    double evals_avg = 0;     // node evaluations per pixel (steps, normal and color)
+    double hit_fraction = 0;  // pixels whose primary ray hit the surface
+    double evals_max = 0;
+};
+
+// On the pruned grid (grid.scene() is the scene).
+Image render(const PrunedGrid& grid, const RenderOptions& options, RenderStats* stats = nullptr);
+// Naive: the full tree at every step.
+Image render_naive(const Scene& scene, const RenderOptions& options,
+                   RenderStats* stats = nullptr);
+
+// Writes a PNG (8-bit RGB) atomically; throws IoError.
+void write_png(const Image& image, const std::string& path);
+
+}  // namespace sdfprune

@@ -1,0 +1,129 @@
+// image.cpp — colors, the heatmap legend (a 3x5 pixel font drawn by hand) and PNG output.
+#include <png.h>
+
+#include <algorithm>
+#include <cmath>
+#include <csetjmp>
+#include <cstdio>
+#include <string>
+
+#include "render_internal.hpp"
+#include "sdfprune/io.hpp"
+
+namespace sdfprune {
+
+vec3 background(float v) {
+    const float t = std::clamp(0.5f + 0.5f * v, 0.0f, 1.0f);
+    return vec3(0.62f, 0.66f, 0.74f) * (1 - t) + vec3(0.86f, 0.89f, 0.94f) * t;
+}
+
+vec3 heat_color(double value, double top) {
+    const double t = top > 0 ? std::clamp(std::log1p(value) / std::log1p(top), 0.0, 1.0) : 0.0;
+    // Black -> purple -> red -> orange -> pale yellow.
+    static const vec3 stops[5] = {{0.0f, 0.0f, 0.04f}, {0.33f, 0.06f, 0.5f}, {0.8f, 0.18f, 0.3f},
+                                  {0.98f, 0.55f, 0.04f}, {1.0f, 1.0f, 0.62f}};
+    const double x = t * 4;
+    const int i = std::min(int(x), 3);
+    const float f = float(x - i);
+    const vec3 c = stops[i] * (1 - f) + stops[i + 1] * f;
+    // Stored linear: to_rgb8 applies the sRGB curve; undo it so the ramp is as designed.
+    return {std::pow(c.x, 2.2f), std::pow(c.y, 2.2f), std::pow(c.z, 2.2f)};
+}
+
+void to_rgb8(const std::vector<vec3>& color, Image& img) {
+    for (size_t i = 0; i < color.size(); ++i)
+        for (int c = 0; c < 3; ++c) {
+            const float lin = std::clamp(color[i][c], 0.0f, 1.0f);
+            img.rgb[3 * i + c] = uint8_t(std::lround(std::pow(lin, 1.0f / 2.2f) * 255.0f));
+        }
+}
+
+namespace {
+
+// 3x5 glyphs, one row of 3 bits per octal digit (top row first).
+uint16_t glyph(char ch) {
+    switch (ch) {
+        case '0': return 075557; case '1': return 026227; case '2': return 071747;
+        case '3': return 071717; case '4': return 055711; case '5': return 074717;
+        case '6': return 074757; case '7': return 071111; case '8': return 075757;
+        case '9': return 075711; case '.': return 000002; case '/': return 011244;
+        case 'k': return 045655; case 'M': return 057755; case 'n': return 006555;
+        case 'o': return 007557; case 'd': return 017557; case 'e': return 025743;
+        case 'v': return 005552; case 'a': return 007357; case 'l': return 062227;
+        case 's': return 007637; case 'p': return 075744; case 'i': return 020222;
+        case 'x': return 005255; default: return 0;
+    }
+}
+
+void fill(Image& img, int x0, int y0, int w, int h, vec3 c) {
+    for (int y = std::max(0, y0); y < std::min<int>(img.height, y0 + h); ++y)
+        for (int x = std::max(0, x0); x < std::min<int>(img.width, x0 + w); ++x)
+            for (int k = 0; k < 3; ++k)
+                img.rgb[3 * (size_t(y) * img.width + x) + k] = uint8_t(std::lround(c[k] * 255));
+}
+
+void text(Image& img, int x, int y, int scale, const std::string& s, vec3 c) {
+    for (char ch : s) {
+        const uint16_t g = glyph(ch);
+        for (int row = 0; row < 5; ++row)
+            for (int col = 0; col < 3; ++col)
+                if (g >> ((4 - row) * 3 + (2 - col)) & 1)
+                    fill(img, x + col * scale, y + row * scale, scale, scale, c);
+        x += 4 * scale;
+    }
+}
+
+std::string compact_number(double v) {
+    char buf[32];
+    if (v >= 1e6) std::snprintf(buf, sizeof buf, "%.1fM", v / 1e6);
+    else if (v >= 1e4) std::snprintf(buf, sizeof buf, "%.0fk", v / 1e3);
+    else std::snprintf(buf, sizeof buf, "%.0f", v);
+    return buf;
+}
+
+}  // namespace
+
+void draw_heatmap_legend(Image& img, double top) {
+    const int scale = std::max(1, int(img.height) / 270);
+    const int bar_w = 60 * scale, bar_h = 6 * scale, pad = 4 * scale;
+    const int x0 = int(img.width) - bar_w - 6 * pad, y0 = int(img.height) - bar_h - 12 * scale - 3 * pad;
+    fill(img, x0 - pad, y0 - pad, bar_w + 2 * pad, bar_h + 12 * scale + 3 * pad, vec3(0.08f));
+    for (int x = 0; x < bar_w; ++x) {
+        const double value = std::expm1(double(x) / (bar_w - 1) * std::log1p(top));
+        vec3 c = heat_color(value, top);
+        c = {std::pow(c.x, 1 / 2.2f), std::pow(c.y, 1 / 2.2f), std::pow(c.z, 1 / 2.2f)};
+        fill(img, x0 + x, y0, 1, bar_h, c);
+    }
+    const vec3 white(0.95f);
+    const int ty = y0 + bar_h + pad;
+    text(img, x0, ty, scale, "0", white);
+    const std::string hi = compact_number(top);
+    text(img, x0 + bar_w - int(hi.size()) * 4 * scale, ty, scale, hi, white);
+    const std::string label = "node evals/pixel";
+    text(img, x0 + (bar_w - int(label.size()) * 4 * scale) / 2, ty + 6 * scale, scale, label, white);
+}
+
+void write_png(const Image& img, const std::string& path) {
+    write_atomic_with(path, [&](const std::string& tmp) {
+        FILE* f = std::fopen(tmp.c_str(), "wb");
+        if (!f) throw IoError(path + ": cannot create");
+        png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
+        png_infop info = png ? png_create_info_struct(png) : nullptr;
+        if (!png || !info || setjmp(png_jmpbuf(png))) {
+            png_destroy_write_struct(&png, &info);
+            std::fclose(f);
+            throw IoError(path + ": PNG encoding failed");
+        }
+        png_init_io(png, f);
+        png_set_IHDR(png, info, img.width, img.height, 8, PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE,
+                     PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+        png_write_info(png, info);
+        for (uint32_t y = 0; y < img.height; ++y)
+            png_write_row(png, img.rgb.data() + size_t(y) * img.width * 3);
+        png_write_end(png, nullptr);
+        png_destroy_write_struct(&png, &info);
+        if (std::fclose(f) != 0) throw IoError(path + ": write failed");
+    });
+}
+
+}  // namespace sdfprune

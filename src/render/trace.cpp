@@ -1,0 +1,263 @@
+// trace.cpp — sphere tracing on the pruned grid or on the full tree (DESIGN.md §6): one
+// primary and one shadow ray per pixel. On the pruned grid, a ray in a far-field cell (of any
+// level) jumps to the cell's exit — no surface can be inside it — or by the cell's constant if
+// that is longer; in a near-field cell it steps by the value of the cell's tape. Both fields
+// run the same loop, so their time ratio is the pruning's alone.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <numbers>
+#include <thread>
+
+#include "render_internal.hpp"
+#include "sdfprune/eval.hpp"
+#include "sdfprune/render.hpp"
+
+namespace sdfprune {
+
+Camera orbit_camera(const Aabb& aabb, float yaw, float pitch, float distance, float fov,
+                    const vec3* target) {
+    Camera c;
+    c.fov_degrees = fov;
+    c.target = target ? *target : (aabb.min + aabb.max) * 0.5f;
+    const float radius = math::length(aabb.max - aabb.min) * 0.5f;
+    if (!(distance > 0))
+        distance = radius / std::sin(fov * std::numbers::pi_v<float> / 360.0f) * 0.8f;
+    const float y = yaw * std::numbers::pi_v<float> / 180, p = pitch * std::numbers::pi_v<float> / 180;
+    c.eye = c.target + vec3(std::cos(p) * std::sin(y), std::sin(p), std::cos(p) * std::cos(y)) *
+                           distance;
+    return c;
+}
+
+namespace {
+
+vec3 normalize(vec3 v) { return v / math::length(v); }
+vec3 cross(vec3 a, vec3 b) {
+    return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+
+// Ray / box intersection: [t0, t1] inside the box, false if missed.
+bool ray_box(vec3 o, vec3 inv_dir, vec3 lo, vec3 hi, float& t0, float& t1) {
+    t0 = 0;
+    t1 = INFINITY;
+    for (int a = 0; a < 3; ++a) {
+        float ta = (lo[a] - o[a]) * inv_dir[a], tb = (hi[a] - o[a]) * inv_dir[a];
+        if (ta > tb) std::swap(ta, tb);
+        t0 = std::max(t0, ta);
+        t1 = std::min(t1, tb);
+    }
+    return t0 <= t1;
+}
+
+struct Counters {
+    uint64_t steps = 0;
+    uint64_t evals = 0;
+};
+
+// The full tree at every query.
+struct NaiveField {
+    const Scene& sc;
+    // The exact value at p; `hint` (a tape valid near p) is unused.
+    float value(vec3 p, std::span<const uint32_t>, float* stack, Counters& c) const {
+        c.evals += sc.size();
+        return eval_tape(sc, sc.full_tape, p, stack);
+    }
+    std::span<const uint32_t> tape_at(vec3) const { return sc.full_tape; }
+};
+
+// The pruned grid.
+struct PrunedField {
+    const PrunedGrid& g;
+    std::span<const uint32_t> tape_at(vec3 p) const {
+        PrunedGrid::Located at;
+        if (!g.locate(p, at) || at.far_field()) return g.scene().full_tape;
+        return g.tape_at(at.cell->tape);
+    }
+    float value(vec3 p, std::span<const uint32_t> hint, float* stack, Counters& c) const {
+        PrunedGrid::Located at;
+        std::span<const uint32_t> tape = hint;
+        if (g.locate(p, at) && !at.far_field()) tape = g.tape_at(at.cell->tape);
+        c.evals += tape.size();
+        return eval_tape(g.scene(), tape, p, stack);
+    }
+};
+
+struct TraceContext {
+    const Scene& sc;
+    float inv_lipschitz;
+    vec3 aabb_lo, aabb_hi;
+};
+
+// Marches o + t·dir over [t0, t1]; returns the hit t or a negative value.
+template <class Field>
+float march(const Field& field, const TraceContext& ctx, vec3 o, vec3 dir, float t0, float t1,
+            uint32_t max_steps, float* stack, Counters& c) {
+    float t = t0;
+    for (uint32_t step = 0; step < max_steps && t <= t1; ++step) {
+        ++c.steps;
+        // [t0, t1] lies in the AABB: clamp away the rounding that would put p just outside.
+        const vec3 p = math::min(math::max(o + dir * t, ctx.aabb_lo), ctx.aabb_hi);
+        float d;
+        if constexpr (std::is_same_v<Field, PrunedField>) {
+            PrunedGrid::Located at;
+            if (field.g.locate(p, at)) {
+                if (at.far_field()) {
+                    // No surface in this cell: continue from its exit (or by its constant).
+                    const vec3 size = field.g.level_cell_size(at.level);
+                    const vec3 lo = ctx.aabb_lo + vec3(float(at.x), float(at.y), float(at.z)) * size;
+                    float t_exit = INFINITY;
+                    for (int a = 0; a < 3; ++a) {
+                        if (dir[a] == 0.0f) continue;
+                        const float bound = dir[a] > 0 ? lo[a] + size[a] : lo[a];
+                        t_exit = std::min(t_exit, (bound - o[a]) / dir[a]);
+                    }
+                    const float tiny = 1e-4f * std::min({size.x, size.y, size.z});
+                    t = std::max(t + std::fabs(at.cell->bound) * ctx.inv_lipschitz, t_exit + tiny);
+                    continue;
+                }
+                const std::span<const uint32_t> tape = field.g.tape_at(at.cell->tape);
+                c.evals += tape.size();
+                d = eval_tape(ctx.sc, tape, p, stack);
+            } else {
+                c.evals += ctx.sc.size();
+                d = eval_tape(ctx.sc, ctx.sc.full_tape, p, stack);
+            }
+        } else {
+            c.evals += ctx.sc.size();
+            d = eval_tape(ctx.sc, ctx.sc.full_tape, p, stack);
+        }
+        if (d < 5e-4f * std::min(1.0f, t)) return t;
+        t += d * ctx.inv_lipschitz;
+    }
+    return -1;
+}
+
+template <class Field>
+Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
+                  RenderStats* stats) {
+    const auto t_start = std::chrono::steady_clock::now();
+    const uint32_t W = opt.width, H = opt.height;
+    if (W == 0 || H == 0) throw std::invalid_argument("image size must be positive");
+    Image img;
+    img.width = W;
+    img.height = H;
+    img.rgb.assign(size_t(W) * H * 3, 0);
+    std::vector<uint32_t> evals(size_t(W) * H, 0);
+    std::vector<vec3> color(size_t(W) * H);
+
+    const TraceContext ctx{sc, 1.0f / sc.lipschitz[sc.root()], sc.aabb.min, sc.aabb.max};
+    const Camera& cam = opt.camera;
+    const vec3 forward = normalize(cam.target - cam.eye);
+    const vec3 right = normalize(cross(forward, cam.up));
+    const vec3 up = cross(right, forward);
+    const float tan_half = std::tan(cam.fov_degrees * std::numbers::pi_v<float> / 360.0f);
+    const float aspect = float(W) / float(H);
+    const vec3 light = normalize(up * 0.9f - right * 0.5f - forward * 0.45f);
+    const float scene_scale = math::length(sc.aabb.max - sc.aabb.min);
+    const float normal_h = 2e-4f * scene_scale;
+
+    std::atomic<uint64_t> total_steps{0}, total_evals{0}, hits{0};
+    std::atomic<uint32_t> rows_done{0};
+    const std::thread::id caller = std::this_thread::get_id();
+
+    auto trace_rows = [&](const tbb::blocked_range<uint32_t>& rows) {
+        std::vector<float> stack(sc.max_stack);
+        std::vector<vec3> color_stack(sc.max_stack);
+        Counters sum;
+        uint64_t row_hits = 0;
+        for (uint32_t y = rows.begin(); y != rows.end(); ++y) {
+            for (uint32_t x = 0; x < W; ++x) {
+                Counters c;
+                const float u = (2.0f * (float(x) + 0.5f) / float(W) - 1.0f) * tan_half * aspect;
+                const float v = (1.0f - 2.0f * (float(y) + 0.5f) / float(H)) * tan_half;
+                const vec3 dir = normalize(forward + right * u + up * v);
+                const vec3 inv(1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z);
+                float t0, t1;
+                vec3 out = background(v / tan_half);
+                if (ray_box(cam.eye, inv, ctx.aabb_lo, ctx.aabb_hi, t0, t1)) {
+                    const float t = march(field, ctx, cam.eye, dir, t0, t1, 1024, stack.data(), c);
+                    if (t >= 0) {
+                        ++row_hits;
+                        const vec3 p = cam.eye + dir * t;
+                        const std::span<const uint32_t> tape = field.tape_at(p);
+                        // Tetrahedron-stencil gradient.
+                        const vec3 k[4] = {{1, -1, -1}, {-1, -1, 1}, {-1, 1, -1}, {1, 1, 1}};
+                        vec3 n(0.0f);
+                        for (const vec3& ki : k)
+                            n = n + ki * field.value(p + ki * normal_h, tape, stack.data(), c);
+                        const float len = math::length(n);
+                        n = len > 0 ? n / len : -dir;
+                        c.evals += tape.size();
+                        const vec3 albedo =
+                            eval_tape_color(sc, tape, p, stack.data(), color_stack.data());
+                        float lit = std::max(0.0f, math::dot(n, light));
+                        if (opt.shadows && lit > 0) {
+                            const vec3 so = p + n * (4.0f * normal_h);
+                            const vec3 sinv(1.0f / light.x, 1.0f / light.y, 1.0f / light.z);
+                            float s0, s1;
+                            if (ray_box(so, sinv, ctx.aabb_lo, ctx.aabb_hi, s0, s1) &&
+                                march(field, ctx, so, light, s0 + normal_h, s1, 512,
+                                      stack.data(), c) >= 0)
+                                lit = 0;
+                        }
+                        out = opt.shading == Shading::kNormals
+                                  ? n * 0.5f + 0.5f
+                                  : albedo * (0.22f + 0.78f * lit) +
+                                        vec3(0.06f) * std::pow(std::max(0.0f, math::dot(n, -dir)), 8.0f);
+                    }
+                }
+                const size_t i = size_t(y) * W + x;
+                color[i] = out;
+                evals[i] = uint32_t(std::min<uint64_t>(c.evals, 0xffffffffu));
+                sum.steps += c.steps;
+                sum.evals += c.evals;
+            }
+            const uint32_t done = ++rows_done;
+            if (opt.progress && std::this_thread::get_id() == caller) opt.progress(double(done) / H);
+        }
+        total_steps += sum.steps;
+        total_evals += sum.evals;
+        hits += row_hits;
+    };
+    with_threads(opt.threads,
+                 [&] { tbb::parallel_for(tbb::blocked_range<uint32_t>(0, H, 1), trace_rows); });
+
+    const double trace_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start).count();
+    double max_evals = 0;
+    for (uint32_t e : evals) max_evals = std::max(max_evals, double(e));
+    if (opt.shading == Shading::kHeatmap) {
+        const double top = opt.heatmap_max > 0 ? opt.heatmap_max : max_evals;
+        for (size_t i = 0; i < evals.size(); ++i) color[i] = heat_color(double(evals[i]), top);
+        to_rgb8(color, img);
+        draw_heatmap_legend(img, top);
+    } else {
+        to_rgb8(color, img);
+    }
+    if (stats) {
+        const double px = double(W) * H;
+        stats->trace_ms = trace_ms;
+        stats->steps_avg = double(total_steps) / px;
+        stats->evals_avg = double(total_evals) / px;
+        stats->hit_fraction = double(hits) / px;
+        stats->evals_max = max_evals;
+    }
+    return img;
+}
+
+}  // namespace
+
+Image render(const PrunedGrid& grid, const RenderOptions& options, RenderStats* stats) {
+    const Scene& sc = grid.scene();
+    return trace_image(PrunedField{grid}, sc, options, stats);
+}
+
+Image render_naive(const Scene& scene, const RenderOptions& options, RenderStats* stats) {
+    return trace_image(NaiveField{scene}, scene, options, stats);
+}
+
+}  // namespace sdfprune
