@@ -80,7 +80,9 @@ struct PrunedCell {
     static constexpr uint32_t kFarField = 0xffffffffu;
     uint32_t tape = kFarField;  // offset of the tape's header in PrunedGrid::tape_pool()
     uint32_t children = 0;      // near-field, not finest: first cell of its child block
-    float value = 0;            // the tree's value at the cell centre
+    // The tree's value at the cell centre; for far-field cells made from a far-field octant
+    // (see prune.cpp) a same-sign value no larger in magnitude, which is all lookups need.
+    float value = 0;
     float bound = 0;            // far-field: constant valid over the whole cell
 };
 

@@ -258,7 +258,7 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                                         g.lipschitz_ * math::length(box.centre - obox.centre);
                                     cell.tape = PrunedCell::kFarField;
                                     cell.bound = oconst;
-                                    cell.value = ov > 0 ? ov - reach : ov + reach;
+                                    cell.value = ov > 0 ? std::max(ov - reach, oconst) : std::min(ov + reach, oconst);
                                 }
                     }
                 }
@@ -358,9 +358,9 @@ bool PrunedGrid::cell_index(vec3 p, uint32_t& ix, uint32_t& iy, uint32_t& iz) co
     const vec3 q = p - scene_->aabb.min;
     uint32_t idx[3];
     for (int a = 0; a < 3; ++a) {
-        const float t = q[a] * inv_cell_size_[a];
-        if (!(t >= 0.0f) || !(t <= float(N))) return false;
-        idx[a] = std::min(uint32_t(t), N - 1);
+        // The closed box itself decides (q · 1/size can round past N on the max faces).
+        if (!(p[a] >= scene_->aabb.min[a]) || !(p[a] <= scene_->aabb.max[a])) return false;
+        idx[a] = std::min(uint32_t(q[a] * inv_cell_size_[a]), N - 1);
     }
     ix = idx[0];
     iy = idx[1];

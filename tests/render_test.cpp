@@ -1,0 +1,128 @@
+// render_test.cpp — sphere tracing: pruned and naive renders agree, outputs and CLI errors.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "sdfprune/builtin.hpp"
+#include "sdfprune/io.hpp"
+#include "sdfprune/render.hpp"
+#include "test_util.hpp"
+
+namespace sdfprune {
+namespace {
+
+RenderOptions small_options(const Scene& sc, Shading shading = Shading::kShaded) {
+    RenderOptions o;
+    o.width = 160;
+    o.height = 90;
+    o.camera = orbit_camera(sc.aabb, 30, 25, 0, 40);
+    o.shading = shading;
+    return o;
+}
+
+// Fraction of pixels whose channels differ by more than `tolerance`.
+double differing_fraction(const Image& a, const Image& b, int tolerance) {
+    EXPECT_EQ(a.rgb.size(), b.rgb.size());
+    size_t n = 0;
+    for (size_t i = 0; i < a.rgb.size(); i += 3) {
+        int d = 0;
+        for (int c = 0; c < 3; ++c) d = std::max(d, std::abs(int(a.rgb[i + c]) - int(b.rgb[i + c])));
+        n += d > tolerance;
+    }
+    return double(n) / double(a.rgb.size() / 3);
+}
+
+TEST(Render, PrunedAndNaiveAgreeOnDemo) {
+    const Scene sc = builtin_scene("demo");
+    PruneOptions po;
+    po.resolution = 128;
+    const PrunedGrid g = prune(sc, po);
+    for (Shading s : {Shading::kShaded, Shading::kNormals}) {
+        RenderStats ps, ns;
+        const Image pruned = render(g, small_options(sc, s), &ps);
+        const Image naive = render_naive(sc, small_options(sc, s), &ns);
+        EXPECT_LE(differing_fraction(pruned, naive, 8), 0.001);
+        EXPECT_GT(ps.hit_fraction, 0.05);
+        EXPECT_DOUBLE_EQ(ps.hit_fraction, ns.hit_fraction);
+        // Pruning is what makes the difference in work.
+        EXPECT_LT(ps.evals_avg * 5, ns.evals_avg);
+    }
+}
+
+TEST(Render, HeatmapShowsEvaluationsAndLegend) {
+    const Scene sc = builtin_scene("demo");
+    PruneOptions po;
+    po.resolution = 64;
+    const PrunedGrid g = prune(sc, po);
+    RenderStats st;
+    const Image heat = render(g, small_options(sc, Shading::kHeatmap), &st);
+    const Image shaded = render(g, small_options(sc, Shading::kShaded));
+    EXPECT_GT(differing_fraction(heat, shaded, 8), 0.5);
+    EXPECT_GT(st.evals_max, 0);
+    // The legend's white labels sit in the bottom-right corner.
+    int white = 0;
+    for (uint32_t y = heat.height * 3 / 4; y < heat.height; ++y)
+        for (uint32_t x = heat.width * 3 / 5; x < heat.width; ++x) {
+            const uint8_t* p = &heat.rgb[3 * (size_t(y) * heat.width + x)];
+            white += p[0] > 230 && p[1] > 230 && p[2] > 230;
+        }
+    EXPECT_GT(white, 10);
+}
+
+TEST(Render, SphereSilhouetteMatchesAnalyticDisc) {
+    const Scene sc = builtin_scene("sphere");
+    const PrunedGrid g = prune(sc, {});
+    RenderOptions o = small_options(sc, Shading::kNormals);
+    o.width = o.height = 101;
+    o.camera.eye = {0, 0, 5};
+    o.camera.target = {0, 0, 0};
+    RenderStats st;
+    render(g, o, &st);
+    // A unit sphere at distance 5 seen with a 40° field of view covers a disc of angular radius
+    // asin(1/5): its share of the square image is π·tan²(θ)/(2·tan(20°))².
+    const double theta = std::asin(0.2), half = std::tan(20.0 * M_PI / 180);
+    const double expected = M_PI * std::tan(theta) * std::tan(theta) / (4 * half * half);
+    EXPECT_NEAR(st.hit_fraction, expected, 0.01);
+}
+
+TEST(Render, WritesPngAtomically) {
+    const Scene sc = builtin_scene("sphere");
+    const Image img = render_naive(sc, small_options(sc));
+    const std::string path = ::testing::TempDir() + "render_test.png";
+    write_png(img, path);
+    std::ifstream in(path, std::ios::binary);
+    char sig[8] = {};
+    in.read(sig, 8);
+    EXPECT_EQ(std::string(sig + 1, 3), "PNG");
+    EXPECT_GT(std::filesystem::file_size(path), 100u);
+    EXPECT_THROW(write_png(img, "/nonexistent-dir/x.png"), IoError);
+    std::filesystem::remove(path);
+}
+
+TEST(RenderCli, JsonAndErrors) {
+    const std::string out = ::testing::TempDir() + "render_cli.png";
+    test::CliResult r =
+        test::run_cli("render builtin:sphere -o " + out + " --width 64 --height 48 --json --grid 32");
+    ASSERT_EQ(r.status, 0) << r.err;
+    const std::string last = r.out.substr(r.out.rfind('{'));
+    for (const char* key : {"\"prune_ms\"", "\"trace_ms\"", "\"width\":64", "\"height\":48",
+                            "\"steps_avg\"", "\"evals_avg\""})
+        EXPECT_NE(last.find(key), std::string::npos) << key;
+    EXPECT_TRUE(std::filesystem::exists(out));
+    std::filesystem::remove(out);
+
+    r = test::run_cli("render builtin:sphere -o " + ::testing::TempDir() + "x.jpg");
+    EXPECT_EQ(r.status, 2);
+    EXPECT_NE(r.err.find("extension"), std::string::npos);
+    r = test::run_cli("render builtin:sphere -o /nonexistent-dir/x.png");
+    EXPECT_EQ(r.status, 2);
+    r = test::run_cli("render builtin:sphere -o " + out + " --target 1,2");
+    EXPECT_EQ(r.status, 2);
+    EXPECT_FALSE(std::filesystem::exists(out));
+    r = test::run_cli("render builtin:sphere -o " + out + " --shading fancy");
+    EXPECT_EQ(r.status, 2);
+}
+
+}  // namespace
+}  // namespace sdfprune
