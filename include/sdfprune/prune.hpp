@@ -125,9 +125,7 @@ public:
     };
     bool locate(vec3 p, Located& out) const;
     // Size of a cell of level `level`.
-    vec3 level_cell_size(uint32_t level) const {
-        return cell_size_ * float(resolution() / levels_[level].res);
-    }
+    vec3 level_cell_size(uint32_t level) const { return level_size_[level]; }
 
     // The far-field constant of finest cell (ix, iy, iz) lying in far-field cell `c` of level
     // `level`: the tighter of c.bound and the Lipschitz bound from c's centre value.
@@ -174,6 +172,12 @@ private:
     std::vector<uint32_t> pool_;
     vec3 cell_size_;
     vec3 inv_cell_size_;
+    std::vector<vec3> level_size_;  // cell size of each level
+    // Lookup shortcut: for every cell of level shortcut_level_ (the one above the finest), the
+    // deciding cell at or above it, as level << 27 | index; empty when not worth it.
+    std::vector<uint32_t> shortcut_;
+    uint32_t shortcut_level_ = 0;
+    void build_shortcut();
     float lipschitz_ = 1;  // of the root: bounds the far-field constants
     PruneStats stats_;
 };

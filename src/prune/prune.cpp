@@ -330,9 +330,12 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
             level.shift = uint32_t(std::countr_zero(scale));
             level.factor_bits = uint32_t(std::countr_zero(level.factor));
         }
+        g.level_size_.push_back(csize);
         g.levels_.push_back(std::move(level));
         if (opt.progress) opt.progress(double(li + 1) / double(res.size()));
     }
+
+    g.build_shortcut();
 
     // Table 2 statistics: far-field cells count 1 active primitive.
     const double cells = double(st.cells);
@@ -410,17 +413,62 @@ CellView PrunedGrid::cell(uint32_t ix, uint32_t iy, uint32_t iz) const {
     return {};
 }
 
+void PrunedGrid::build_shortcut() {
+    constexpr uint32_t kMaxEntries = 1u << 21;
+    if (levels_.size() < 3 || !levels_.back().pow2) return;
+    const uint32_t S = uint32_t(levels_.size() - 2), r = levels_[S].res;
+    if (uint64_t(r) * r * r > kMaxEntries) return;
+    for (const Level& l : levels_)
+        if (l.cells.size() >= (1u << 27) || !l.pow2) return;
+    shortcut_level_ = S;
+    shortcut_.resize(size_t(r) * r * r);
+    const uint32_t N = resolution(), scale = N / r;
+    for (uint32_t z = 0; z < r; ++z)
+        for (uint32_t y = 0; y < r; ++y)
+            for (uint32_t x = 0; x < r; ++x) {
+                const uint32_t ix = x * scale, iy = y * scale, iz = z * scale;
+                uint32_t block_start = 0, li = 0;
+                for (;; ++li) {
+                    const uint32_t index = block_start + levels_[li].local_index(ix, iy, iz, N);
+                    const PrunedCell& c = levels_[li].cells[index];
+                    if (li == S || c.tape == PrunedCell::kFarField) {
+                        shortcut_[(size_t(z) * r + y) * r + x] = li << 27 | index;
+                        break;
+                    }
+                    block_start = c.children;
+                }
+            }
+}
+
 bool PrunedGrid::locate(vec3 p, Located& out) const {
     uint32_t ix, iy, iz;
     if (!cell_index(p, ix, iy, iz)) return false;
     const uint32_t N = resolution();
+    if (!shortcut_.empty()) {
+        const Level& s = levels_[shortcut_level_];
+        const uint32_t sx = ix >> s.shift, sy = iy >> s.shift, sz = iz >> s.shift;
+        const uint32_t entry = shortcut_[(size_t(sz) * s.res + sy) * s.res + sx];
+        uint32_t li = entry >> 27;
+        const PrunedCell* c = &levels_[li].cells[entry & ((1u << 27) - 1)];
+        if (c->tape != PrunedCell::kFarField) {
+            li = shortcut_level_ + 1;
+            c = &levels_[li].cells[c->children + levels_[li].local_index(ix, iy, iz, N)];
+        }
+        const uint32_t shift = levels_[li].shift;
+        out = {li, ix >> shift, iy >> shift, iz >> shift, c};
+        return true;
+    }
     uint32_t block_start = 0;
     for (uint32_t li = 0; li < levels_.size(); ++li) {
         const Level& l = levels_[li];
         const PrunedCell& c = l.cells[block_start + l.local_index(ix, iy, iz, N)];
         if (c.tape == PrunedCell::kFarField || li + 1 == levels_.size()) {
-            const uint32_t scale = N / l.res;
-            out = {li, ix / scale, iy / scale, iz / scale, &c};
+            if (l.pow2) {
+                out = {li, ix >> l.shift, iy >> l.shift, iz >> l.shift, &c};
+            } else {
+                const uint32_t scale = N / l.res;
+                out = {li, ix / scale, iy / scale, iz / scale, &c};
+            }
             return true;
         }
         block_start = c.children;

@@ -96,40 +96,52 @@ struct TraceContext {
 template <class Field>
 float march(const Field& field, const TraceContext& ctx, vec3 o, vec3 dir, float t0, float t1,
             uint32_t max_steps, float* stack, Counters& c) {
+    const vec3 inv_dir(1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z);
+    // The last near-field cell and its tape: consecutive steps near the surface often stay in
+    // one cell, and then need no lookup.
+    std::span<const uint32_t> near_tape;
+    vec3 near_lo(INFINITY), near_hi(-INFINITY);
     float t = t0;
     for (uint32_t step = 0; step < max_steps && t <= t1; ++step) {
         ++c.steps;
         // [t0, t1] lies in the AABB: clamp away the rounding that would put p just outside.
         const vec3 p = math::min(math::max(o + dir * t, ctx.aabb_lo), ctx.aabb_hi);
-        float d;
+        std::span<const uint32_t> tape = ctx.sc.full_tape;
         if constexpr (std::is_same_v<Field, PrunedField>) {
+            const bool cached = p.x >= near_lo.x && p.y >= near_lo.y && p.z >= near_lo.z &&
+                                p.x <= near_hi.x && p.y <= near_hi.y && p.z <= near_hi.z;
             PrunedGrid::Located at;
-            if (field.g.locate(p, at)) {
+            if (cached) {
+                tape = near_tape;
+            } else if (field.g.locate(p, at)) {
+                const vec3 size = field.g.level_cell_size(at.level);
+                const vec3 lo = ctx.aabb_lo + vec3(float(at.x), float(at.y), float(at.z)) * size;
                 if (at.far_field()) {
                     // No surface in this cell: continue from its exit (or by its constant).
-                    const vec3 size = field.g.level_cell_size(at.level);
-                    const vec3 lo = ctx.aabb_lo + vec3(float(at.x), float(at.y), float(at.z)) * size;
                     float t_exit = INFINITY;
                     for (int a = 0; a < 3; ++a) {
-                        if (dir[a] == 0.0f) continue;
                         const float bound = dir[a] > 0 ? lo[a] + size[a] : lo[a];
-                        t_exit = std::min(t_exit, (bound - o[a]) / dir[a]);
+                        const float ta = (bound - o[a]) * inv_dir[a];
+                        if (ta == ta) t_exit = std::min(t_exit, ta);  // skips 0·inf
                     }
+                    // |f(p)| >= |f(centre)| - L·|p - centre|: often far beyond the cell.
+                    const float from_centre =
+                        std::fabs(at.cell->value) * ctx.inv_lipschitz -
+                        math::length(p - (lo + size * 0.5f));
+                    const float step = std::max(std::fabs(at.cell->bound) * ctx.inv_lipschitz,
+                                                from_centre);
                     const float tiny = 1e-4f * std::min({size.x, size.y, size.z});
-                    t = std::max(t + std::fabs(at.cell->bound) * ctx.inv_lipschitz, t_exit + tiny);
+                    t = std::max(t + step, t_exit + tiny);
                     continue;
                 }
-                const std::span<const uint32_t> tape = field.g.tape_at(at.cell->tape);
-                c.evals += tape.size();
-                d = eval_tape(ctx.sc, tape, p, stack);
-            } else {
-                c.evals += ctx.sc.size();
-                d = eval_tape(ctx.sc, ctx.sc.full_tape, p, stack);
+                tape = field.g.tape_at(at.cell->tape);
+                near_tape = tape;
+                near_lo = lo;
+                near_hi = lo + size;
             }
-        } else {
-            c.evals += ctx.sc.size();
-            d = eval_tape(ctx.sc, ctx.sc.full_tape, p, stack);
         }
+        c.evals += tape.size();
+        const float d = eval_tape(ctx.sc, tape, p, stack);
         if (d < 5e-4f * std::min(1.0f, t)) return t;
         t += d * ctx.inv_lipschitz;
     }
