@@ -29,8 +29,13 @@ test: build
 run: build
 	./tools/run_demo.sh $(BUILD)
 
+# Micro-benchmarks, then the issues' targets on the reference scenes (writes BENCHMARKS.md;
+# several minutes: the naive baselines are slow by design).
 bench: build
 	./$(BUILD)/sdfprune_bench --benchmark_min_time=0.2
+	./bench/targets.sh $(BUILD) > BENCHMARKS.md.tmp && mv BENCHMARKS.md.tmp BENCHMARKS.md
+	@echo "wrote BENCHMARKS.md"
+
 
 # Address + undefined-behaviour sanitizers, separate build tree.
 sanitize: setup

@@ -17,7 +17,7 @@ void add_app_options(CLI::App* sub, AppOptions& o) {
         ->check(CLI::IsMember({"pruned", "naive"}));
     add_prune_options(sub, o.prune, o.lipschitz_bounds);
     sub->add_flag("--json", o.json, "print the figures as one JSON object on the last line");
-    sub->add_flag("--quiet", o.quiet, "no progress bar and no summary on stderr");
+    sub->add_flag("--quiet", o.quiet, "no progress bar and no summary line");
 }
 
 Prepared prepare(const std::string& scene_arg, const AppOptions& o) {

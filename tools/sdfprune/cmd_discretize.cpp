@@ -68,19 +68,19 @@ void add_discretize(CLI::App& app, std::vector<Command>& commands) {
              const double write_ms = ms_since(t1);
 
              if (!o.quiet) {
-                 std::fprintf(stderr, "wrote %s: %u³ float32 SDF samples (%s) of %s\n",
+                 std::printf( "wrote %s: %u³ float32 SDF samples (%s) of %s\n",
                               args->output.c_str(), n,
                               ext == ".npy" ? "[z][y][x]" : "OpenVDB level set \"surface\"",
                               args->scene.c_str());
                  if (p.grid)
-                     std::fprintf(stderr,
+                     std::printf(
                                   "  pruned (grid %u³, %llu near-field cells exact, others their "
                                   "far-field bound): prune %.1f ms, eval %.1f ms\n",
                                   p.grid->resolution(),
                                   (unsigned long long)p.grid->stats().near_field_cells, p.prune_ms,
                                   eval_ms);
                  else
-                     std::fprintf(stderr, "  naive (full tree at every cell): eval %.1f ms\n",
+                     std::printf( "  naive (full tree at every cell): eval %.1f ms\n",
                                   eval_ms);
              }
              if (o.json) {

@@ -70,7 +70,7 @@ void add_eval(CLI::App& app, std::vector<Command>& commands) {
              write_npy(args->output, shape, values);
 
              if (!o.quiet)
-                 std::fprintf(stderr,
+                 std::printf(
                               "wrote %s: %llu float32 SDF values (%s) at the points of %s\n",
                               args->output.c_str(), (unsigned long long)m,
                               p.grid ? "pruned" : "naive", args->points.c_str());
