@@ -20,6 +20,19 @@ void add_app_options(CLI::App* sub, AppOptions& o) {
     sub->add_flag("--quiet", o.quiet, "no progress bar and no summary line");
 }
 
+void add_res_option(CLI::App* sub, uint32_t& res, const char* what, uint32_t max) {
+    sub->add_option("--res", res,
+                    std::string(what) + " per axis; the pruning grid follows it unless --grid is given")
+        ->capture_default_str()
+        ->check(CLI::Range(1u, max));
+}
+
+AppOptions following_res(const CLI::App* sub, const AppOptions& o, uint32_t res) {
+    AppOptions r = o;
+    if (sub->get_option("--grid")->count() == 0) r.prune.resolution = res;
+    return r;
+}
+
 Prepared prepare(const std::string& scene_arg, const AppOptions& o) {
     Prepared p;
     p.scene = std::make_unique<Scene>(load_scene_arg(scene_arg));

@@ -25,6 +25,13 @@ struct AppOptions {
 // --lipschitz-bounds, --threads, --json, --quiet.
 void add_app_options(CLI::App* sub, AppOptions& o);
 
+// Adds --res (the output grid's cells per axis, 1..max, default 256); with `following` the
+// pruning grid follows it unless --grid is given (see following_res()).
+void add_res_option(CLI::App* sub, uint32_t& res, const char* what, uint32_t max);
+// The options with the pruning grid set to `res`, unless --grid was given explicitly: then
+// small outputs don't pay for a 256³ pruning.
+AppOptions following_res(const CLI::App* sub, const AppOptions& o, uint32_t res);
+
 // A loaded scene and, for --method pruned, its pruned grid (prune_ms = 0 for naive).
 struct Prepared {
     std::unique_ptr<Scene> scene;

@@ -27,10 +27,7 @@ void add_discretize(CLI::App& app, std::vector<Command>& commands) {
         "never above the distance).");
     sub->add_option("SCENE", args->scene, "scene file (.json) or builtin:NAME")->required();
     sub->add_option("-o,--output", args->output, "output file, .npy or .vdb")->required();
-    sub->add_option("--res", args->res,
-                    "cells per axis; the pruning grid follows it unless --grid is given")
-        ->capture_default_str()
-        ->check(CLI::Range(1u, 2048u));
+    add_res_option(sub, args->res, "cells", 2048u);
     add_app_options(sub, args->app);
     sub->footer(
         "Examples:\n  sdfprune discretize scenes/molecule.json -o molecule.npy --res 256\n"
@@ -41,8 +38,7 @@ void add_discretize(CLI::App& app, std::vector<Command>& commands) {
              const AppOptions& o = args->app;
              const std::string ext = check_output(args->output, {".npy", ".vdb"});
              const uint32_t n = args->res;
-             AppOptions po = o;
-             if (sub->get_option("--grid")->count() == 0) po.prune.resolution = n;
+             const AppOptions po = following_res(sub, o, n);
              // Allocated (and touched) before any timing, the same for both methods.
              std::vector<float> values(uint64_t(n) * n * n);
 
