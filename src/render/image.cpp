@@ -1,4 +1,4 @@
-// image.cpp — colors, the heatmap legend (a 3x5 pixel font drawn by hand) and PNG output.
+// image.cpp — colors, the heatmap legend (drawn with draw.hpp's 3x5 pixel font) and PNG output.
 #include <png.h>
 
 #include <algorithm>
@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <string>
 
+#include "draw.hpp"
 #include "render_internal.hpp"
 #include "sdfprune/io.hpp"
 
@@ -47,39 +48,6 @@ void to_rgb8(const std::vector<vec3>& color, Image& img) {
 
 namespace {
 
-// 3x5 glyphs, one row of 3 bits per octal digit (top row first).
-uint16_t glyph(char ch) {
-    switch (ch) {
-        case '0': return 075557; case '1': return 026227; case '2': return 071747;
-        case '3': return 071717; case '4': return 055711; case '5': return 074717;
-        case '6': return 074757; case '7': return 071111; case '8': return 075757;
-        case '9': return 075711; case '.': return 000002; case '/': return 011244;
-        case 'k': return 045655; case 'M': return 057755; case 'n': return 006555;
-        case 'o': return 007557; case 'd': return 017557; case 'e': return 025743;
-        case 'v': return 005552; case 'a': return 007357; case 'l': return 062227;
-        case 's': return 007637; case 'p': return 075744; case 'i': return 020222;
-        case 'x': return 005255; default: return 0;
-    }
-}
-
-void fill(Image& img, int x0, int y0, int w, int h, vec3 c) {
-    for (int y = std::max(0, y0); y < std::min<int>(img.height, y0 + h); ++y)
-        for (int x = std::max(0, x0); x < std::min<int>(img.width, x0 + w); ++x)
-            for (int k = 0; k < 3; ++k)
-                img.rgb[3 * (size_t(y) * img.width + x) + k] = uint8_t(std::lround(c[k] * 255));
-}
-
-void text(Image& img, int x, int y, int scale, const std::string& s, vec3 c) {
-    for (char ch : s) {
-        const uint16_t g = glyph(ch);
-        for (int row = 0; row < 5; ++row)
-            for (int col = 0; col < 3; ++col)
-                if (g >> ((4 - row) * 3 + (2 - col)) & 1)
-                    fill(img, x + col * scale, y + row * scale, scale, scale, c);
-        x += 4 * scale;
-    }
-}
-
 std::string compact_number(double v) {
     char buf[32];
     if (v >= 1e6) std::snprintf(buf, sizeof buf, "%.1fM", v / 1e6);
@@ -91,6 +59,8 @@ std::string compact_number(double v) {
 }  // namespace
 
 void draw_heatmap_legend(Image& img, double top) {
+    using draw::fill;
+    using draw::text;
     const int scale = std::max(1, int(img.height) / 270);
     const int bar_w = 60 * scale, bar_h = 6 * scale, pad = 4 * scale;
     const int x0 = int(img.width) - bar_w - 6 * pad, y0 = int(img.height) - bar_h - 12 * scale - 3 * pad;
