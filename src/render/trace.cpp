@@ -27,15 +27,18 @@ Camera orbit_camera(const Aabb& aabb, float yaw, float pitch, float distance, fl
     const float radius = math::length(aabb.max - aabb.min) * 0.5f;
     if (!(distance > 0))
         distance = radius / std::sin(fov * std::numbers::pi_v<float> / 360.0f) * 0.8f;
-    const float y = yaw * std::numbers::pi_v<float> / 180, p = pitch * std::numbers::pi_v<float> / 180;
-    c.eye = c.target + vec3(std::cos(p) * std::sin(y), std::sin(p), std::cos(p) * std::cos(y)) *
-                           distance;
+    const float y = yaw * std::numbers::pi_v<float> / 180,
+                p = pitch * std::numbers::pi_v<float> / 180;
+    c.eye = c.target +
+            vec3(std::cos(p) * std::sin(y), std::sin(p), std::cos(p) * std::cos(y)) * distance;
     return c;
 }
 
 namespace {
 
-vec3 normalize(vec3 v) { return v / math::length(v); }
+vec3 normalize(vec3 v) {
+    return v / math::length(v);
+}
 vec3 cross(vec3 a, vec3 b) {
     return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
@@ -125,11 +128,10 @@ float march(const Field& field, const TraceContext& ctx, vec3 o, vec3 dir, float
                         if (ta == ta) t_exit = std::min(t_exit, ta);  // skips 0·inf
                     }
                     // |f(p)| >= |f(centre)| - L·|p - centre|: often far beyond the cell.
-                    const float from_centre =
-                        std::fabs(at.cell->value) * ctx.inv_lipschitz -
-                        math::length(p - (lo + size * 0.5f));
-                    const float step = std::max(std::fabs(at.cell->bound) * ctx.inv_lipschitz,
-                                                from_centre);
+                    const float from_centre = std::fabs(at.cell->value) * ctx.inv_lipschitz -
+                                              math::length(p - (lo + size * 0.5f));
+                    const float step =
+                        std::max(std::fabs(at.cell->bound) * ctx.inv_lipschitz, from_centre);
                     const float tiny = 1e-4f * std::min({size.x, size.y, size.z});
                     t = std::max(t + step, t_exit + tiny);
                     continue;
@@ -173,73 +175,85 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
     const float normal_h = 2e-4f * scene_scale;
 
     std::atomic<uint64_t> total_steps{0}, total_evals{0}, hits{0};
-    std::atomic<uint32_t> rows_done{0};
+    std::atomic<uint32_t> tiles_done{0};
     const std::thread::id caller = std::this_thread::get_id();
+    // Square tiles rather than rows: neighbouring rays visit the same cells and tapes.
+    constexpr uint32_t kTile = 16;
+    const uint32_t tiles_x = (W + kTile - 1) / kTile, tiles_y = (H + kTile - 1) / kTile;
+    const uint32_t tiles = tiles_x * tiles_y;
 
-    auto trace_rows = [&](const tbb::blocked_range<uint32_t>& rows) {
+    auto trace_tiles = [&](const tbb::blocked_range<uint32_t>& range) {
         std::vector<float> stack(sc.max_stack);
         std::vector<vec3> color_stack(sc.max_stack);
         Counters sum;
-        uint64_t row_hits = 0;
-        for (uint32_t y = rows.begin(); y != rows.end(); ++y) {
-            for (uint32_t x = 0; x < W; ++x) {
-                Counters c;
-                const float u = (2.0f * (float(x) + 0.5f) / float(W) - 1.0f) * tan_half * aspect;
-                const float v = (1.0f - 2.0f * (float(y) + 0.5f) / float(H)) * tan_half;
-                const vec3 dir = normalize(forward + right * u + up * v);
-                const vec3 inv(1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z);
-                float t0, t1;
-                vec3 out = background(v / tan_half);
-                if (ray_box(cam.eye, inv, ctx.aabb_lo, ctx.aabb_hi, t0, t1)) {
-                    const float t = march(field, ctx, cam.eye, dir, t0, t1, 1024, stack.data(), c);
-                    if (t >= 0) {
-                        ++row_hits;
-                        const vec3 p = cam.eye + dir * t;
-                        const std::span<const uint32_t> tape = field.tape_at(p);
-                        // Tetrahedron-stencil gradient.
-                        const vec3 k[4] = {{1, -1, -1}, {-1, -1, 1}, {-1, 1, -1}, {1, 1, 1}};
-                        vec3 n(0.0f);
-                        for (const vec3& ki : k)
-                            n = n + ki * field.value(p + ki * normal_h, tape, stack.data(), c);
-                        const float len = math::length(n);
-                        n = len > 0 ? n / len : -dir;
-                        c.evals += tape.size();
-                        const vec3 albedo =
-                            eval_tape_color(sc, tape, p, stack.data(), color_stack.data());
-                        float lit = std::max(0.0f, math::dot(n, light));
-                        if (opt.shadows && lit > 0) {
-                            const vec3 so = p + n * (4.0f * normal_h);
-                            const vec3 sinv(1.0f / light.x, 1.0f / light.y, 1.0f / light.z);
-                            float s0, s1;
-                            if (ray_box(so, sinv, ctx.aabb_lo, ctx.aabb_hi, s0, s1) &&
-                                march(field, ctx, so, light, s0 + normal_h, s1, 512,
-                                      stack.data(), c) >= 0)
-                                lit = 0;
+        uint64_t tile_hits = 0;
+        for (uint32_t tile = range.begin(); tile != range.end(); ++tile) {
+            const uint32_t x0 = tile % tiles_x * kTile, y0 = tile / tiles_x * kTile;
+            for (uint32_t y = y0; y < std::min(H, y0 + kTile); ++y)
+                for (uint32_t x = x0; x < std::min(W, x0 + kTile); ++x) {
+                    Counters c;
+                    const float u =
+                        (2.0f * (float(x) + 0.5f) / float(W) - 1.0f) * tan_half * aspect;
+                    const float v = (1.0f - 2.0f * (float(y) + 0.5f) / float(H)) * tan_half;
+                    const vec3 dir = normalize(forward + right * u + up * v);
+                    const vec3 inv(1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z);
+                    float t0, t1;
+                    vec3 out = background(v / tan_half);
+                    if (ray_box(cam.eye, inv, ctx.aabb_lo, ctx.aabb_hi, t0, t1)) {
+                        const float t =
+                            march(field, ctx, cam.eye, dir, t0, t1, 1024, stack.data(), c);
+                        if (t >= 0) {
+                            ++tile_hits;
+                            const vec3 p = cam.eye + dir * t;
+                            const std::span<const uint32_t> tape = field.tape_at(p);
+                            // Tetrahedron-stencil gradient.
+                            const vec3 k[4] = {{1, -1, -1}, {-1, -1, 1}, {-1, 1, -1}, {1, 1, 1}};
+                            vec3 n(0.0f);
+                            for (const vec3& ki : k)
+                                n = n + ki * field.value(p + ki * normal_h, tape, stack.data(), c);
+                            const float len = math::length(n);
+                            n = len > 0 ? n / len : -dir;
+                            c.evals += tape.size();
+                            const vec3 albedo =
+                                eval_tape_color(sc, tape, p, stack.data(), color_stack.data());
+                            float lit = std::max(0.0f, math::dot(n, light));
+                            if (opt.shadows && lit > 0) {
+                                const vec3 so = p + n * (4.0f * normal_h);
+                                const vec3 sinv(1.0f / light.x, 1.0f / light.y, 1.0f / light.z);
+                                float s0, s1;
+                                if (ray_box(so, sinv, ctx.aabb_lo, ctx.aabb_hi, s0, s1) &&
+                                    march(field, ctx, so, light, s0 + normal_h, s1, 512,
+                                          stack.data(), c) >= 0)
+                                    lit = 0;
+                            }
+                            out = opt.shading == Shading::kNormals
+                                      ? n * 0.5f + 0.5f
+                                      : albedo * (0.22f + 0.78f * lit) +
+                                            vec3(0.06f) *
+                                                std::pow(std::max(0.0f, math::dot(n, -dir)), 8.0f);
                         }
-                        out = opt.shading == Shading::kNormals
-                                  ? n * 0.5f + 0.5f
-                                  : albedo * (0.22f + 0.78f * lit) +
-                                        vec3(0.06f) * std::pow(std::max(0.0f, math::dot(n, -dir)), 8.0f);
                     }
+                    const size_t i = size_t(y) * W + x;
+                    color[i] = out;
+                    evals[i] = uint32_t(std::min<uint64_t>(c.evals, 0xffffffffu));
+                    sum.steps += c.steps;
+                    sum.evals += c.evals;
                 }
-                const size_t i = size_t(y) * W + x;
-                color[i] = out;
-                evals[i] = uint32_t(std::min<uint64_t>(c.evals, 0xffffffffu));
-                sum.steps += c.steps;
-                sum.evals += c.evals;
-            }
-            const uint32_t done = ++rows_done;
-            if (opt.progress && std::this_thread::get_id() == caller) opt.progress(double(done) / H);
+            const uint32_t done = ++tiles_done;
+            if (opt.progress && std::this_thread::get_id() == caller)
+                opt.progress(double(done) / tiles);
         }
         total_steps += sum.steps;
         total_evals += sum.evals;
-        hits += row_hits;
+        hits += tile_hits;
     };
-    with_threads(opt.threads,
-                 [&] { tbb::parallel_for(tbb::blocked_range<uint32_t>(0, H, 1), trace_rows); });
+    with_threads(opt.threads, [&] {
+        tbb::parallel_for(tbb::blocked_range<uint32_t>(0, tiles, 1), trace_tiles);
+    });
 
     const double trace_ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start).count();
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start)
+            .count();
     double max_evals = 0;
     for (uint32_t e : evals) max_evals = std::max(max_evals, double(e));
     if (opt.shading == Shading::kHeatmap) {
