@@ -29,13 +29,12 @@ test: build
 run: build
 	./tools/run_demo.sh $(BUILD)
 
-# Micro-benchmarks, then the issues' targets on the reference scenes (writes BENCHMARKS.md;
-# several minutes: the naive baselines are slow by design).
+# Micro-benchmarks, then BENCHMARKS.md: the issues' targets on the reference scenes, Tables 1-2
+# over generated scenes, and the scaling plot docs/scaling.png (tens of minutes on 2 cores: the
+# naive baselines are slow by design and estimated beyond a budget).
 bench: build
 	./$(BUILD)/sdfprune_bench --benchmark_min_time=0.2
-	./bench/targets.sh $(BUILD) > BENCHMARKS.md.tmp && mv BENCHMARKS.md.tmp BENCHMARKS.md
-	@echo "wrote BENCHMARKS.md"
-
+	./bench/run_bench.sh $(BUILD)
 
 # Address + undefined-behaviour sanitizers, separate build tree.
 sanitize: setup
