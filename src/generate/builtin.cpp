@@ -5,6 +5,7 @@
 #include <numbers>
 
 #include "sdfprune/builder.hpp"
+#include "sdfprune/generate.hpp"
 
 namespace sdfprune {
 
@@ -61,6 +62,7 @@ Scene builtin_scene(const std::string& name) {
         SceneBuilder b;
         return b.build(b.sphere(1.0f), {vec3(-2.0f), vec3(2.0f)});
     }
+    for (const std::string& k : generator_kinds()) if (name == k) return generate_scene(k, 1, 0);
     std::string known;
     for (const std::string& n : builtin_scene_names()) known += (known.empty() ? "" : ", ") + n;
     throw SceneError("unknown built-in scene \"" + name + "\" (known: " + known + ")");
