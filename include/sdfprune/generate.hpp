@@ -46,8 +46,10 @@ std::vector<std::string> generator_kinds();
 
 // Makes the scene `kind` from `seed`. count = 0 gives the paper's size. For the scalable kinds
 // count is the exact number of primitives:
-//   fluid     spheres (SPH-like particles of a splash; the particle spacing shrinks as count
-//             grows, so the shape stays the same), balanced smooth-union tree;
+//   fluid     spheres: adaptive SPH-like particles of a splash crown in a tank (fine at the
+//             surface, large and overlapping deep inside, so the inside prunes as far field);
+//             the spacing shrinks as count grows, so the shape stays the same. A balanced
+//             union in Morton order, smooth only between neighbours (the lowest two levels);
 //   molecule  atoms: DNA rings of up to 1000 atoms each, every ring a left-deep smooth-union
 //             chain (k = 0.026, like the reference molecule), rings joined by a balanced tree;
 //   crowd     primitives of a crowd of people (7–16 primitives each) on a ground slab;

@@ -19,7 +19,7 @@ const std::vector<GeneratorInfo>& generator_info() {
         {"car", 117, 59, false, 0,
          "a hatchback: window and wheel-arch cuts, spoked wheels, lights"},
         {"train-station", 119, 60, false, 0,
-         "a platform under an arched roof, a train and passengers"},
+         "a platform under a curved canopy, a train and a passenger"},
         {"camera", 119, 60, false, 0,
          "a reflex camera: lens barrel with glass, dials, grip, back screen"},
         {"trees", 369, 185, false, 0,

@@ -1,6 +1,6 @@
 // particles.cpp — scenes of many spheres, any number of them: "molecule" (rings of DNA, each a
-// left-deep smooth-union chain of atoms like the reference molecule.json) and "fluid" (SPH-like
-// particles of a splash crown in a tank, smoothly blended in a balanced tree).
+// left-deep smooth-union chain of atoms like the reference molecule.json) and "fluid" (adaptive
+// SPH-like particles of a splash crown in a tank, in a balanced tree blended between neighbours).
 #include <algorithm>
 #include <array>
 
@@ -63,10 +63,10 @@ uint32_t dna_ring(Assembly& a, Rng& rng, uint32_t atoms, const Affine& place) {
 // ---- fluid -----------------------------------------------------------------------------------
 
 constexpr float kTank = 0.8f;  // the tank spans [-kTank, kTank] in x and z
-constexpr float kFloor = -1.1f;
+constexpr float kFloor = -1.5f;
 constexpr float kLevel = -0.3f;  // water level at rest
 constexpr int kSpikes = 11;
-constexpr float kDrop = 0.085f;   // radius of the falling drop
+constexpr float kDrop = 0.085f;  // radius of the falling drop
 // The thin splash is sampled finer than the pool: spacing kSplashSpacing·h.
 constexpr float kSplashSpacing = 0.6f;
 
@@ -118,36 +118,68 @@ bool in_splash(const Splash& s, vec3 p, float r) {
 
 struct Particle {
     vec3 p;
-    float depth;   // below the nearest water surface, under-estimated; 0 in the thin splash
-    float radius;  // at depth 0
+    float radius;
+    bool fine;  // at the surface (or in the splash): never dropped
 };
 
-// The water as particles: the pool on a lattice of spacing h, the splash above it on a finer
-// one (jittered when collected; counted only when `out` is null). The pool is counted column
-// by column without tests; only the splash's columns are tested point by point.
-uint64_t lattice(const Splash& s, float h, Rng* rng, std::vector<Particle>* out) {
+// Depth below the pool's nearest face (top, floor, tank sides), under-estimated; < 0 outside.
+float pool_depth(vec3 p) {
+    const float top = surface(std::sqrt(p.x * p.x + p.z * p.z));
+    // Vertical distance to the rippled top over-estimates on slopes: 0.9.
+    return std::min(
+        {0.9f * (top - p.y), p.y - kFloor, kTank - std::fabs(p.x), kTank - std::fabs(p.z)});
+}
+
+// The water as particles, adaptively like adaptive SPH: the pool as an octree of cubes, split
+// down to spacing h near its faces, each leaf one particle (radius 0.8·h at the surface; deep
+// leaves of side c ≤ depth / 2.5 get radius 1.8·c, overlapping their neighbours so that the
+// inside is solid and deep — pruning culls it as far field even on coarse grids — yet never
+// closer than 0.7·c to the surface); the thin splash on its own
+// lattice of spacing kSplashSpacing·h. Counts only when `out` is null; jitters fine particles.
+uint64_t sample_water(const Splash& s, float h, Rng* rng, std::vector<Particle>* out) {
     uint64_t n = 0;
-    auto keep = [&](vec3 p, float depth, float spacing) {
+    auto emit = [&](vec3 p, float radius, bool fine, float jitter) {
         ++n;
-        if (out) out->push_back({p + uniform_vec3(*rng, -0.15f * spacing, 0.15f * spacing), depth, 0.8f * spacing});
-    };
-    const int cols = int(2 * kTank / h);
-    for (int iz = 0; iz < cols; ++iz)
-        for (int ix = 0; ix < cols; ++ix) {
-            const float x = -kTank + (float(ix) + 0.5f) * h, z = -kTank + (float(iz) + 0.5f) * h;
-            const float top = surface(std::sqrt(x * x + z * z));
-            const int pool = std::max(int(std::floor((top - kFloor) / h + 0.5f)), 0);
-            if (!out) {
-                n += uint64_t(pool);
-                continue;
-            }
-            const float side = kTank - std::max(std::fabs(x), std::fabs(z));
-            for (int iy = 0; iy < pool; ++iy) {
-                const float y = kFloor + (float(iy) + 0.5f) * h;
-                // Vertical distance to the rippled top over-estimates on slopes: 0.9.
-                keep({x, y, z}, std::max(0.0f, std::min({0.9f * (top - y), y - kFloor, side})), h);
-            }
+        if (out) {
+            if (fine) p = p + uniform_vec3(*rng, -jitter, jitter);
+            out->push_back({p, radius, fine});
         }
+    };
+    // Iterative octree descent from top cubes of side h·2^K (about 0.2).
+    float top_side = h;
+    while (top_side * 2 <= 0.4f) top_side *= 2;
+    const float y_top = kLevel + 0.03f;
+    const int nxz = int(std::ceil(2 * kTank / top_side)),
+              ny = int(std::ceil((y_top - kFloor) / top_side));
+    struct Cube {
+        vec3 centre;
+        float side;
+    };
+    std::vector<Cube> stack;
+    for (int iz = 0; iz < nxz; ++iz)
+        for (int iy = 0; iy < ny; ++iy)
+            for (int ix = 0; ix < nxz; ++ix) {
+                stack.push_back(
+                    {vec3{-kTank, kFloor, -kTank} +
+                         vec3{float(ix) + 0.5f, float(iy) + 0.5f, float(iz) + 0.5f} * top_side,
+                     top_side});
+                while (!stack.empty()) {
+                    const Cube c = stack.back();
+                    stack.pop_back();
+                    const float d = pool_depth(c.centre);
+                    if (c.side < 1.5f * h) {
+                        if (d >= 0) emit(c.centre, 0.8f * h, true, 0.15f * h);
+                    } else if (d >= 2.5f * c.side) {
+                        emit(c.centre, 1.8f * c.side, false, 0);
+                    } else if (d > -0.87f * c.side) {
+                        const float q = c.side / 4;
+                        for (int o = 7; o >= 0; --o)
+                            stack.push_back(
+                                {c.centre + vec3{o & 1 ? q : -q, o & 2 ? q : -q, o & 4 ? q : -q},
+                                 c.side / 2});
+                    }
+                }
+            }
     const float hs = kSplashSpacing * h, reach = 0.5f;
     const int splash_cols = int(2 * reach / hs), rows = int((0.3f - kFloor) / hs);
     for (int iz = 0; iz < splash_cols; ++iz)
@@ -158,8 +190,7 @@ uint64_t lattice(const Splash& s, float h, Rng* rng, std::vector<Particle>* out)
             const float top = surface(r);
             for (int iy = 0; iy < rows; ++iy) {
                 const vec3 p{x, kFloor + (float(iy) + 0.5f) * hs, z};
-                if (p.y > top && in_splash(s, p, r))
-                    keep(p, std::max(0.0f, kDrop - math::length(p - s.drop)), hs);
+                if (p.y > top && in_splash(s, p, r)) emit(p, 0.8f * hs, true, 0.15f * hs);
             }
         }
     return n;
@@ -200,23 +231,36 @@ Scene fluid(uint64_t seed, uint32_t spheres) {
     Rng rng(seed);
     const Splash s = make_splash(rng);
 
-    // Find the lattice spacing that fills the water with at least `spheres` points (the count
-    // goes as h^-3; a few secant steps), then drop the surplus at random.
-    float h = std::cbrt(2.2f / float(spheres));
-    uint64_t got = lattice(s, h, nullptr, nullptr);
-    for (int it = 0; it < 8 && (got < spheres || got > spheres + spheres / 100 + 8); ++it) {
-        h *= std::cbrt(float(got) / (float(spheres) * 1.003f));
-        got = lattice(s, h, nullptr, nullptr);
+    // Find the spacing h that makes at least `spheres` particles: secant steps on log(count)
+    // against log(h) (most particles lie at the surface: count ~ h^-2 at first), then drop the
+    // surplus among deep particles.
+    const float want = float(spheres) * 1.003f;
+    float h = std::sqrt(60.0f / float(spheres)), slope = -2;
+    uint64_t got = sample_water(s, h, nullptr, nullptr);
+    for (int it = 0; it < 12 && (got < spheres || got > spheres + spheres / 100 + 8); ++it) {
+        const float h_next = h * std::exp(std::log(want / float(got)) / slope);
+        const uint64_t got_next = sample_water(s, h_next, nullptr, nullptr);
+        if (got_next != got && h_next != h)
+            slope = std::clamp(std::log(float(got_next) / float(got)) / std::log(h_next / h), -3.5f,
+                               -1.5f);
+        h = h_next;
+        got = got_next;
     }
     while (got < spheres) {
         h *= 0.995f;
-        got = lattice(s, h, nullptr, nullptr);
+        got = sample_water(s, h, nullptr, nullptr);
     }
     std::vector<Particle> points;
     points.reserve(got);
-    lattice(s, h, &rng, &points);
+    sample_water(s, h, &rng, &points);
+    const uint64_t deep = uint64_t(
+        std::count_if(points.begin(), points.end(), [](const Particle& p) { return !p.fine; }));
+    const bool deep_only = points.size() - spheres <= deep;
     std::vector<std::pair<uint64_t, uint32_t>> keep(points.size());
-    for (size_t i = 0; i < points.size(); ++i) keep[i] = {rng.next_u64(), uint32_t(i)};
+    for (size_t i = 0; i < points.size(); ++i) {
+        const uint64_t key = rng.next_u64() >> 1;
+        keep[i] = {deep_only && points[i].fine ? key : key | (1ull << 63), uint32_t(i)};
+    }
     std::nth_element(keep.begin(), keep.begin() + spheres, keep.end());
     std::vector<Particle> water(spheres);
     std::vector<vec3> centres(spheres);
@@ -226,25 +270,22 @@ Scene fluid(uint64_t seed, uint32_t spheres) {
     }
     std::vector<Particle>().swap(points);
 
-    // Particles in Morton order; a balanced smooth union. Like adaptive SPH, particles grow
-    // with depth (half as fast, so they never reach the surface): the surface keeps its fine
-    // particles while the inside becomes solid, deep water, which pruning culls as far field
-    // instead of keeping every inner cell near the surface of some particle. Colour: deep blue
-    // to white foam with height above the level.
+    // Particles in Morton order; a balanced union, blending neighbours within groups of 4
+    // (the lowest two levels) and hard above: a balanced tree of smooth unions lowers the
+    // field by up to k/4 per level where many operands are close, which bloats the shape and
+    // defeats pruning. Colour: deep blue to white foam with height above the level.
     const std::vector<uint32_t> order = morton_order(centres);
     std::vector<vec3>().swap(centres);
     Assembly a;
     a.reserve(size_t(spheres) * 2);
     std::vector<uint32_t> leaves(spheres);
-    const vec3 deep{0.08f, 0.28f, 0.62f}, foam{0.85f, 0.93f, 1.0f};
+    const vec3 deep_blue{0.08f, 0.28f, 0.62f}, foam{0.85f, 0.93f, 1.0f};
     for (uint32_t i = 0; i < spheres; ++i) {
         const Particle& w = water[order[i]];
         const float t = smoothstep(-0.05f, 0.2f, w.p.y - kLevel);
-        const float radius = w.radius + 0.5f * std::max(0.0f, w.depth - 1.5f * h);
-        leaves[i] = a.sphere(w.p, radius, lerp(deep, foam, t));
+        leaves[i] = a.sphere(w.p, w.radius, lerp(deep_blue, foam, t));
     }
-    // Neighbours blend within groups of 8 (the lowest three levels), hard unions above.
-    return a.build(a.balanced(leaves, math::kOpUnion, 0.5f * kSplashSpacing * h, 3));
+    return a.build(a.balanced(leaves, math::kOpUnion, 0.5f * kSplashSpacing * h, 2));
 }
 
 }  // namespace sdfprune::gen

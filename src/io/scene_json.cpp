@@ -433,6 +433,7 @@ namespace {
 using JsonWriter = rapidjson::Writer<rapidjson::StringBuffer>;
 
 void write_float(JsonWriter& w, float x) {
+    if (x == 0.0f) x = 0.0f;  // "-0" would read back as an integer 0: write +0 to keep bytes stable
     char buf[32];
     auto res = std::to_chars(buf, buf + sizeof buf, x);
     w.RawValue(buf, size_t(res.ptr - buf), rapidjson::kNumberType);
