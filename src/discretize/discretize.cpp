@@ -130,9 +130,7 @@ class PrunedWalk {
     }
 
   private:
-    float reach(float len) const {
-        return lipschitz_ * len * (1.0f + 1e-5f) + math::kPruneMarginAbs;
-    }
+    float reach(float len) const { return far_field_reach(lipschitz_, len); }
     // The value of finest cell (x, y, z): its exact tape value at the centre, or its
     // far-field constant (far_field_constant with scale 1: the cell's own corner distance).
     float finest(const PrunedCell& c, uint32_t x, uint32_t y, uint32_t z, float* stack) const {
@@ -141,9 +139,7 @@ class PrunedWalk {
                    : eval_tape(sc_, g_.tape_at(c.tape), g_.cell_center(x, y, z), stack);
     }
     static float combine(const PrunedCell& c, float reach) {
-        const float lipschitz_bound = std::fabs(c.value) - reach;
-        return c.value > 0 ? std::max(c.bound, lipschitz_bound)
-                           : std::min(c.bound, -lipschitz_bound);
+        return far_field_combine(c.value, c.bound, reach);
     }
 
     // Far-field cell (cx, cy, cz) covering scale³ finest cells: each gets
@@ -193,8 +189,8 @@ class PrunedWalk {
         float bound, abs_value, lipschitz;
 
         float one(float sq) const {
-            const float r = lipschitz * std::sqrt(sq) * (1.0f + 1e-5f) + math::kPruneMarginAbs;
-            return positive ? std::max(bound, abs_value - r) : std::min(bound, -(abs_value - r));
+            return far_field_combine(positive ? abs_value : -abs_value, bound,
+                                     far_field_reach(lipschitz, std::sqrt(sq)));
         }
         void fill(float* o, const float* dx2, float y2, float z2, uint32_t count) const {
             uint32_t i = 0;

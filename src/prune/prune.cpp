@@ -385,9 +385,7 @@ float PrunedGrid::far_field_constant(uint32_t level, const PrunedCell& c, uint32
                                                 float(iz / scale) + 0.5f) *
                                                (cell_size_ * float(scale));
     const vec3 d = math::abs(cell_center(ix, iy, iz) - coarse) + cell_size_ * 0.5f;
-    const float reach = lipschitz_ * math::length(d) * (1.0f + 1e-5f) + math::kPruneMarginAbs;
-    const float lipschitz_bound = std::fabs(c.value) - reach;
-    return c.value > 0 ? std::max(c.bound, lipschitz_bound) : std::min(c.bound, -lipschitz_bound);
+    return far_field_combine(c.value, c.bound, far_field_reach(lipschitz_, math::length(d)));
 }
 
 CellView PrunedGrid::cell(uint32_t ix, uint32_t iy, uint32_t iz) const {
