@@ -88,18 +88,10 @@ struct PrunedCell {
     float bound = 0;            // far-field: constant valid over the whole cell
 };
 
-// The far-field arithmetic, in one place (PrunedGrid::far_field_constant, discretize's fill):
-// the reach of a far-field cell's centre value over `distance` with Lipschitz bound
-// `lipschitz`, rounding margins included, ...
-inline float far_field_reach(float lipschitz, float distance) {
-    return lipschitz * distance * (1.0f + 1e-5f) + math::kPruneMarginAbs;
-}
-// ... and the constant of a point within that reach of far-field cell c's centre: the tighter
-// of c.bound and the Lipschitz bound from c.value (same sign, never larger in magnitude).
-inline float far_field_combine(float value, float bound, float reach) {
-    const float lipschitz_bound = std::fabs(value) - reach;
-    return value > 0 ? std::max(bound, lipschitz_bound) : std::min(bound, -lipschitz_bound);
-}
+// The far-field arithmetic, in one place (sdf_math.h; PrunedGrid::far_field_constant,
+// discretize's fill and the GPU kernels use it).
+using math::far_field_combine;
+using math::far_field_reach;
 
 // What a finest cell holds.
 struct CellView {

@@ -194,6 +194,20 @@ SDFPRUNE_FN vec2 similarity_range(vec3 centre, float scale, float f0, float rho,
     return vec2(scale * near_dist - rho, scale * far_dist + f0);
 }
 
+// ---- far field -------------------------------------------------------------------------------
+// The reach of a far-field cell's centre value over `distance` with Lipschitz bound
+// `lipschitz`, rounding margins included (PrunedGrid::far_field_constant, discretization) ...
+SDFPRUNE_FN float far_field_reach(float lipschitz, float distance) {
+    return lipschitz * distance * (1.0f + 1e-5f) + kPruneMarginAbs;
+}
+// ... and the constant of a point within that reach of a far-field cell's centre: the tighter
+// of the cell's bound and the Lipschitz bound from its centre value (same sign as f, never
+// larger in magnitude).
+SDFPRUNE_FN float far_field_combine(float value, float bound, float reach) {
+    float lipschitz_bound = abs(value) - reach;
+    return value > 0.0f ? max(bound, lipschitz_bound) : min(bound, -lipschitz_bound);
+}
+
 #ifdef __cplusplus
 }  // namespace sdfprune::math
 #endif

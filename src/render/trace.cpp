@@ -150,6 +150,23 @@ float march(const Field& field, const TraceContext& ctx, vec3 o, vec3 dir, float
     return -1;
 }
 
+}  // namespace
+
+CameraFrame camera_frame(const Scene& sc, const RenderOptions& opt) {
+    const Camera& cam = opt.camera;
+    CameraFrame f;
+    f.forward = normalize(cam.target - cam.eye);
+    f.right = normalize(cross(f.forward, cam.up));
+    f.up = cross(f.right, f.forward);
+    f.tan_half = std::tan(cam.fov_degrees * std::numbers::pi_v<float> / 360.0f);
+    f.aspect = float(opt.width) / float(opt.height);
+    f.light = normalize(f.up * 0.9f - f.right * 0.5f - f.forward * 0.45f);
+    f.normal_h = 2e-4f * math::length(sc.aabb.max - sc.aabb.min);
+    return f;
+}
+
+namespace {
+
 template <class Field>
 Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
                   RenderStats* stats) {
@@ -165,14 +182,9 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
 
     const TraceContext ctx{sc, 1.0f / sc.lipschitz[sc.root()], sc.aabb.min, sc.aabb.max};
     const Camera& cam = opt.camera;
-    const vec3 forward = normalize(cam.target - cam.eye);
-    const vec3 right = normalize(cross(forward, cam.up));
-    const vec3 up = cross(right, forward);
-    const float tan_half = std::tan(cam.fov_degrees * std::numbers::pi_v<float> / 360.0f);
-    const float aspect = float(W) / float(H);
-    const vec3 light = normalize(up * 0.9f - right * 0.5f - forward * 0.45f);
-    const float scene_scale = math::length(sc.aabb.max - sc.aabb.min);
-    const float normal_h = 2e-4f * scene_scale;
+    const CameraFrame frame = camera_frame(sc, opt);
+    const vec3 forward = frame.forward, right = frame.right, up = frame.up, light = frame.light;
+    const float tan_half = frame.tan_half, aspect = frame.aspect, normal_h = frame.normal_h;
 
     std::atomic<uint64_t> total_steps{0}, total_evals{0}, hits{0};
     std::atomic<uint32_t> tiles_done{0};

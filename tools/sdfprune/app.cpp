@@ -20,6 +20,14 @@ void add_app_options(CLI::App* sub, AppOptions& o) {
     sub->add_flag("--quiet", o.quiet, "no progress bar and no summary line");
 }
 
+void add_backend_option(CLI::App* sub, std::string& backend) {
+    sub->add_option("--backend", backend,
+                    "cpu (default) or vulkan: prune and evaluate on a Vulkan device (the first "
+                    "GPU; SDFPRUNE_VULKAN_DEVICE=N picks another)")
+        ->capture_default_str()
+        ->check(CLI::IsMember({"cpu", "vulkan"}));
+}
+
 void add_res_option(CLI::App* sub, uint32_t& res, const char* what, uint32_t max) {
     sub->add_option("--res", res,
                     std::string(what) + " per axis; the pruning grid follows it unless --grid is given")
@@ -36,9 +44,18 @@ AppOptions following_res(const CLI::App* sub, const AppOptions& o, uint32_t res)
 Prepared prepare(const std::string& scene_arg, const AppOptions& o) {
     Prepared p;
     p.scene = std::make_unique<Scene>(load_scene_arg(scene_arg));
+    if (o.vulkan() && !o.pruned())
+        throw std::invalid_argument("--backend vulkan runs the pruned method only (drop "
+                                    "--method naive, or use --backend cpu)");
     if (!o.pruned()) return p;
     PruneOptions po = o.prune;
     if (o.lipschitz_bounds) po.bounds = CellBounds::kLipschitz;
+    if (o.vulkan()) {
+        p.device = std::make_unique<gpu::Device>();
+        p.device_grid = std::make_unique<gpu::Grid>(gpu::prune(*p.device, *p.scene, po));
+        p.prune_ms = p.device_grid->stats().prune_ms;
+        return p;
+    }
     Progress bar("pruning", o.quiet);
     po.progress = [&bar](double f) { bar.update(f); };
     p.grid = std::make_unique<PrunedGrid>(prune(*p.scene, po));

@@ -8,17 +8,20 @@
 #include <string>
 
 #include "command.hpp"
+#include "sdfprune/gpu.hpp"
 #include "sdfprune/prune.hpp"
 
 namespace sdfprune::cli {
 
 struct AppOptions {
     std::string method = "pruned";  // "pruned" or "naive" (the full tree at every query)
+    std::string backend = "cpu";    // "cpu" or "vulkan" (where the subcommand offers --backend)
     PruneOptions prune;
     bool lipschitz_bounds = false;
     bool json = false;
     bool quiet = false;
     bool pruned() const { return method == "pruned"; }
+    bool vulkan() const { return backend == "vulkan"; }
 };
 
 // Adds --method, --grid, --factor, --no-farfield, --no-hierarchy, --farfield-c,
@@ -32,11 +35,17 @@ void add_res_option(CLI::App* sub, uint32_t& res, const char* what, uint32_t max
 // small outputs don't pay for a 256³ pruning.
 AppOptions following_res(const CLI::App* sub, const AppOptions& o, uint32_t res);
 
-// A loaded scene and, for --method pruned, its pruned grid (prune_ms = 0 for naive).
+// A loaded scene and, for --method pruned, its pruned grid (prune_ms = 0 for naive): on the
+// CPU (grid), or with --backend vulkan on the device (device, device_grid; prune_ms is GPU time).
 struct Prepared {
     std::unique_ptr<Scene> scene;
     std::unique_ptr<PrunedGrid> grid;
+    std::unique_ptr<gpu::Device> device;
+    std::unique_ptr<gpu::Grid> device_grid;
     double prune_ms = 0;
+    const PruneStats* stats() const {
+        return grid ? &grid->stats() : device_grid ? &device_grid->stats() : nullptr;
+    }
 };
 Prepared prepare(const std::string& scene_arg, const AppOptions& o);
 

@@ -29,10 +29,12 @@ void add_discretize(CLI::App& app, std::vector<Command>& commands) {
     sub->add_option("-o,--output", args->output, "output file, .npy or .vdb")->required();
     add_res_option(sub, args->res, "cells", 2048u);
     add_app_options(sub, args->app);
+    add_backend_option(sub, args->app.backend);
     sub->footer(
         "Examples:\n  sdfprune discretize scenes/molecule.json -o molecule.npy --res 256\n"
         "  sdfprune discretize scenes/trees.json -o trees.vdb --res 512\n"
-        "  sdfprune discretize scenes/molecule.json -o m.npy --method naive --json");
+        "  sdfprune discretize scenes/molecule.json -o m.npy --method naive --json\n"
+        "  sdfprune discretize scenes/molecule.json -o m.npy --backend vulkan");
     commands.push_back(
         {sub, [args, sub] {
              const AppOptions& o = args->app;
@@ -44,7 +46,10 @@ void add_discretize(CLI::App& app, std::vector<Command>& commands) {
 
              const Prepared p = prepare(args->scene, po);
              const auto t0 = std::chrono::steady_clock::now();
-             {
+             double eval_ms = 0;
+             if (p.device_grid) {
+                 gpu::discretize(*p.device, *p.device_grid, n, values, &eval_ms);
+             } else {
                  Progress bar("discretizing", o.quiet);
                  const auto cb = [&bar](double f) { bar.update(f); };
                  if (p.grid)
@@ -52,7 +57,7 @@ void add_discretize(CLI::App& app, std::vector<Command>& commands) {
                  else
                      discretize_naive(*p.scene, n, values, o.prune.threads, cb);
              }
-             const double eval_ms = ms_since(t0);
+             if (!p.device_grid) eval_ms = ms_since(t0);
 
              const auto t1 = std::chrono::steady_clock::now();
              if (ext == ".npy") {
@@ -68,13 +73,12 @@ void add_discretize(CLI::App& app, std::vector<Command>& commands) {
                               args->output.c_str(), n,
                               ext == ".npy" ? "[z][y][x]" : "OpenVDB level set \"surface\"",
                               args->scene.c_str());
-                 if (p.grid)
-                     std::printf(
-                                  "  pruned (grid %u³, %llu near-field cells exact, others their "
-                                  "far-field bound): prune %.1f ms, eval %.1f ms\n",
-                                  p.grid->resolution(),
-                                  (unsigned long long)p.grid->stats().near_field_cells, p.prune_ms,
-                                  eval_ms);
+                 if (const PruneStats* s = p.stats())
+                     std::printf("  pruned (grid %u³, %llu near-field cells exact, others their "
+                                 "far-field bound%s%s): prune %.1f ms, eval %.1f ms\n",
+                                 s->grid, (unsigned long long)s->near_field_cells,
+                                 p.device ? "; GPU times on " : "",
+                                 p.device ? p.device->name().c_str() : "", p.prune_ms, eval_ms);
                  else
                      std::printf( "  naive (full tree at every cell): eval %.1f ms\n",
                                   eval_ms);
@@ -86,17 +90,19 @@ void add_discretize(CLI::App& app, std::vector<Command>& commands) {
                      .add("format", ext.substr(1))
                      .add("res", n)
                      .add("method", o.method)
+                     .add("backend", o.backend)
                      .add("prune_ms", p.prune_ms)
                      .add("eval_ms", eval_ms)
                      .add("write_ms", write_ms);
-                 if (p.grid) {
+                 if (const PruneStats* s = p.stats()) {
                      std::string levels;
-                     for (uint32_t r : p.grid->stats().levels)
+                     for (uint32_t r : s->levels)
                          levels += (levels.empty() ? "" : "x") + std::to_string(r);
-                     j.add("grid", p.grid->resolution())
+                     j.add("grid", s->grid)
                          .add("levels", levels)
-                         .add("near_field_cells", p.grid->stats().near_field_cells);
+                         .add("near_field_cells", s->near_field_cells);
                  }
+                 if (p.device) j.add("device", p.device->name());
                  std::printf("%s\n", j.str().c_str());
              }
              return 0;

@@ -50,10 +50,12 @@ void add_render(CLI::App& app, std::vector<Command>& commands) {
         ->check(CLI::IsMember({"shaded", "normals", "heatmap"}));
     sub->add_flag("--no-shadows", a->no_shadows, "trace primary rays only");
     add_app_options(sub, a->app);
+    add_backend_option(sub, a->app.backend);
     sub->footer(
         "Examples:\n  sdfprune render scenes/molecule.json -o molecule.png\n"
         "  sdfprune render scenes/trees.json -o heat.png --shading heatmap --width 960 --height 540\n"
-        "  sdfprune render builtin:demo -o naive.png --method naive --json");
+        "  sdfprune render builtin:demo -o naive.png --method naive --json\n"
+        "  sdfprune render scenes/molecule.json -o gpu.png --backend vulkan");
     commands.push_back({sub, [a] {
         check_output(a->out, {".png"});
         vec3 target;
@@ -73,7 +75,9 @@ void add_render(CLI::App& app, std::vector<Command>& commands) {
         Progress bar("tracing", a->app.quiet);
         ro.progress = [&bar](double f) { bar.update(f); };
         RenderStats st;
-        const Image img = prep.grid ? render(*prep.grid, ro, &st) : render_naive(sc, ro, &st);
+        const Image img = prep.device_grid ? gpu::render(*prep.device, *prep.device_grid, ro, &st)
+                          : prep.grid      ? render(*prep.grid, ro, &st)
+                                           : render_naive(sc, ro, &st);
         bar.done();
         write_png(img, a->out);
         if (a->app.json) {
@@ -81,6 +85,7 @@ void add_render(CLI::App& app, std::vector<Command>& commands) {
             j.add("scene", a->scene)
                 .add("output", a->out)
                 .add("method", a->app.method)
+                .add("backend", a->app.backend)
                 .add("width", a->width)
                 .add("height", a->height)
                 .add("nodes", sc.size())
@@ -89,14 +94,16 @@ void add_render(CLI::App& app, std::vector<Command>& commands) {
                 .add("steps_avg", st.steps_avg)
                 .add("evals_avg", st.evals_avg)
                 .add("hit_fraction", st.hit_fraction);
-            if (prep.grid) j.add("grid", prep.grid->resolution());
+            if (prep.stats()) j.add("grid", prep.stats()->grid);
+            if (prep.device) j.add("device", prep.device->name());
             std::printf("%s\n", j.str().c_str());
         } else if (!a->app.quiet) {
-            std::printf("wrote %s (%ux%u, %s, %s): prune %.1f ms, trace %.1f ms, %.1f steps and "
-                        "%.0f node evaluations per pixel\n",
+            std::printf("wrote %s (%ux%u, %s, %s%s%s): prune %.1f ms, trace %.1f ms, %.1f steps "
+                        "and %.0f node evaluations per pixel\n",
                         a->out.c_str(), a->width, a->height, a->shading.c_str(),
-                        a->app.method.c_str(), prep.prune_ms, st.trace_ms, st.steps_avg,
-                        st.evals_avg);
+                        a->app.method.c_str(), prep.device ? ", Vulkan on " : "",
+                        prep.device ? prep.device->name().c_str() : "", prep.prune_ms,
+                        st.trace_ms, st.steps_avg, st.evals_avg);
         }
         return 0;
     }});

@@ -5,6 +5,7 @@
 #include <exception>
 
 #include "command.hpp"
+#include "sdfprune/gpu.hpp"
 #include "sdfprune/io.hpp"
 
 namespace sdfprune::cli {
@@ -49,6 +50,9 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "sdfprune: %s\n", e.what());
         return 2;
     } catch (const IoError& e) {
+        std::fprintf(stderr, "sdfprune: %s\n", e.what());
+        return 2;
+    } catch (const gpu::GpuError& e) {
         std::fprintf(stderr, "sdfprune: %s\n", e.what());
         return 2;
     } catch (const std::invalid_argument& e) {

@@ -1,0 +1,97 @@
+// gpu.hpp — the Vulkan compute backend: the same pruning, tracing and discretization as the CPU
+// backend (prune.hpp, render.hpp, discretize.hpp), run as compute shaders on any Vulkan device
+// (NVIDIA, AMD, Intel, Apple through MoltenVK, Mesa's lavapipe on the CPU).
+//
+// The shaders include shaders/shared/sdf_math.h, the same header the CPU code uses, and mirror
+// the CPU stages step for step, so both backends find the same tapes and statistics. Tapes are
+// allocated in device buffers sized from counts (the tape pool grows and the level is redone
+// when it overflows); a device that truly lacks memory gives a GpuError.
+//
+// Thread-safety: a Device and the grids made with it are used from one thread at a time.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <stdexcept>
+#include <string>
+
+#include "prune.hpp"
+#include "render.hpp"
+
+namespace sdfprune::gpu {
+
+// No Vulkan device, a device error, or this build has no Vulkan backend. One-line message.
+struct GpuError : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+class Context;
+class DeviceGrid;
+
+// True when this build includes the Vulkan backend.
+bool built_with_vulkan();
+
+// One Vulkan device (the first with a compute queue; SDFPRUNE_VULKAN_DEVICE=N picks another).
+class Device {
+public:
+    Device();  // throws GpuError when there is no device
+    ~Device();
+    Device(Device&&) noexcept;
+    Device& operator=(Device&&) noexcept;
+    std::string name() const;
+    Context& context() { return *context_; }
+
+private:
+    std::unique_ptr<Context> context_;
+};
+
+// Pruning statistics as PruneStats; prune_ms is GPU time (timestamps), prune_peak_bytes the
+// device memory held at most while pruning, tape_bytes the device bytes of the result.
+// wall_ms adds the host's share (submissions, waits, buffer growth).
+struct DevicePruneStats : PruneStats {
+    double wall_ms = 0;
+};
+
+// A pruned grid living in device memory; refers to its Scene and Device, which must outlive it.
+class Grid {
+public:
+    Grid(Grid&&) noexcept;
+    Grid& operator=(Grid&&) noexcept;
+    ~Grid();
+    const DevicePruneStats& stats() const;
+    const Scene& scene() const;
+
+    // Finest-cell contents read back from the device, for comparisons with the CPU backend:
+    // for each finest cell in z-major order, the tape's words (empty for far-field cells)
+    // through `visit(index, far_field, constant, tape)`.
+    struct CellContents {
+        bool far_field = true;
+        float constant = 0;
+        std::span<const uint32_t> tape;
+    };
+    void for_each_finest_cell(
+        const std::function<void(uint64_t index, const CellContents&)>& visit) const;
+
+private:
+    friend Grid prune(Device&, const Scene&, const PruneOptions&);
+    friend Image render(Device&, const Grid&, const RenderOptions&, RenderStats*);
+    friend void discretize(Device&, const Grid&, uint32_t, std::span<float>, double*);
+    Grid();
+    std::unique_ptr<DeviceGrid> impl_;
+};
+
+// Hierarchical pruning on the device; same options and results as sdfprune::prune (threads,
+// progress and cancel are ignored).
+Grid prune(Device& device, const Scene& scene, const PruneOptions& options = {});
+
+// Sphere tracing (primary + shadow ray) on the device; stats->trace_ms is GPU time.
+Image render(Device& device, const Grid& grid, const RenderOptions& options,
+             RenderStats* stats = nullptr);
+
+// The pruned field at the centres of an n³ grid over the scene's AABB, as discretize_pruned;
+// *gpu_ms (if given) receives the GPU time.
+void discretize(Device& device, const Grid& grid, uint32_t n, std::span<float> out,
+                double* gpu_ms = nullptr);
+
+}  // namespace sdfprune::gpu

@@ -1,0 +1,243 @@
+#version 450
+// prune.comp — one pruning step of a level, one job (a cell or an octant) per iteration of a
+// persistent thread; mirrors src/prune/prune_cell.cpp stage for stage (evaluate_cell,
+// is_near_field, compact_tape) and the octant split of src/prune/prune.cpp.
+//   mode 0: cells of a level from their block's tape (blocks[job / f³])
+//   mode 1: the 8 octants of each block from the block's tape (not stored as cells)
+//   mode 2: cells of a level from their octant's tape (or far-field from a far octant)
+// New tapes are appended to the pool with an atomic counter; on overflow nothing is written
+// and the host grows the pool and runs the step again.
+#include "scene.glsl"
+
+layout(local_size_x = 64) in;
+
+#include "cells.glsl"
+
+layout(std430, binding = 4) readonly buffer Blocks { Block blocks[]; };
+layout(std430, binding = 5) buffer Octants { Cell octants[]; };
+layout(std430, binding = 6) buffer Cells { Cell cells[]; };
+layout(std430, binding = 7) buffer Counters {
+    uint pool_used;
+    uint pool_capacity;
+    uint overflow;
+    uint max_len;  // longest tape written or shared in this step
+    uint near_jobs;  // near-field cells in this step
+    uint next_blocks;
+};
+// Per thread: 2 words per parent-tape entry (left operand; decision | alive << 2 | negate << 4),
+// then 4 words per stack slot (value, lo, hi, entry).
+layout(std430, binding = 8) buffer Scratch { uint scratch[]; };
+
+layout(push_constant) uniform Push {
+    vec4 origin;  // AABB min; w: Lipschitz bound of the root
+    vec4 csize;   // cell size of this level; w: far-field C
+    uint mode;
+    uint factor;  // f: cells per axis of a block
+    uint jobs;
+    uint threads;
+    uint max_len;    // longest parent tape (entry scratch per thread)
+    uint max_stack;  // deepest stack
+    uint flags;      // 1: far field on; 2: interval bounds
+    uint pool_start;  // pool words in use before this step
+} pc;
+
+// Prunes the tape at `parent` over the box; returns true for near-field. Fills value, the
+// far-field constant, and for near-field cells the new tape (or the parent's when unchanged).
+bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out float value,
+               out float constant, out uint tape) {
+    uint t = gl_GlobalInvocationID.x;
+    uint ebase = t * (2u * pc.max_len + 4u * pc.max_stack);
+    uint sbase = ebase + 2u * pc.max_len;
+    bool interval = (pc.flags & 2u) != 0u;
+    uint len = pool[parent];
+    uint top = 0u;
+    // Stage 1: values and ranges at the centre, decisions (evaluate_cell).
+    for (uint i = 0u; i < len; ++i) {
+        uint w = pool[parent + 2u + i];
+        uint n = tape_node(w);
+        uint kind = nodes[n].kind;
+        float spread = nodes[n].lipschitz * R;
+        float v, lo, hi;
+        if (kind < kPrimitiveKindCount) {
+            uint p = nodes[n].primitive;
+            v = eval_primitive(kind, params[p], centre);
+            lo = v - spread;
+            hi = v + spread;
+            vec4 b0 = extras[p].bound0;
+            if (interval && b0.w > 0.0) {
+                vec2 r = similarity_range(b0.xyz, b0.w, extras[p].bound1.x, extras[p].bound1.y,
+                                          centre, half_size);
+                lo = max(lo, r.x);
+                hi = min(hi, r.y);
+            }
+        } else {
+            uint sr = sbase + (top - 1u) * 4u, sl = sbase + (top - 2u) * 4u;
+            top -= 2u;
+            float lv = uintBitsToFloat(scratch[sl]), llo = uintBitsToFloat(scratch[sl + 1u]),
+                  lhi = uintBitsToFloat(scratch[sl + 2u]);
+            float rv = uintBitsToFloat(scratch[sr]), rlo = uintBitsToFloat(scratch[sr + 1u]),
+                  rhi = uintBitsToFloat(scratch[sr + 2u]);
+            float sgn = operator_s(kind), k = nodes[n].blend;
+            uint d = prune_decision(sgn, k, llo, lhi, rlo, rhi);
+            scratch[ebase + 2u * i] = scratch[sl + 3u];
+            scratch[ebase + 2u * i + 1u] = d;
+            v = apply_operator(sgn, k, lv, rv);
+            if (d == kLeftWins) {
+                lo = llo;
+                hi = lhi;
+            } else if (d == kRightWins) {
+                lo = rlo;
+                hi = rhi;
+            } else if (interval) {
+                vec2 r2 = operator_range(sgn, k, llo, lhi, rlo, rhi);
+                lo = max(v - spread, r2.x);
+                hi = min(v + spread, r2.y);
+            } else {
+                lo = v - spread;
+                hi = v + spread;
+            }
+        }
+        if (tape_negated(w)) {
+            v = -v;
+            float tmp = lo;
+            lo = -hi;
+            hi = -tmp;
+        }
+        if (kind < kPrimitiveKindCount) scratch[ebase + 2u * i + 1u] = kKeepBoth;
+        uint so = sbase + top * 4u;
+        scratch[so] = floatBitsToUint(v);
+        scratch[so + 1u] = floatBitsToUint(lo);
+        scratch[so + 2u] = floatBitsToUint(hi);
+        scratch[so + 3u] = i;
+        ++top;
+    }
+    value = uintBitsToFloat(scratch[sbase]);
+    constant = 0.0;
+    tape = kFarField;
+    // Stage 2: the far-field test on the root's range (is_near_field).
+    if ((pc.flags & 1u) != 0u) {
+        float L = nodes[tape_node(pool[parent + 2u + len - 1u])].lipschitz;
+        float clearance = (pc.csize.w - 1.0) * L * R;
+        float margin = kPruneMarginAbs + kPruneMarginRel * (abs(value) + L * R);
+        float lo = uintBitsToFloat(scratch[sbase + 1u]) - margin;
+        float hi = uintBitsToFloat(scratch[sbase + 2u]) + margin;
+        if (lo > clearance && lo > 0.0) {
+            constant = lo;
+            return false;
+        }
+        if (hi < -clearance && hi < 0.0) {
+            constant = hi;
+            return false;
+        }
+    }
+    // Stage 3: the top-down pass (compact_tape). Flags: alive (bits 2-3: 1 kept, 2 skipped),
+    // negate (bit 4).
+    for (uint i = 0u; i < len; ++i) scratch[ebase + 2u * i + 1u] &= 3u;
+    uint root_neg = tape_negated(pool[parent + 2u + len - 1u]) ? 1u : 0u;
+    scratch[ebase + 2u * (len - 1u) + 1u] |= (1u << 2) | (root_neg << 4);
+    for (uint i = len; i-- > 0u;) {
+        uint f = scratch[ebase + 2u * i + 1u];
+        uint w = pool[parent + 2u + i];
+        if (((f >> 2) & 3u) != 1u || is_primitive(tape_node(w))) continue;
+        uint l = scratch[ebase + 2u * i], r = i - 1u;
+        uint d = f & 3u;
+        if (d == kKeepBoth) {
+            uint nl = tape_negated(pool[parent + 2u + l]) ? 1u : 0u;
+            uint nr = tape_negated(pool[parent + 2u + r]) ? 1u : 0u;
+            scratch[ebase + 2u * l + 1u] = (scratch[ebase + 2u * l + 1u] & 3u) | (1u << 2) |
+                                           (nl << 4);
+            scratch[ebase + 2u * r + 1u] = (scratch[ebase + 2u * r + 1u] & 3u) | (1u << 2) |
+                                           (nr << 4);
+            continue;
+        }
+        uint win = d == kLeftWins ? l : r;
+        uint neg = ((f >> 4) & 1u) ^ (tape_negated(pool[parent + 2u + win]) ? 1u : 0u);
+        scratch[ebase + 2u * i + 1u] = (f & 3u) | (2u << 2) | (f & 16u);
+        scratch[ebase + 2u * win + 1u] = (scratch[ebase + 2u * win + 1u] & 3u) | (1u << 2) |
+                                         (neg << 4);
+    }
+    uint out_len = 0u, prims = 0u;
+    for (uint i = 0u; i < len; ++i) {
+        if (((scratch[ebase + 2u * i + 1u] >> 2) & 3u) != 1u) continue;
+        ++out_len;
+        prims += is_primitive(tape_node(pool[parent + 2u + i])) ? 1u : 0u;
+    }
+    atomicMax(max_len, out_len);
+    if (out_len == len) {
+        tape = parent;  // nothing pruned: share the parent's tape
+        return true;
+    }
+    uint at = atomicAdd(pool_used, out_len + 2u);
+    if (at < pc.pool_start || at + out_len + 2u > pool_capacity || at + out_len + 2u < at) {
+        overflow = 1u;
+        return true;
+    }
+    pool[at] = out_len;
+    pool[at + 1u] = prims;
+    uint o = at + 2u;
+    for (uint i = 0u; i < len; ++i) {
+        uint f = scratch[ebase + 2u * i + 1u];
+        if (((f >> 2) & 3u) != 1u) continue;
+        pool[o++] = tape_word(tape_node(pool[parent + 2u + i]), ((f >> 4) & 1u) != 0u);
+    }
+    tape = at;
+    return true;
+}
+
+void main() {
+    uint f = pc.factor;
+    uint per_block = f * f * f;
+    vec3 origin = pc.origin.xyz;
+    vec3 cs = pc.csize.xyz;
+    vec3 half_cell = cs * 0.5;
+    float radius = length(half_cell);
+    uint hf = f / 2u;
+    for (uint job = gl_GlobalInvocationID.x; job < pc.jobs; job += pc.threads) {
+        Cell result;
+        result.children = 0u;
+        if (pc.mode == 1u) {
+            Block b = blocks[job / 8u];
+            uint o = job % 8u;
+            uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
+                             b.z + ((o >> 2) & 1u) * hf);
+            vec3 centre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
+            bool near = prune_box(b.tape, centre, half_cell * float(hf), radius * float(hf),
+                                  result.value, result.bound, result.tape);
+            if (!near) result.tape = kFarField;
+            octants[job] = result;
+            continue;
+        }
+        uint bi = job / per_block, local = job % per_block;
+        Block b = blocks[bi];
+        uvec3 lc = uvec3(local % f, (local / f) % f, local / (f * f));
+        vec3 centre = origin + (vec3(b.x + lc.x, b.y + lc.y, b.z + lc.z) + 0.5) * cs;
+        uint parent = b.tape;
+        if (pc.mode == 2u) {
+            uint o = (lc.x >= hf ? 1u : 0u) | (lc.y >= hf ? 2u : 0u) | (lc.z >= hf ? 4u : 0u);
+            Cell oct = octants[bi * 8u + o];
+            if (oct.tape == kFarField) {
+                // A far octant makes far cells (prune.cpp): its constant, and its centre value
+                // moved conservatively to the cell's centre.
+                uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
+                                 b.z + ((o >> 2) & 1u) * hf);
+                vec3 ocentre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
+                float reach = pc.origin.w * length(centre - ocentre);
+                result.tape = kFarField;
+                result.bound = oct.bound;
+                result.value = oct.value > 0.0 ? max(oct.value - reach, oct.bound)
+                                               : min(oct.value + reach, oct.bound);
+                cells[job] = result;
+                continue;
+            }
+            parent = oct.tape;
+        }
+        bool near = prune_box(parent, centre, half_cell, radius, result.value, result.bound,
+                              result.tape);
+        if (near) {
+            atomicAdd(near_jobs, 1u);
+        } else {
+            result.tape = kFarField;
+        }
+        cells[job] = result;
+    }
+}

@@ -1,0 +1,70 @@
+// gpu_device.cpp — Device and Grid (gpu.hpp): ownership, and reading a device grid back.
+#include <cstring>
+
+#include "device_grid.hpp"
+
+namespace sdfprune::gpu {
+
+bool built_with_vulkan() { return true; }
+
+Device::Device() : context_(std::make_unique<Context>()) {}
+Device::~Device() = default;
+Device::Device(Device&&) noexcept = default;
+Device& Device::operator=(Device&&) noexcept = default;
+std::string Device::name() const { return context_->device_name(); }
+
+Grid::Grid() = default;
+Grid::~Grid() = default;
+Grid::Grid(Grid&&) noexcept = default;
+Grid& Grid::operator=(Grid&&) noexcept = default;
+const DevicePruneStats& Grid::stats() const { return impl_->stats; }
+const Scene& Grid::scene() const { return *impl_->scene; }
+
+void Grid::for_each_finest_cell(
+    const std::function<void(uint64_t, const CellContents&)>& visit) const {
+    DeviceGrid& g = *impl_;
+    const GpuLevel& last = g.level_info.back();
+    const uint64_t cell_total = last.offset + (g.cells.size / sizeof(PrunedCell) - last.offset);
+    std::vector<PrunedCell> cells(cell_total);
+    g.ctx.download(g.cells, cells.data(), cells.size() * sizeof(PrunedCell));
+    std::vector<uint32_t> pool(g.pool_words);
+    g.ctx.download(g.pool, pool.data(), pool.size() * 4);
+    const uint32_t N = last.res;
+    const Scene& sc = *g.scene;
+    const vec3 cs = (sc.aabb.max - sc.aabb.min) / float(N);
+    const float L = sc.lipschitz[sc.root()];
+    for (uint32_t z = 0; z < N; ++z)
+        for (uint32_t y = 0; y < N; ++y)
+            for (uint32_t x = 0; x < N; ++x) {
+                // The walk of PrunedGrid::cell and grid.glsl's locate.
+                uint32_t block_start = 0;
+                CellContents out;
+                for (size_t li = 0; li < g.level_info.size(); ++li) {
+                    const GpuLevel& l = g.level_info[li];
+                    const uint32_t scale = N / l.res, f = l.factor;
+                    const uint32_t sx = x / scale, sy = y / scale, sz = z / scale;
+                    const PrunedCell& c =
+                        cells[l.offset + block_start + ((sz % f) * f + sy % f) * f + sx % f];
+                    if (c.tape == PrunedCell::kFarField) {
+                        const vec3 coarse =
+                            sc.aabb.min + vec3(float(sx) + 0.5f, float(sy) + 0.5f,
+                                               float(sz) + 0.5f) * (cs * float(scale));
+                        const vec3 centre = sc.aabb.min + vec3(float(x) + 0.5f, float(y) + 0.5f,
+                                                               float(z) + 0.5f) * cs;
+                        const vec3 d = math::abs(centre - coarse) + cs * 0.5f;
+                        out.constant = far_field_combine(
+                            c.value, c.bound, far_field_reach(L, math::length(d)));
+                        break;
+                    }
+                    if (li + 1 == g.level_info.size()) {
+                        out.far_field = false;
+                        out.tape = {pool.data() + c.tape + 2, pool[c.tape]};
+                        break;
+                    }
+                    block_start = c.children;
+                }
+                visit((uint64_t(z) * N + y) * N + x, out);
+            }
+}
+
+}  // namespace sdfprune::gpu

@@ -1,0 +1,267 @@
+// gpu_prune.cpp — hierarchical pruning on the device (gpu.hpp): the host walks the levels as
+// src/prune/prune.cpp does and runs each step as a dispatch of prune.comp over all its cells
+// (or octants), then expand.comp to make the next level's blocks. The tape pool grows and the
+// step is redone when a step overflows it; statistics are read back at the end.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+
+#include "device_grid.hpp"
+
+namespace sdfprune::gpu {
+namespace {
+
+// Scratch memory for the per-thread arrays of prune.comp and the stacks of the evaluating
+// kernels: the number of threads in flight is chosen to fit it.
+constexpr uint64_t kScratchBudgetBytes = uint64_t(256) << 20;
+constexpr uint32_t kGroup = 64;  // local_size_x of every kernel
+
+struct PrunePush {  // prune.comp: Push
+    vec4 origin, csize;
+    uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start;
+};
+static_assert(sizeof(PrunePush) == 64);
+
+uint32_t groups_for(uint64_t n) { return uint32_t((n + kGroup - 1) / kGroup); }
+
+}  // namespace
+
+uint32_t stack_threads(uint64_t work, uint64_t bytes_per_thread) {
+    const uint64_t fit = std::max<uint64_t>(kGroup, kScratchBudgetBytes / bytes_per_thread);
+    const uint64_t t = std::min<uint64_t>(std::max<uint64_t>(work, 1), fit);
+    return uint32_t(std::min<uint64_t>((t + kGroup - 1) / kGroup * kGroup, 1u << 30));
+}
+
+DeviceGrid::~DeviceGrid() {
+    for (Buffer* b : {&nodes, &params, &extras, &pool, &cells, &levels}) ctx.destroy(*b);
+}
+
+GpuGridParams DeviceGrid::grid_params() const {
+    const Aabb& box = scene->aabb;
+    const GpuLevel& finest = level_info.back();
+    const vec3 cs = (box.max - box.min) / float(finest.res);
+    const float L = scene->lipschitz[scene->root()];
+    GpuGridParams g;
+    g.aabb_min = vec4(box.min.x, box.min.y, box.min.z, L);
+    g.aabb_max = vec4(box.max.x, box.max.y, box.max.z, 1.0f / L);
+    g.cell_size = vec4(cs.x, cs.y, cs.z, float(finest.res));
+    g.inv_cell = vec4(1.0f / cs.x, 1.0f / cs.y, 1.0f / cs.z, float(level_info.size()));
+    return g;
+}
+
+Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
+    const auto t_start = std::chrono::steady_clock::now();
+    if (!(opt.far_field_c >= 1.0f)) throw std::invalid_argument("far-field C must be >= 1");
+    const std::vector<uint32_t> res = grid_levels(opt.resolution, opt.factor, opt.hierarchy);
+    Context& ctx = device.context();
+    ctx.reset_peak();
+    const uint64_t live_before = ctx.bytes_live();
+    Grid grid;
+    grid.impl_ = std::make_unique<DeviceGrid>(ctx, sc);
+    DeviceGrid& g = *grid.impl_;
+    DevicePruneStats& st = g.stats;
+
+    // The scene.
+    std::vector<GpuNode> nodes(sc.size());
+    for (uint32_t n = 0; n < sc.size(); ++n)
+        nodes[n] = {sc.kind[n], sc.is_primitive(n) ? sc.primitive[n] : 0u, sc.blend[n],
+                    sc.lipschitz[n]};
+    std::vector<GpuPrimitiveExtra> extras(sc.primitive_count());
+    for (uint32_t p = 0; p < sc.primitive_count(); ++p) {
+        const PrimitiveBound& b = sc.bound[p];
+        extras[p] = {vec4(b.centre.x, b.centre.y, b.centre.z, b.scale), vec4(b.f0, b.rho, 0, 0),
+                     vec4(sc.color[p].x, sc.color[p].y, sc.color[p].z, 1)};
+    }
+    const auto upload_vector = [&](const auto& v) {
+        const uint64_t bytes = v.size() * sizeof(v[0]);
+        Buffer b = ctx.create_buffer(bytes);
+        ctx.upload(b, v.data(), bytes);
+        return b;
+    };
+    g.nodes = upload_vector(nodes);
+    g.params = upload_vector(sc.params);
+    g.extras = upload_vector(extras);
+
+    // The pool starts with the full tape; it grows on overflow.
+    const uint64_t max_pool_words = std::min<uint64_t>(ctx.max_buffer_bytes() / 4, 0xfffffff0u);
+    std::vector<uint32_t> head{sc.size(), sc.primitive_count()};
+    head.insert(head.end(), sc.full_tape.begin(), sc.full_tape.end());
+    if (head.size() > max_pool_words)
+        throw GpuError("scene too large for the device's largest storage buffer");
+    uint64_t capacity = std::min<uint64_t>(max_pool_words, std::max<uint64_t>(4 * head.size(), 1 << 20));
+    g.pool = ctx.create_buffer(capacity * 4);
+    ctx.upload(g.pool, head.data(), head.size() * 4);
+    g.pool_words = uint32_t(head.size());
+
+    Buffer counters = ctx.create_buffer(sizeof(GpuCounters), true);
+    auto* counter = static_cast<GpuCounters*>(counters.mapped);
+    Buffer blocks = ctx.create_buffer(sizeof(GpuBlock));
+    const GpuBlock root_block{0, 0, 0, 0};
+    ctx.upload(blocks, &root_block, sizeof(root_block));
+    uint64_t block_count = 1;
+    uint32_t max_len = sc.size();  // longest tape of the current parents
+    Buffer scratch;
+    double gpu_ms = 0;
+
+    const vec3 origin = sc.aabb.min, extent = sc.aabb.max - sc.aabb.min;
+    const float L = sc.lipschitz[sc.root()];
+    const uint32_t flags =
+        (opt.far_field ? 1u : 0u) | (opt.bounds == CellBounds::kInterval ? 2u : 0u);
+
+    // One step: `jobs` cells or octants from their parents' tapes into `octants`/`cells`.
+    const auto run_step = [&](uint32_t mode, uint32_t factor, uint64_t jobs, vec3 csize,
+                              const Buffer& octants, const Buffer& cells) {
+        const uint64_t thread_bytes = (2ull * max_len + 4ull * sc.max_stack) * 4;
+        const uint32_t threads = stack_threads(jobs, thread_bytes);
+        if (scratch.size < threads * thread_bytes) {
+            ctx.destroy(scratch);
+            scratch = ctx.create_buffer(threads * thread_bytes);
+        }
+        for (;;) {
+            *counter = GpuCounters{g.pool_words, uint32_t(capacity), 0, 0, 0, 0, {0, 0}};
+            const PrunePush push{vec4(origin.x, origin.y, origin.z, L),
+                                 vec4(csize.x, csize.y, csize.z, opt.far_field_c),
+                                 mode, factor, uint32_t(jobs), threads, max_len,
+                                 sc.max_stack, flags, g.pool_words};
+            ctx.begin();
+            ctx.dispatch(KernelId::kPrune,
+                         {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, &octants, &cells,
+                          &counters, &scratch},
+                         &push, sizeof(push), groups_for(threads));
+            gpu_ms += ctx.submit();
+            if (!counter->overflow) break;
+            // Grow the pool (keeping what it holds) and redo the step.
+            const uint64_t need = uint64_t(counter->pool_used);
+            uint64_t grown = std::max<uint64_t>(capacity * 2, need + need / 4);
+            if (capacity >= max_pool_words)
+                throw GpuError("tape pool exceeds the device's largest storage buffer (" +
+                               std::to_string(ctx.max_buffer_bytes()) + " bytes)");
+            grown = std::min(grown, max_pool_words);
+            Buffer bigger = ctx.create_buffer(grown * 4);
+            ctx.begin();
+            ctx.copy(g.pool, bigger, uint64_t(g.pool_words) * 4);
+            ctx.submit();
+            ctx.destroy(g.pool);
+            g.pool = bigger;
+            capacity = grown;
+        }
+        g.pool_words = counter->pool_used;
+        return *counter;
+    };
+
+    std::vector<Buffer> level_cells;
+    for (uint32_t li = 0; li < res.size(); ++li) {
+        const bool finest = li + 1 == res.size();
+        const uint32_t f = li == 0 ? res[0] : res[li] / res[li - 1];
+        const uint64_t per_block = uint64_t(f) * f * f;
+        const uint64_t total = per_block * block_count;
+        if (total > 0xfffffffeull) throw std::length_error("too many cells in one level");
+        const vec3 csize = extent / float(res[li]);
+        Buffer cells = ctx.create_buffer(total * sizeof(PrunedCell));
+        // The same split as the CPU backend (prune.cpp): octants first where it applies.
+        const bool split = opt.hierarchy && f >= 4 && f % 2 == 0 && 1024 % per_block == 0;
+        GpuCounters c;
+        if (split) {
+            Buffer octants = ctx.create_buffer(block_count * 8 * sizeof(PrunedCell));
+            c = run_step(1, f, block_count * 8, csize, octants, cells);
+            max_len = std::max(c.max_len, 1u);
+            c = run_step(2, f, total, csize, octants, cells);
+            ctx.destroy(octants);
+        } else {
+            c = run_step(0, f, total, csize, cells, cells);
+        }
+        max_len = std::max(c.max_len, 1u);
+        if (!finest) {
+            const uint32_t nf = res[li + 1] / res[li];
+            Buffer next = ctx.create_buffer(uint64_t(c.near_jobs) * sizeof(GpuBlock));
+            *counter = GpuCounters{};
+            const uint32_t push[3] = {f, uint32_t(total), nf};
+            ctx.begin();
+            ctx.dispatch(KernelId::kExpand, {&blocks, &cells, &next, &counters}, push,
+                         sizeof(push), groups_for(total));
+            gpu_ms += ctx.submit();
+            ctx.destroy(blocks);
+            blocks = next;
+            block_count = c.near_jobs;
+        }
+        g.level_info.push_back({res[li], f, 0, 0});
+        level_cells.push_back(cells);
+    }
+    ctx.destroy(blocks);
+    ctx.destroy(scratch);
+
+    // All levels' cells in one buffer, for the lookups of the tracing and discretizing kernels.
+    uint64_t cell_total = 0;
+    for (size_t li = 0; li < level_cells.size(); ++li) {
+        g.level_info[li].offset = uint32_t(cell_total);
+        cell_total += level_cells[li].size / sizeof(PrunedCell);
+    }
+    g.cells = ctx.create_buffer(cell_total * sizeof(PrunedCell));
+    g.levels = ctx.create_buffer(g.level_info.size() * sizeof(GpuLevel));
+    ctx.begin();
+    for (size_t li = 0; li < level_cells.size(); ++li)
+        ctx.copy(level_cells[li], g.cells, level_cells[li].size,
+                 0, uint64_t(g.level_info[li].offset) * sizeof(PrunedCell));
+    gpu_ms += ctx.submit();
+    ctx.upload(g.levels, g.level_info.data(), g.level_info.size() * sizeof(GpuLevel));
+    for (Buffer& b : level_cells) ctx.destroy(b);
+    st.prune_ms = gpu_ms;
+    st.prune_peak_bytes = ctx.bytes_peak() - live_before;
+    st.wall_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() -
+                                                           t_start).count();
+
+    // Statistics (not timed): per cell (length, primitives) or far-field, level by level.
+    const uint32_t N = res.back();
+    st.grid = N;
+    st.cells = uint64_t(N) * N * N;
+    st.levels = res;
+    uint64_t far_finest = 0;
+    double prim_sum = 0, prim_sq = 0, tape_sum = 0;
+    for (size_t li = 0; li < g.level_info.size(); ++li) {
+        const uint64_t n = li + 1 < g.level_info.size()
+                               ? g.level_info[li + 1].offset - g.level_info[li].offset
+                               : cell_total - g.level_info[li].offset;
+        Buffer level = ctx.create_buffer(n * sizeof(PrunedCell));
+        Buffer info = ctx.create_buffer(n * 8);
+        const uint32_t push = uint32_t(n);
+        ctx.begin();
+        ctx.copy(g.cells, level, n * sizeof(PrunedCell),
+                 uint64_t(g.level_info[li].offset) * sizeof(PrunedCell));
+        ctx.dispatch(KernelId::kCellInfo, {&level, &g.pool, &info}, &push, sizeof(push),
+                     groups_for(n));
+        ctx.submit();
+        std::vector<uint32_t> host(n * 2);
+        ctx.download(info, host.data(), n * 8);
+        ctx.destroy(level);
+        ctx.destroy(info);
+        const uint64_t below = N / g.level_info[li].res;
+        const bool finest = li + 1 == g.level_info.size();
+        for (uint64_t i = 0; i < n; ++i) {
+            const uint32_t len = host[2 * i], prims = host[2 * i + 1];
+            if (len == PrunedCell::kFarField) {
+                far_finest += finest ? 1 : below * below * below;
+                continue;
+            }
+            if (!finest) continue;
+            ++st.near_field_cells;
+            tape_sum += len;
+            st.tape_max = std::max(st.tape_max, len);
+            prim_sum += prims;
+            prim_sq += double(prims) * prims;
+            st.active_max = std::max(st.active_max, prims);
+        }
+    }
+    const double cells = double(st.cells);
+    st.near_field_prims_avg = st.near_field_cells ? prim_sum / double(st.near_field_cells) : 0;
+    st.tape_avg = st.near_field_cells ? tape_sum / double(st.near_field_cells) : 0;
+    st.active_avg = (prim_sum + double(far_finest)) / cells;
+    const double mean_sq = (prim_sq + double(far_finest)) / cells;
+    st.active_std = std::sqrt(std::max(0.0, mean_sq - st.active_avg * st.active_avg));
+    if (far_finest > 0) st.active_max = std::max(st.active_max, 1u);
+    st.tape_bytes = uint64_t(g.pool_words) * 4 + cell_total * sizeof(PrunedCell);
+    ctx.destroy(counters);
+    return grid;
+}
+
+}  // namespace sdfprune::gpu

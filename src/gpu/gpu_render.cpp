@@ -1,0 +1,161 @@
+// gpu_render.cpp — sphere tracing and discretization on the device (gpu.hpp): trace.comp and
+// discretize.comp over slices sized so that the per-thread stacks fit the scratch budget; the
+// host finishes images exactly as the CPU tracer does (background, heatmap, sRGB).
+#include <algorithm>
+#include <cstring>
+#include <stdexcept>
+
+#include "../render/render_internal.hpp"
+#include "device_grid.hpp"
+
+namespace sdfprune::gpu {
+
+uint32_t stack_threads(uint64_t work, uint64_t bytes_per_thread);  // gpu_prune.cpp
+
+namespace {
+
+struct TraceParams {  // trace.comp: TraceParams
+    GpuGridParams grid;
+    vec4 eye, forward, right, up, light;
+    uint32_t width, height, shading, shadows;
+};
+struct DiscretizeParams {  // discretize.comp: DiscretizeParams
+    GpuGridParams grid;
+    vec4 sample_size;
+    uint32_t n, pad[3];
+};
+struct GpuPixel {  // trace.comp: Pixel
+    vec4 color;
+    uint32_t evals, steps, pad[2];
+};
+static_assert(sizeof(TraceParams) == 160 && sizeof(DiscretizeParams) == 96);
+static_assert(sizeof(GpuPixel) == 32);
+
+struct SlicePush {  // trace.comp and discretize.comp: Push
+    uint32_t first, count, stack_threads, base;
+};
+
+vec4 v4(vec3 v, float w) { return vec4(v.x, v.y, v.z, w); }
+
+template <class Params>
+Buffer upload_params(Context& ctx, const Params& p) {
+    Buffer b = ctx.create_buffer(sizeof(p));
+    ctx.upload(b, &p, sizeof(p));
+    return b;
+}
+
+}  // namespace
+
+Image render(Device& device, const Grid& grid, const RenderOptions& opt, RenderStats* stats) {
+    const DeviceGrid& g = *grid.impl_;
+    Context& ctx = device.context();
+    const Scene& sc = *g.scene;
+    const uint32_t W = opt.width, H = opt.height;
+    if (W == 0 || H == 0) throw std::invalid_argument("image size must be positive");
+    const uint64_t pixels = uint64_t(W) * H;
+    if (pixels > 0xffffffffull) throw std::invalid_argument("image too large");
+    const CameraFrame frame = camera_frame(sc, opt);
+    TraceParams prm;
+    prm.grid = g.grid_params();
+    prm.eye = v4(opt.camera.eye, frame.tan_half);
+    prm.forward = v4(frame.forward, frame.aspect);
+    prm.right = v4(frame.right, frame.normal_h);
+    prm.up = v4(frame.up, 0);
+    prm.light = v4(frame.light, 0);
+    prm.width = W;
+    prm.height = H;
+    prm.shading = opt.shading == Shading::kNormals ? 1u : 0u;
+    prm.shadows = opt.shadows ? 1u : 0u;
+    Buffer params = upload_params(ctx, prm);
+    Buffer out = ctx.create_buffer(pixels * sizeof(GpuPixel));
+    const uint32_t threads = stack_threads(pixels, uint64_t(sc.max_stack) * 16);
+    Buffer stack = ctx.create_buffer(uint64_t(threads) * sc.max_stack * 16);
+    ctx.begin();
+    for (uint64_t first = 0; first < pixels; first += threads) {
+        const SlicePush push{uint32_t(first),
+                             uint32_t(std::min<uint64_t>(threads, pixels - first)), threads, 0};
+        ctx.dispatch(KernelId::kTrace,
+                     {&g.nodes, &g.params, &g.extras, &g.pool, &g.cells, &g.levels, &params,
+                      &out, &stack},
+                     &push, sizeof(push), (push.count + 63) / 64);
+    }
+    const double gpu_ms = ctx.submit();
+    std::vector<GpuPixel> host(pixels);
+    ctx.download(out, host.data(), pixels * sizeof(GpuPixel));
+    for (Buffer* b : {&params, &out, &stack}) ctx.destroy(*b);
+
+    Image img;
+    img.width = W;
+    img.height = H;
+    img.rgb.assign(pixels * 3, 0);
+    std::vector<vec3> color(pixels);
+    uint64_t steps = 0, evals = 0, hits = 0;
+    double evals_max = 0;
+    for (uint64_t i = 0; i < pixels; ++i) {
+        const GpuPixel& p = host[i];
+        const float v = 1.0f - 2.0f * (float(i / W) + 0.5f) / float(H);
+        color[i] = p.color.w > 0 ? p.color.xyz() : background(v);
+        hits += p.color.w > 0 ? 1 : 0;
+        steps += p.steps;
+        evals += p.evals;
+        evals_max = std::max(evals_max, double(p.evals));
+    }
+    if (opt.shading == Shading::kHeatmap) {
+        const double top = opt.heatmap_max > 0 ? opt.heatmap_max : evals_max;
+        for (uint64_t i = 0; i < pixels; ++i) color[i] = heat_color(double(host[i].evals), top);
+        to_rgb8(color, img);
+        draw_heatmap_legend(img, top);
+    } else {
+        to_rgb8(color, img);
+    }
+    if (stats) {
+        const double px = double(pixels);
+        stats->trace_ms = gpu_ms;
+        stats->steps_avg = double(steps) / px;
+        stats->evals_avg = double(evals) / px;
+        stats->hit_fraction = double(hits) / px;
+        stats->evals_max = evals_max;
+    }
+    return img;
+}
+
+void discretize(Device& device, const Grid& grid, uint32_t n, std::span<float> out,
+                double* gpu_ms) {
+    const DeviceGrid& g = *grid.impl_;
+    Context& ctx = device.context();
+    const Scene& sc = *g.scene;
+    if (n == 0) throw std::invalid_argument("discretize: resolution must be >= 1");
+    const uint64_t total = uint64_t(n) * n * n;
+    if (out.size() != total) throw std::invalid_argument("discretize: output must hold n³ values");
+    DiscretizeParams prm{};
+    prm.grid = g.grid_params();
+    const vec3 sample = (sc.aabb.max - sc.aabb.min) / float(n);
+    prm.sample_size = v4(sample, 0);
+    prm.n = n;
+    Buffer params = upload_params(ctx, prm);
+    const uint32_t threads = stack_threads(total, uint64_t(sc.max_stack) * 16);
+    Buffer stack = ctx.create_buffer(uint64_t(threads) * sc.max_stack * 16);
+    // Values come back in slices of at most 64 Mi floats.
+    const uint64_t slice = std::min<uint64_t>(total, uint64_t(1) << 26);
+    Buffer values = ctx.create_buffer(slice * 4);
+    double ms = 0;
+    for (uint64_t first = 0; first < total; first += slice) {
+        const uint64_t count = std::min(slice, total - first);
+        ctx.begin();
+        for (uint64_t done = 0; done < count; done += threads) {
+            const SlicePush push{uint32_t(first + done),
+                                 uint32_t(std::min<uint64_t>(threads, count - done)), threads,
+                                 uint32_t(first)};
+            ctx.dispatch(KernelId::kDiscretize,
+                         {&g.nodes, &g.params, &g.extras, &g.pool, &g.cells, &g.levels, &params,
+                          &values, &stack},
+                         &push, sizeof(push), (push.count + 63) / 64);
+        }
+        ms += ctx.submit();
+        ctx.download(values, out.data() + first, count * 4);
+    }
+    for (Buffer* b : {&params, &stack, &values}) ctx.destroy(*b);
+    if (gpu_ms) *gpu_ms = ms;
+}
+
+}  // namespace sdfprune::gpu

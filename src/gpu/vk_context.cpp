@@ -1,0 +1,394 @@
+// vk_context.cpp — instance, device, queue, buffers, kernels and submissions (vk_context.hpp).
+#include "vk_context.hpp"
+
+#include <algorithm>
+#include <cstdlib>
+#include <cstring>
+
+namespace sdfprune::gpu {
+namespace {
+
+// SPIR-V of the kernels, compiled by glslc at build time (CMakeLists.txt).
+const uint32_t kPruneSpv[] = {
+#include "prune.spv.inc"
+};
+const uint32_t kExpandSpv[] = {
+#include "expand.spv.inc"
+};
+const uint32_t kCellInfoSpv[] = {
+#include "cell_info.spv.inc"
+};
+const uint32_t kTraceSpv[] = {
+#include "trace.spv.inc"
+};
+const uint32_t kDiscretizeSpv[] = {
+#include "discretize.spv.inc"
+};
+
+struct KernelCode {
+    const uint32_t* words;
+    size_t bytes;
+    uint32_t bindings;  // storage buffers 0 .. bindings-1
+};
+
+// Binding counts must match the shaders' layouts (shaders/gpu/*.comp).
+const KernelCode kKernels[] = {
+    {kPruneSpv, sizeof(kPruneSpv), 9},       {kExpandSpv, sizeof(kExpandSpv), 4},
+    {kCellInfoSpv, sizeof(kCellInfoSpv), 3},  {kTraceSpv, sizeof(kTraceSpv), 9},
+    {kDiscretizeSpv, sizeof(kDiscretizeSpv), 9},
+};
+static_assert(std::size(kKernels) == size_t(KernelId::kCount));
+
+constexpr uint32_t kMaxBindings = 12;
+constexpr uint32_t kMaxSets = 4096;
+constexpr uint32_t kPushBytes = 128;
+
+// A zeroed Vulkan info struct with its type set.
+template <class T>
+T vk_struct(VkStructureType type) {
+    T s{};
+    s.sType = type;
+    return s;
+}
+
+}  // namespace
+
+void Context::check(VkResult r, const char* what) const {
+    if (r == VK_SUCCESS) return;
+    if (r == VK_ERROR_OUT_OF_DEVICE_MEMORY || r == VK_ERROR_OUT_OF_HOST_MEMORY)
+        throw GpuError(std::string("Vulkan: out of memory (") + what + ")");
+    throw GpuError(std::string("Vulkan: ") + what + " failed (VkResult " + std::to_string(r) +
+                   ")");
+}
+
+Context::Context() {
+    auto app = vk_struct<VkApplicationInfo>(VK_STRUCTURE_TYPE_APPLICATION_INFO);
+    app.pApplicationName = "sdfprune";
+    app.apiVersion = VK_API_VERSION_1_1;
+    auto ici = vk_struct<VkInstanceCreateInfo>(VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO);
+    ici.pApplicationInfo = &app;
+    if (vkCreateInstance(&ici, nullptr, &instance_) != VK_SUCCESS)
+        throw GpuError("no Vulkan device: the Vulkan loader found no driver (install "
+                       "mesa-vulkan-drivers or a GPU driver)");
+    uint32_t count = 0;
+    vkEnumeratePhysicalDevices(instance_, &count, nullptr);
+    std::vector<VkPhysicalDevice> devices(count);
+    vkEnumeratePhysicalDevices(instance_, &count, devices.data());
+    // Candidates with a compute queue; discrete and integrated GPUs before CPU drivers.
+    struct Candidate {
+        VkPhysicalDevice device;
+        uint32_t family;
+        int rank;
+    };
+    std::vector<Candidate> candidates;
+    for (VkPhysicalDevice d : devices) {
+        uint32_t nq = 0;
+        vkGetPhysicalDeviceQueueFamilyProperties(d, &nq, nullptr);
+        std::vector<VkQueueFamilyProperties> q(nq);
+        vkGetPhysicalDeviceQueueFamilyProperties(d, &nq, q.data());
+        VkPhysicalDeviceProperties p;
+        vkGetPhysicalDeviceProperties(d, &p);
+        const int rank = p.deviceType == VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU     ? 0
+                         : p.deviceType == VK_PHYSICAL_DEVICE_TYPE_INTEGRATED_GPU ? 1
+                         : p.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU            ? 3
+                                                                                  : 2;
+        for (uint32_t i = 0; i < nq; ++i)
+            if (q[i].queueFlags & VK_QUEUE_COMPUTE_BIT) {
+                candidates.push_back({d, i, rank});
+                break;
+            }
+    }
+    std::stable_sort(candidates.begin(), candidates.end(),
+                     [](const Candidate& a, const Candidate& b) { return a.rank < b.rank; });
+    if (candidates.empty()) {
+        vkDestroyInstance(instance_, nullptr);
+        instance_ = VK_NULL_HANDLE;
+        throw GpuError("no Vulkan device with a compute queue");
+    }
+    size_t pick = 0;
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_DEVICE")) {
+        pick = size_t(std::strtoul(env, nullptr, 10));
+        if (pick >= candidates.size()) {
+            vkDestroyInstance(instance_, nullptr);
+            instance_ = VK_NULL_HANDLE;
+            throw GpuError("SDFPRUNE_VULKAN_DEVICE=" + std::string(env) + ": only " +
+                           std::to_string(candidates.size()) + " Vulkan device(s)");
+        }
+    }
+    physical_ = candidates[pick].device;
+    queue_family_ = candidates[pick].family;
+    VkPhysicalDeviceProperties props;
+    vkGetPhysicalDeviceProperties(physical_, &props);
+    device_name_ = props.deviceName;
+    max_range_ = props.limits.maxStorageBufferRange;
+    timestamp_ns_ = double(props.limits.timestampPeriod);
+    vkGetPhysicalDeviceMemoryProperties(physical_, &memory_);
+
+    const float priority = 1.0f;
+    auto qci = vk_struct<VkDeviceQueueCreateInfo>(VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO);
+    qci.queueFamilyIndex = queue_family_;
+    qci.queueCount = 1;
+    qci.pQueuePriorities = &priority;
+    auto dci = vk_struct<VkDeviceCreateInfo>(VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO);
+    dci.queueCreateInfoCount = 1;
+    dci.pQueueCreateInfos = &qci;
+    check(vkCreateDevice(physical_, &dci, nullptr, &device_), "vkCreateDevice");
+    vkGetDeviceQueue(device_, queue_family_, 0, &queue_);
+
+    auto cpi = vk_struct<VkCommandPoolCreateInfo>(VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO);
+    cpi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
+    cpi.queueFamilyIndex = queue_family_;
+    check(vkCreateCommandPool(device_, &cpi, nullptr, &command_pool_), "vkCreateCommandPool");
+    auto cai = vk_struct<VkCommandBufferAllocateInfo>(VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO);
+    cai.commandPool = command_pool_;
+    cai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    cai.commandBufferCount = 1;
+    check(vkAllocateCommandBuffers(device_, &cai, &cmd_), "vkAllocateCommandBuffers");
+    auto fci = vk_struct<VkFenceCreateInfo>(VK_STRUCTURE_TYPE_FENCE_CREATE_INFO);
+    check(vkCreateFence(device_, &fci, nullptr, &fence_), "vkCreateFence");
+
+    VkDescriptorPoolSize ps{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, kMaxSets * kMaxBindings};
+    auto dpi = vk_struct<VkDescriptorPoolCreateInfo>(VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO);
+    dpi.maxSets = kMaxSets;
+    dpi.poolSizeCount = 1;
+    dpi.pPoolSizes = &ps;
+    check(vkCreateDescriptorPool(device_, &dpi, nullptr, &descriptor_pool_),
+          "vkCreateDescriptorPool");
+
+    uint32_t nq = 0;
+    vkGetPhysicalDeviceQueueFamilyProperties(physical_, &nq, nullptr);
+    std::vector<VkQueueFamilyProperties> qf(nq);
+    vkGetPhysicalDeviceQueueFamilyProperties(physical_, &nq, qf.data());
+    if (qf[queue_family_].timestampValidBits > 0) {
+        auto qpi = vk_struct<VkQueryPoolCreateInfo>(VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO);
+        qpi.queryType = VK_QUERY_TYPE_TIMESTAMP;
+        qpi.queryCount = 2;
+        check(vkCreateQueryPool(device_, &qpi, nullptr, &timestamps_), "vkCreateQueryPool");
+    }
+
+    for (const KernelCode& code : kKernels) {
+        Kernel k;
+        k.bindings = code.bindings;
+        VkDescriptorSetLayoutBinding b[kMaxBindings];
+        for (uint32_t i = 0; i < code.bindings; ++i)
+            b[i] = {i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr};
+        auto sli = vk_struct<VkDescriptorSetLayoutCreateInfo>(VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO);
+        sli.bindingCount = code.bindings;
+        sli.pBindings = b;
+        check(vkCreateDescriptorSetLayout(device_, &sli, nullptr, &k.set_layout),
+              "vkCreateDescriptorSetLayout");
+        VkPushConstantRange range{VK_SHADER_STAGE_COMPUTE_BIT, 0, kPushBytes};
+        auto pli = vk_struct<VkPipelineLayoutCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO);
+        pli.setLayoutCount = 1;
+        pli.pSetLayouts = &k.set_layout;
+        pli.pushConstantRangeCount = 1;
+        pli.pPushConstantRanges = &range;
+        check(vkCreatePipelineLayout(device_, &pli, nullptr, &k.layout),
+              "vkCreatePipelineLayout");
+        auto smi = vk_struct<VkShaderModuleCreateInfo>(VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO);
+        smi.codeSize = code.bytes;
+        smi.pCode = code.words;
+        VkShaderModule module;
+        check(vkCreateShaderModule(device_, &smi, nullptr, &module), "vkCreateShaderModule");
+        auto cpci = vk_struct<VkComputePipelineCreateInfo>(VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO);
+        cpci.stage = vk_struct<VkPipelineShaderStageCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO);
+        cpci.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
+        cpci.stage.module = module;
+        cpci.stage.pName = "main";
+        cpci.layout = k.layout;
+        const VkResult r =
+            vkCreateComputePipelines(device_, VK_NULL_HANDLE, 1, &cpci, nullptr, &k.pipeline);
+        vkDestroyShaderModule(device_, module, nullptr);
+        check(r, "vkCreateComputePipelines");
+        kernels_.push_back(k);
+    }
+}
+
+Context::~Context() {
+    if (device_) {
+        vkDeviceWaitIdle(device_);
+        for (Kernel& k : kernels_) {
+            vkDestroyPipeline(device_, k.pipeline, nullptr);
+            vkDestroyPipelineLayout(device_, k.layout, nullptr);
+            vkDestroyDescriptorSetLayout(device_, k.set_layout, nullptr);
+        }
+        if (timestamps_) vkDestroyQueryPool(device_, timestamps_, nullptr);
+        vkDestroyDescriptorPool(device_, descriptor_pool_, nullptr);
+        vkDestroyFence(device_, fence_, nullptr);
+        vkDestroyCommandPool(device_, command_pool_, nullptr);
+        vkDestroyDevice(device_, nullptr);
+    }
+    if (instance_) vkDestroyInstance(instance_, nullptr);
+}
+
+uint32_t Context::memory_type(uint32_t bits, bool host_visible) const {
+    const VkMemoryPropertyFlags want =
+        host_visible ? VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT
+                     : VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT;
+    for (uint32_t i = 0; i < memory_.memoryTypeCount; ++i)
+        if ((bits & (1u << i)) && (memory_.memoryTypes[i].propertyFlags & want) == want) return i;
+    // Devices without a device-local type (some CPU drivers) use any allowed type.
+    for (uint32_t i = 0; i < memory_.memoryTypeCount; ++i)
+        if ((bits & (1u << i)) && !host_visible) return i;
+    throw GpuError("Vulkan: no suitable memory type");
+}
+
+Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
+    Buffer b;
+    b.size = std::max<uint64_t>(bytes, 16);
+    b.size = (b.size + 15) & ~uint64_t(15);
+    auto bci = vk_struct<VkBufferCreateInfo>(VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO);
+    bci.size = b.size;
+    bci.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
+                VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+    bci.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+    check(vkCreateBuffer(device_, &bci, nullptr, &b.buffer), "vkCreateBuffer");
+    VkMemoryRequirements req;
+    vkGetBufferMemoryRequirements(device_, b.buffer, &req);
+    auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
+    mai.allocationSize = req.size;
+    mai.memoryTypeIndex = memory_type(req.memoryTypeBits, host_visible);
+    const VkResult r = vkAllocateMemory(device_, &mai, nullptr, &b.memory);
+    if (r != VK_SUCCESS) {
+        vkDestroyBuffer(device_, b.buffer, nullptr);
+        throw GpuError("Vulkan device out of memory: a buffer of " + std::to_string(bytes) +
+                       " bytes did not fit (" + std::to_string(live_) + " bytes in use)");
+    }
+    vkBindBufferMemory(device_, b.buffer, b.memory, 0);
+    if (host_visible) check(vkMapMemory(device_, b.memory, 0, b.size, 0, &b.mapped), "vkMapMemory");
+    if (!host_visible) {
+        live_ += b.size;
+        peak_ = std::max(peak_, live_);
+    }
+    return b;
+}
+
+void Context::destroy(Buffer& b) {
+    if (!b.buffer) return;
+    if (b.mapped) {
+        vkUnmapMemory(device_, b.memory);
+    } else {
+        live_ -= b.size;
+    }
+    vkDestroyBuffer(device_, b.buffer, nullptr);
+    vkFreeMemory(device_, b.memory, nullptr);
+    b = Buffer{};
+}
+
+void Context::begin() {
+    if (recording_) throw std::logic_error("Context::begin while recording");
+    auto bi = vk_struct<VkCommandBufferBeginInfo>(VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO);
+    bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    check(vkBeginCommandBuffer(cmd_, &bi), "vkBeginCommandBuffer");
+    recording_ = true;
+    if (timestamps_) {
+        vkCmdResetQueryPool(cmd_, timestamps_, 0, 2);
+        vkCmdWriteTimestamp(cmd_, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps_, 0);
+    }
+}
+
+void Context::barrier() {
+    auto mb = vk_struct<VkMemoryBarrier>(VK_STRUCTURE_TYPE_MEMORY_BARRIER);
+    mb.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT;
+    mb.dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT |
+                       VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_TRANSFER_WRITE_BIT;
+    const VkPipelineStageFlags stages =
+        VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT;
+    vkCmdPipelineBarrier(cmd_, stages, stages, 0, 1, &mb, 0, nullptr, 0, nullptr);
+}
+
+void Context::dispatch(KernelId id, std::initializer_list<const Buffer*> buffers,
+                       const void* push, uint32_t push_bytes, uint32_t groups) {
+    const Kernel& k = kernels_[size_t(id)];
+    if (buffers.size() != k.bindings || push_bytes > kPushBytes)
+        throw std::logic_error("Context::dispatch: bindings do not match the kernel");
+    if (sets_used_ == kMaxSets)
+        throw std::logic_error("Context::dispatch: too many dispatches in one submission");
+    auto ai = vk_struct<VkDescriptorSetAllocateInfo>(VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO);
+    ai.descriptorPool = descriptor_pool_;
+    ai.descriptorSetCount = 1;
+    ai.pSetLayouts = &k.set_layout;
+    VkDescriptorSet set;
+    check(vkAllocateDescriptorSets(device_, &ai, &set), "vkAllocateDescriptorSets");
+    ++sets_used_;
+    VkDescriptorBufferInfo info[kMaxBindings];
+    VkWriteDescriptorSet writes[kMaxBindings];
+    uint32_t i = 0;
+    for (const Buffer* b : buffers) {
+        info[i] = {b->buffer, 0, VK_WHOLE_SIZE};
+        writes[i] = vk_struct<VkWriteDescriptorSet>(VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET);
+        writes[i].dstSet = set;
+        writes[i].dstBinding = i;
+        writes[i].descriptorCount = 1;
+        writes[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+        writes[i].pBufferInfo = &info[i];
+        ++i;
+    }
+    vkUpdateDescriptorSets(device_, i, writes, 0, nullptr);
+    vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, k.pipeline);
+    vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, k.layout, 0, 1, &set, 0,
+                            nullptr);
+    uint8_t padded[kPushBytes] = {};
+    std::memcpy(padded, push, push_bytes);
+    vkCmdPushConstants(cmd_, k.layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, kPushBytes, padded);
+    vkCmdDispatch(cmd_, std::max(groups, 1u), 1, 1);
+    barrier();
+}
+
+void Context::copy(const Buffer& src, const Buffer& dst, uint64_t bytes, uint64_t src_offset,
+                   uint64_t dst_offset) {
+    if (bytes == 0) return;
+    VkBufferCopy region{src_offset, dst_offset, bytes};
+    vkCmdCopyBuffer(cmd_, src.buffer, dst.buffer, 1, &region);
+    barrier();
+}
+
+void Context::fill(const Buffer& dst, uint32_t value) {
+    vkCmdFillBuffer(cmd_, dst.buffer, 0, VK_WHOLE_SIZE, value);
+    barrier();
+}
+
+double Context::submit() {
+    if (!recording_) throw std::logic_error("Context::submit without begin");
+    if (timestamps_)
+        vkCmdWriteTimestamp(cmd_, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps_, 1);
+    check(vkEndCommandBuffer(cmd_), "vkEndCommandBuffer");
+    recording_ = false;
+    auto si = vk_struct<VkSubmitInfo>(VK_STRUCTURE_TYPE_SUBMIT_INFO);
+    si.commandBufferCount = 1;
+    si.pCommandBuffers = &cmd_;
+    check(vkQueueSubmit(queue_, 1, &si, fence_), "vkQueueSubmit");
+    check(vkWaitForFences(device_, 1, &fence_, VK_TRUE, UINT64_MAX), "vkWaitForFences");
+    vkResetFences(device_, 1, &fence_);
+    vkResetCommandBuffer(cmd_, 0);
+    vkResetDescriptorPool(device_, descriptor_pool_, 0);
+    sets_used_ = 0;
+    if (!timestamps_) return 0;
+    uint64_t ticks[2] = {0, 0};
+    if (vkGetQueryPoolResults(device_, timestamps_, 0, 2, sizeof(ticks), ticks, sizeof(uint64_t),
+                              VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT) != VK_SUCCESS)
+        return 0;
+    return double(ticks[1] - ticks[0]) * timestamp_ns_ * 1e-6;
+}
+
+void Context::upload(const Buffer& dst, const void* data, uint64_t bytes, uint64_t dst_offset) {
+    if (bytes == 0) return;
+    Buffer staging = create_buffer(bytes, true);
+    std::memcpy(staging.mapped, data, bytes);
+    begin();
+    copy(staging, dst, bytes, 0, dst_offset);
+    submit();
+    destroy(staging);
+}
+
+void Context::download(const Buffer& src, void* data, uint64_t bytes, uint64_t src_offset) {
+    if (bytes == 0) return;
+    Buffer staging = create_buffer(bytes, true);
+    begin();
+    copy(src, staging, bytes, src_offset, 0);
+    submit();
+    std::memcpy(data, staging.mapped, bytes);
+    destroy(staging);
+}
+
+}  // namespace sdfprune::gpu
