@@ -9,10 +9,11 @@
 
 namespace sdfprune::test {
 
-CliResult run_cli(const std::string& args) {
+CliResult run_cli(const std::string& args, const std::string& env) {
     const std::string base = ::testing::TempDir() + "sdfprune_cli_" + std::to_string(::getpid());
     const std::string out = base + ".out", err = base + ".err";
-    const std::string cmd = std::string(SDFPRUNE_CLI) + " " + args + " >" + out + " 2>" + err;
+    const std::string cmd =
+        env + (env.empty() ? "" : " ") + SDFPRUNE_CLI + " " + args + " >" + out + " 2>" + err;
     CliResult r;
     const int raw = std::system(cmd.c_str());
     r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;

@@ -34,7 +34,8 @@ struct CliResult {
     std::string err;  // stderr
 };
 
-// Runs the sdfprune CLI with `args` (shell-quoted by the caller) and captures its output.
-CliResult run_cli(const std::string& args);
+// Runs the sdfprune CLI with `args` (shell-quoted by the caller) and captures its output;
+// `env` is prefixed to the command (e.g. "VAR=value").
+CliResult run_cli(const std::string& args, const std::string& env = "");
 
 }  // namespace sdfprune::test

@@ -34,7 +34,7 @@ bool built_with_vulkan();
 
 // One Vulkan device (the first with a compute queue; SDFPRUNE_VULKAN_DEVICE=N picks another).
 class Device {
-public:
+  public:
     Device();  // throws GpuError when there is no device
     ~Device();
     Device(Device&&) noexcept;
@@ -42,20 +42,22 @@ public:
     std::string name() const;
     Context& context() { return *context_; }
 
-private:
+  private:
     std::unique_ptr<Context> context_;
 };
 
 // Pruning statistics as PruneStats; prune_ms is GPU time (timestamps), prune_peak_bytes the
 // device memory held at most while pruning, tape_bytes the device bytes of the result.
-// wall_ms adds the host's share (submissions, waits, buffer growth).
+// wall_ms adds the host's share (submissions, waits, buffer growth); pool_grows counts the
+// steps redone after the tape pool overflowed and grew.
 struct DevicePruneStats : PruneStats {
     double wall_ms = 0;
+    uint32_t pool_grows = 0;
 };
 
 // A pruned grid living in device memory; refers to its Scene and Device, which must outlive it.
 class Grid {
-public:
+  public:
     Grid(Grid&&) noexcept;
     Grid& operator=(Grid&&) noexcept;
     ~Grid();
@@ -73,7 +75,7 @@ public:
     void for_each_finest_cell(
         const std::function<void(uint64_t index, const CellContents&)>& visit) const;
 
-private:
+  private:
     friend Grid prune(Device&, const Scene&, const PruneOptions&);
     friend Image render(Device&, const Grid&, const RenderOptions&, RenderStats*);
     friend void discretize(Device&, const Grid&, uint32_t, std::span<float>, double*);

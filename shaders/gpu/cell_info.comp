@@ -13,8 +13,9 @@ layout(std430, binding = 2) writeonly buffer Info { uvec2 info[]; };
 layout(push_constant) uniform Push { uint cells_count; } pc;
 
 void main() {
-    uint i = gl_GlobalInvocationID.x;
-    if (i >= pc.cells_count) return;
-    uint t = cells[i].tape;
-    info[i] = t == kFarField ? uvec2(kFarField, 0u) : uvec2(pool[t], pool[t + 1u]);
+    uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+    for (uint i = gl_GlobalInvocationID.x; i < pc.cells_count; i += stride) {
+        uint t = cells[i].tape;
+        info[i] = t == kFarField ? uvec2(kFarField, 0u) : uvec2(pool[t], pool[t + 1u]);
+    }
 }

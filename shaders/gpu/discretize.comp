@@ -28,7 +28,8 @@ void main() {
     uint n = prm.n;
     uvec3 i = uvec3(index % n, (index / n) % n, index / (n * n));
     GridParams g = prm.grid;
-    vec3 p = g.aabb_min.xyz + (vec3(i) + 0.5) * prm.sample_size.xyz;
+    // precise: no fused multiply-add, so p rounds as on the CPU and lands in the same cell.
+    precise vec3 p = g.aabb_min.xyz + (vec3(i) + 0.5) * prm.sample_size.xyz;
     Located at;
     float v;
     if (!locate(g, p, at)) {

@@ -18,10 +18,10 @@ layout(push_constant) uniform Push {
 } pc;
 
 void main() {
-    uint i = gl_GlobalInvocationID.x;
-    if (i >= pc.cells_count) return;
+    uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+    for (uint i = gl_GlobalInvocationID.x; i < pc.cells_count; i += stride) {
     Cell c = cells[i];
-    if (c.tape == kFarField) return;
+    if (c.tape == kFarField) continue;
     uint f = pc.factor, nf = pc.next_factor, per_block = f * f * f;
     uint idx = atomicAdd(counters[5], 1u);
     cells[i].children = idx * nf * nf * nf;
@@ -33,4 +33,5 @@ void main() {
     n.z = (b.z + local / (f * f)) * nf;
     n.tape = c.tape;
     next[idx] = n;
+    }
 }

@@ -39,6 +39,7 @@ layout(push_constant) uniform Push {
     uint max_stack;  // deepest stack
     uint flags;      // 1: far field on; 2: interval bounds
     uint pool_start;  // pool words in use before this step
+    uint first_job;   // this dispatch's jobs: [first_job, jobs)
 } pc;
 
 // Prunes the tape at `parent` over the box; returns true for near-field. Fills value, the
@@ -131,17 +132,25 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out float valu
         }
     }
     // Stage 3: the top-down pass (compact_tape). Flags: alive (bits 2-3: 1 kept, 2 skipped),
-    // negate (bit 4).
-    for (uint i = 0u; i < len; ++i) scratch[ebase + 2u * i + 1u] &= 3u;
+    // negate (bit 4); stage 1 cleared them. An entry's flags are final when the reverse sweep
+    // reaches it (parents come later), so the sweep also counts the kept entries. Few loops:
+    // lavapipe stops an invocation's loops after 65535 iterations in all.
     uint root_neg = tape_negated(pool[parent + 2u + len - 1u]) ? 1u : 0u;
     scratch[ebase + 2u * (len - 1u) + 1u] |= (1u << 2) | (root_neg << 4);
+    uint out_len = 0u, prims = 0u;
     for (uint i = len; i-- > 0u;) {
         uint f = scratch[ebase + 2u * i + 1u];
         uint w = pool[parent + 2u + i];
-        if (((f >> 2) & 3u) != 1u || is_primitive(tape_node(w))) continue;
+        if (((f >> 2) & 3u) != 1u) continue;
+        if (is_primitive(tape_node(w))) {
+            ++out_len;
+            ++prims;
+            continue;
+        }
         uint l = scratch[ebase + 2u * i], r = i - 1u;
         uint d = f & 3u;
         if (d == kKeepBoth) {
+            ++out_len;
             uint nl = tape_negated(pool[parent + 2u + l]) ? 1u : 0u;
             uint nr = tape_negated(pool[parent + 2u + r]) ? 1u : 0u;
             scratch[ebase + 2u * l + 1u] = (scratch[ebase + 2u * l + 1u] & 3u) | (1u << 2) |
@@ -155,12 +164,6 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out float valu
         scratch[ebase + 2u * i + 1u] = (f & 3u) | (2u << 2) | (f & 16u);
         scratch[ebase + 2u * win + 1u] = (scratch[ebase + 2u * win + 1u] & 3u) | (1u << 2) |
                                          (neg << 4);
-    }
-    uint out_len = 0u, prims = 0u;
-    for (uint i = 0u; i < len; ++i) {
-        if (((scratch[ebase + 2u * i + 1u] >> 2) & 3u) != 1u) continue;
-        ++out_len;
-        prims += is_primitive(tape_node(pool[parent + 2u + i])) ? 1u : 0u;
     }
     atomicMax(max_len, out_len);
     if (out_len == len) {
@@ -192,7 +195,7 @@ void main() {
     vec3 half_cell = cs * 0.5;
     float radius = length(half_cell);
     uint hf = f / 2u;
-    for (uint job = gl_GlobalInvocationID.x; job < pc.jobs; job += pc.threads) {
+    for (uint job = pc.first_job + gl_GlobalInvocationID.x; job < pc.jobs; job += pc.threads) {
         Cell result;
         result.children = 0u;
         if (pc.mode == 1u) {
@@ -200,7 +203,7 @@ void main() {
             uint o = job % 8u;
             uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
                              b.z + ((o >> 2) & 1u) * hf);
-            vec3 centre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
+            precise vec3 centre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
             bool near = prune_box(b.tape, centre, half_cell * float(hf), radius * float(hf),
                                   result.value, result.bound, result.tape);
             if (!near) result.tape = kFarField;
@@ -210,7 +213,7 @@ void main() {
         uint bi = job / per_block, local = job % per_block;
         Block b = blocks[bi];
         uvec3 lc = uvec3(local % f, (local / f) % f, local / (f * f));
-        vec3 centre = origin + (vec3(b.x + lc.x, b.y + lc.y, b.z + lc.z) + 0.5) * cs;
+        precise vec3 centre = origin + (vec3(b.x + lc.x, b.y + lc.y, b.z + lc.z) + 0.5) * cs;
         uint parent = b.tape;
         if (pc.mode == 2u) {
             uint o = (lc.x >= hf ? 1u : 0u) | (lc.y >= hf ? 2u : 0u) | (lc.z >= hf ? 4u : 0u);
@@ -220,7 +223,7 @@ void main() {
                 // moved conservatively to the cell's centre.
                 uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
                                  b.z + ((o >> 2) & 1u) * hf);
-                vec3 ocentre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
+                precise vec3 ocentre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
                 float reach = pc.origin.w * length(centre - ocentre);
                 result.tape = kFarField;
                 result.bound = oct.bound;

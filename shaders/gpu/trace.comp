@@ -56,10 +56,10 @@ float march(vec3 o, vec3 dir, float t0, float t1, uint max_steps) {
     vec3 inv_dir = vec3(1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z);
     uint near_tape = 0u;
     vec3 near_lo = vec3(kInfinity), near_hi = vec3(-kInfinity);
-    float t = t0;
+    precise float t = t0;
     for (uint step = 0u; step < max_steps && t <= t1; ++step) {
         ++g_steps;
-        vec3 p = min(max(o + dir * t, g.aabb_min.xyz), g.aabb_max.xyz);
+        precise vec3 p = min(max(o + dir * t, g.aabb_min.xyz), g.aabb_max.xyz);
         uint tape = 0u;  // the full tree
         bool cached = p.x >= near_lo.x && p.y >= near_lo.y && p.z >= near_lo.z &&
                       p.x <= near_hi.x && p.y <= near_hi.y && p.z <= near_hi.z;
@@ -68,7 +68,7 @@ float march(vec3 o, vec3 dir, float t0, float t1, uint max_steps) {
             tape = near_tape;
         } else if (locate(g, p, at)) {
             vec3 size = level_cell_size(g, at.level);
-            vec3 lo = g.aabb_min.xyz + vec3(at.cell) * size;
+            precise vec3 lo = g.aabb_min.xyz + vec3(at.cell) * size;
             if (at.c.tape == kFarField) {
                 float t_exit = kInfinity;
                 for (int a = 0; a < 3; ++a) {
@@ -130,7 +130,7 @@ void main() {
     if (ray_box(eye, inv, g.aabb_min.xyz, g.aabb_max.xyz, t0, t1)) {
         float t = march(eye, dir, t0, t1, 1024u);
         if (t >= 0.0) {
-            vec3 p = eye + dir * t;
+            precise vec3 p = eye + dir * t;
             uint tape = tape_at(p);
             vec3 n = vec3(0.0);
             n = n + vec3(1.0, -1.0, -1.0) * value_at(p + vec3(1.0, -1.0, -1.0) * h, tape);
@@ -143,7 +143,7 @@ void main() {
             vec3 albedo = eval_tape_color(tape, p, tid, pc.stack_threads);
             float lit = max(0.0, dot(n, light));
             if (prm.shadows != 0u && lit > 0.0) {
-                vec3 so = p + n * (4.0 * h);
+                precise vec3 so = p + n * (4.0 * h);
                 vec3 sinv = vec3(1.0 / light.x, 1.0 / light.y, 1.0 / light.z);
                 float s0, s1;
                 if (ray_box(so, sinv, g.aabb_min.xyz, g.aabb_max.xyz, s0, s1) &&

@@ -43,7 +43,7 @@ struct GpuCounters {
 
 // The pruned grid on the device.
 class DeviceGrid {
-public:
+  public:
     DeviceGrid(Context& ctx, const Scene& scene) : ctx(ctx), scene(&scene) {}
     ~DeviceGrid();
     Context& ctx;
@@ -53,7 +53,7 @@ public:
     Buffer cells;                        // all levels' cells, concatenated
     Buffer levels;                       // GpuLevel per level
     std::vector<GpuLevel> level_info;
-    uint32_t pool_words = 0;             // words in use in `pool`
+    uint32_t pool_words = 0;  // words in use in `pool`
     GpuGridParams grid_params() const;
 };
 

@@ -5,20 +5,28 @@
 
 namespace sdfprune::gpu {
 
-bool built_with_vulkan() { return true; }
+bool built_with_vulkan() {
+    return true;
+}
 
 Device::Device() : context_(std::make_unique<Context>()) {}
 Device::~Device() = default;
 Device::Device(Device&&) noexcept = default;
 Device& Device::operator=(Device&&) noexcept = default;
-std::string Device::name() const { return context_->device_name(); }
+std::string Device::name() const {
+    return context_->device_name();
+}
 
 Grid::Grid() = default;
 Grid::~Grid() = default;
 Grid::Grid(Grid&&) noexcept = default;
 Grid& Grid::operator=(Grid&&) noexcept = default;
-const DevicePruneStats& Grid::stats() const { return impl_->stats; }
-const Scene& Grid::scene() const { return *impl_->scene; }
+const DevicePruneStats& Grid::stats() const {
+    return impl_->stats;
+}
+const Scene& Grid::scene() const {
+    return *impl_->scene;
+}
 
 void Grid::for_each_finest_cell(
     const std::function<void(uint64_t, const CellContents&)>& visit) const {
@@ -46,14 +54,15 @@ void Grid::for_each_finest_cell(
                     const PrunedCell& c =
                         cells[l.offset + block_start + ((sz % f) * f + sy % f) * f + sx % f];
                     if (c.tape == PrunedCell::kFarField) {
-                        const vec3 coarse =
-                            sc.aabb.min + vec3(float(sx) + 0.5f, float(sy) + 0.5f,
-                                               float(sz) + 0.5f) * (cs * float(scale));
-                        const vec3 centre = sc.aabb.min + vec3(float(x) + 0.5f, float(y) + 0.5f,
-                                                               float(z) + 0.5f) * cs;
+                        const vec3 coarse = sc.aabb.min + vec3(float(sx) + 0.5f, float(sy) + 0.5f,
+                                                               float(sz) + 0.5f) *
+                                                              (cs * float(scale));
+                        const vec3 centre =
+                            sc.aabb.min +
+                            vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * cs;
                         const vec3 d = math::abs(centre - coarse) + cs * 0.5f;
-                        out.constant = far_field_combine(
-                            c.value, c.bound, far_field_reach(L, math::length(d)));
+                        out.constant = far_field_combine(c.value, c.bound,
+                                                         far_field_reach(L, math::length(d)));
                         break;
                     }
                     if (li + 1 == g.level_info.size()) {

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 
 #include "device_grid.hpp"
@@ -12,26 +13,13 @@
 namespace sdfprune::gpu {
 namespace {
 
-// Scratch memory for the per-thread arrays of prune.comp and the stacks of the evaluating
-// kernels: the number of threads in flight is chosen to fit it.
-constexpr uint64_t kScratchBudgetBytes = uint64_t(256) << 20;
-constexpr uint32_t kGroup = 64;  // local_size_x of every kernel
-
 struct PrunePush {  // prune.comp: Push
     vec4 origin, csize;
-    uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start;
+    uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
 };
-static_assert(sizeof(PrunePush) == 64);
-
-uint32_t groups_for(uint64_t n) { return uint32_t((n + kGroup - 1) / kGroup); }
+static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) <= 128);
 
 }  // namespace
-
-uint32_t stack_threads(uint64_t work, uint64_t bytes_per_thread) {
-    const uint64_t fit = std::max<uint64_t>(kGroup, kScratchBudgetBytes / bytes_per_thread);
-    const uint64_t t = std::min<uint64_t>(std::max<uint64_t>(work, 1), fit);
-    return uint32_t(std::min<uint64_t>((t + kGroup - 1) / kGroup * kGroup, 1u << 30));
-}
 
 DeviceGrid::~DeviceGrid() {
     for (Buffer* b : {&nodes, &params, &extras, &pool, &cells, &levels}) ctx.destroy(*b);
@@ -89,7 +77,8 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     head.insert(head.end(), sc.full_tape.begin(), sc.full_tape.end());
     if (head.size() > max_pool_words)
         throw GpuError("scene too large for the device's largest storage buffer");
-    uint64_t capacity = std::min<uint64_t>(max_pool_words, std::max<uint64_t>(4 * head.size(), 1 << 20));
+    uint64_t capacity =
+        std::min<uint64_t>(max_pool_words, std::max<uint64_t>(4 * head.size(), 1 << 20));
     g.pool = ctx.create_buffer(capacity * 4);
     ctx.upload(g.pool, head.data(), head.size() * 4);
     g.pool_words = uint32_t(head.size());
@@ -113,22 +102,42 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     const auto run_step = [&](uint32_t mode, uint32_t factor, uint64_t jobs, vec3 csize,
                               const Buffer& octants, const Buffer& cells) {
         const uint64_t thread_bytes = (2ull * max_len + 4ull * sc.max_stack) * 4;
-        const uint32_t threads = stack_threads(jobs, thread_bytes);
+        const uint32_t threads = ctx.threads_for(jobs, thread_bytes);
+        // Under a loop limit (lavapipe), one job per invocation and dispatch: three passes
+        // over the parent tape must fit.
+        const bool limited = ctx.loop_limited();
+        if (limited && 3ull * max_len + 64 > Context::kLoopLimit)
+            throw GpuError("tapes of " + std::to_string(max_len) + " nodes exceed what " +
+                           ctx.device_name() + " can prune (its loop limit of " +
+                           std::to_string(Context::kLoopLimit) +
+                           " iterations); use --backend cpu or a GPU");
         if (scratch.size < threads * thread_bytes) {
             ctx.destroy(scratch);
             scratch = ctx.create_buffer(threads * thread_bytes);
         }
         for (;;) {
             *counter = GpuCounters{g.pool_words, uint32_t(capacity), 0, 0, 0, 0, {0, 0}};
-            const PrunePush push{vec4(origin.x, origin.y, origin.z, L),
-                                 vec4(csize.x, csize.y, csize.z, opt.far_field_c),
-                                 mode, factor, uint32_t(jobs), threads, max_len,
-                                 sc.max_stack, flags, g.pool_words};
+            PrunePush push{vec4(origin.x, origin.y, origin.z, L),
+                           vec4(csize.x, csize.y, csize.z, opt.far_field_c),
+                           mode,
+                           factor,
+                           uint32_t(jobs),
+                           threads,
+                           max_len,
+                           sc.max_stack,
+                           flags,
+                           g.pool_words,
+                           0};
+            const uint64_t per_dispatch = limited ? threads : std::max<uint64_t>(jobs, 1);
             ctx.begin();
-            ctx.dispatch(KernelId::kPrune,
-                         {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, &octants, &cells,
-                          &counters, &scratch},
-                         &push, sizeof(push), groups_for(threads));
+            for (uint64_t first = 0; first < std::max<uint64_t>(jobs, 1); first += per_dispatch) {
+                push.first_job = uint32_t(first);
+                push.jobs = uint32_t(std::min<uint64_t>(jobs, first + per_dispatch));
+                ctx.dispatch(KernelId::kPrune,
+                             {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, &octants, &cells,
+                              &counters, &scratch},
+                             &push, sizeof(push), threads / kWorkgroupSize);
+            }
             gpu_ms += ctx.submit();
             if (!counter->overflow) break;
             // Grow the pool (keeping what it holds) and redo the step.
@@ -145,6 +154,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             ctx.destroy(g.pool);
             g.pool = bigger;
             capacity = grown;
+            ++st.pool_grows;
         }
         g.pool_words = counter->pool_used;
         return *counter;
@@ -178,8 +188,8 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             *counter = GpuCounters{};
             const uint32_t push[3] = {f, uint32_t(total), nf};
             ctx.begin();
-            ctx.dispatch(KernelId::kExpand, {&blocks, &cells, &next, &counters}, push,
-                         sizeof(push), groups_for(total));
+            ctx.dispatch(KernelId::kExpand, {&blocks, &cells, &next, &counters}, push, sizeof(push),
+                         ctx.groups_for(total));
             gpu_ms += ctx.submit();
             ctx.destroy(blocks);
             blocks = next;
@@ -201,15 +211,16 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     g.levels = ctx.create_buffer(g.level_info.size() * sizeof(GpuLevel));
     ctx.begin();
     for (size_t li = 0; li < level_cells.size(); ++li)
-        ctx.copy(level_cells[li], g.cells, level_cells[li].size,
-                 0, uint64_t(g.level_info[li].offset) * sizeof(PrunedCell));
+        ctx.copy(level_cells[li], g.cells, level_cells[li].size, 0,
+                 uint64_t(g.level_info[li].offset) * sizeof(PrunedCell));
     gpu_ms += ctx.submit();
     ctx.upload(g.levels, g.level_info.data(), g.level_info.size() * sizeof(GpuLevel));
     for (Buffer& b : level_cells) ctx.destroy(b);
     st.prune_ms = gpu_ms;
     st.prune_peak_bytes = ctx.bytes_peak() - live_before;
-    st.wall_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() -
-                                                           t_start).count();
+    st.wall_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start)
+            .count();
 
     // Statistics (not timed): per cell (length, primitives) or far-field, level by level.
     const uint32_t N = res.back();
@@ -229,7 +240,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         ctx.copy(g.cells, level, n * sizeof(PrunedCell),
                  uint64_t(g.level_info[li].offset) * sizeof(PrunedCell));
         ctx.dispatch(KernelId::kCellInfo, {&level, &g.pool, &info}, &push, sizeof(push),
-                     groups_for(n));
+                     ctx.groups_for(n));
         ctx.submit();
         std::vector<uint32_t> host(n * 2);
         ctx.download(info, host.data(), n * 8);

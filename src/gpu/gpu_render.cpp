@@ -10,8 +10,6 @@
 
 namespace sdfprune::gpu {
 
-uint32_t stack_threads(uint64_t work, uint64_t bytes_per_thread);  // gpu_prune.cpp
-
 namespace {
 
 struct TraceParams {  // trace.comp: TraceParams
@@ -35,7 +33,9 @@ struct SlicePush {  // trace.comp and discretize.comp: Push
     uint32_t first, count, stack_threads, base;
 };
 
-vec4 v4(vec3 v, float w) { return vec4(v.x, v.y, v.z, w); }
+vec4 v4(vec3 v, float w) {
+    return vec4(v.x, v.y, v.z, w);
+}
 
 template <class Params>
 Buffer upload_params(Context& ctx, const Params& p) {
@@ -68,21 +68,32 @@ Image render(Device& device, const Grid& grid, const RenderOptions& opt, RenderS
     prm.shadows = opt.shadows ? 1u : 0u;
     Buffer params = upload_params(ctx, prm);
     Buffer out = ctx.create_buffer(pixels * sizeof(GpuPixel));
-    const uint32_t threads = stack_threads(pixels, uint64_t(sc.max_stack) * 16);
+    const uint32_t threads = ctx.threads_for(pixels, uint64_t(sc.max_stack) * 16);
     Buffer stack = ctx.create_buffer(uint64_t(threads) * sc.max_stack * 16);
     ctx.begin();
     for (uint64_t first = 0; first < pixels; first += threads) {
-        const SlicePush push{uint32_t(first),
-                             uint32_t(std::min<uint64_t>(threads, pixels - first)), threads, 0};
-        ctx.dispatch(KernelId::kTrace,
-                     {&g.nodes, &g.params, &g.extras, &g.pool, &g.cells, &g.levels, &params,
-                      &out, &stack},
-                     &push, sizeof(push), (push.count + 63) / 64);
+        const SlicePush push{uint32_t(first), uint32_t(std::min<uint64_t>(threads, pixels - first)),
+                             threads, 0};
+        ctx.dispatch(
+            KernelId::kTrace,
+            {&g.nodes, &g.params, &g.extras, &g.pool, &g.cells, &g.levels, &params, &out, &stack},
+            &push, sizeof(push), ctx.groups_for(push.count));
     }
     const double gpu_ms = ctx.submit();
     std::vector<GpuPixel> host(pixels);
     ctx.download(out, host.data(), pixels * sizeof(GpuPixel));
     for (Buffer* b : {&params, &out, &stack}) ctx.destroy(*b);
+    if (ctx.loop_limited()) {
+        // Loop iterations of each pixel's invocation, bounded from above: tape words evaluated,
+        // and per step the level walk and the few fixed loops.
+        const uint64_t per_step = g.level_info.size() + 8;
+        for (const GpuPixel& p : host)
+            if (p.evals + (uint64_t(p.steps) + 8) * per_step >= Context::kLoopLimit)
+                throw GpuError("the image needs more loop iterations per pixel than " +
+                               ctx.device_name() + " allows (" +
+                               std::to_string(Context::kLoopLimit) +
+                               "); use --backend cpu or a GPU");
+    }
 
     Image img;
     img.width = W;
@@ -127,13 +138,18 @@ void discretize(Device& device, const Grid& grid, uint32_t n, std::span<float> o
     if (n == 0) throw std::invalid_argument("discretize: resolution must be >= 1");
     const uint64_t total = uint64_t(n) * n * n;
     if (out.size() != total) throw std::invalid_argument("discretize: output must hold n³ values");
+    if (ctx.loop_limited() && uint64_t(g.stats.tape_max) + 64 >= Context::kLoopLimit)
+        throw GpuError("tapes of " + std::to_string(g.stats.tape_max) +
+                       " nodes exceed the loop "
+                       "limit of " +
+                       ctx.device_name() + "; use --backend cpu or a GPU");
     DiscretizeParams prm{};
     prm.grid = g.grid_params();
     const vec3 sample = (sc.aabb.max - sc.aabb.min) / float(n);
     prm.sample_size = v4(sample, 0);
     prm.n = n;
     Buffer params = upload_params(ctx, prm);
-    const uint32_t threads = stack_threads(total, uint64_t(sc.max_stack) * 16);
+    const uint32_t threads = ctx.threads_for(total, uint64_t(sc.max_stack) * 16);
     Buffer stack = ctx.create_buffer(uint64_t(threads) * sc.max_stack * 16);
     // Values come back in slices of at most 64 Mi floats.
     const uint64_t slice = std::min<uint64_t>(total, uint64_t(1) << 26);
@@ -149,7 +165,7 @@ void discretize(Device& device, const Grid& grid, uint32_t n, std::span<float> o
             ctx.dispatch(KernelId::kDiscretize,
                          {&g.nodes, &g.params, &g.extras, &g.pool, &g.cells, &g.levels, &params,
                           &values, &stack},
-                         &push, sizeof(push), (push.count + 63) / 64);
+                         &push, sizeof(push), ctx.groups_for(push.count));
         }
         ms += ctx.submit();
         ctx.download(values, out.data() + first, count * 4);

@@ -9,28 +9,45 @@ class DeviceGrid {};
 
 namespace {
 [[noreturn]] void missing() {
-    throw GpuError("this sdfprune was built without the Vulkan backend (needs libvulkan-dev "
-                   "and glslc)");
+    throw GpuError(
+        "this sdfprune was built without the Vulkan backend (needs libvulkan-dev "
+        "and glslc)");
 }
 }  // namespace
 
-bool built_with_vulkan() { return false; }
-Device::Device() { missing(); }
+bool built_with_vulkan() {
+    return false;
+}
+Device::Device() {
+    missing();
+}
 Device::~Device() = default;
 Device::Device(Device&&) noexcept = default;
 Device& Device::operator=(Device&&) noexcept = default;
-std::string Device::name() const { missing(); }
+std::string Device::name() const {
+    missing();
+}
 Grid::Grid() = default;
 Grid::~Grid() = default;
 Grid::Grid(Grid&&) noexcept = default;
 Grid& Grid::operator=(Grid&&) noexcept = default;
-const DevicePruneStats& Grid::stats() const { missing(); }
-const Scene& Grid::scene() const { missing(); }
+const DevicePruneStats& Grid::stats() const {
+    missing();
+}
+const Scene& Grid::scene() const {
+    missing();
+}
 void Grid::for_each_finest_cell(const std::function<void(uint64_t, const CellContents&)>&) const {
     missing();
 }
-Grid prune(Device&, const Scene&, const PruneOptions&) { missing(); }
-Image render(Device&, const Grid&, const RenderOptions&, RenderStats*) { missing(); }
-void discretize(Device&, const Grid&, uint32_t, std::span<float>, double*) { missing(); }
+Grid prune(Device&, const Scene&, const PruneOptions&) {
+    missing();
+}
+Image render(Device&, const Grid&, const RenderOptions&, RenderStats*) {
+    missing();
+}
+void discretize(Device&, const Grid&, uint32_t, std::span<float>, double*) {
+    missing();
+}
 
 }  // namespace sdfprune::gpu

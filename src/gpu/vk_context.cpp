@@ -33,15 +33,17 @@ struct KernelCode {
 
 // Binding counts must match the shaders' layouts (shaders/gpu/*.comp).
 const KernelCode kKernels[] = {
-    {kPruneSpv, sizeof(kPruneSpv), 9},       {kExpandSpv, sizeof(kExpandSpv), 4},
-    {kCellInfoSpv, sizeof(kCellInfoSpv), 3},  {kTraceSpv, sizeof(kTraceSpv), 9},
+    {kPruneSpv, sizeof(kPruneSpv), 9},           {kExpandSpv, sizeof(kExpandSpv), 4},
+    {kCellInfoSpv, sizeof(kCellInfoSpv), 3},     {kTraceSpv, sizeof(kTraceSpv), 9},
     {kDiscretizeSpv, sizeof(kDiscretizeSpv), 9},
 };
 static_assert(std::size(kKernels) == size_t(KernelId::kCount));
 
 constexpr uint32_t kMaxBindings = 12;
-constexpr uint32_t kMaxSets = 4096;
+constexpr uint32_t kMaxSets = Context::kMaxDispatches;
 constexpr uint32_t kPushBytes = 128;
+// Scratch memory of the per-thread arrays and stacks of the kernels.
+constexpr uint64_t kScratchBudgetBytes = uint64_t(256) << 20;
 
 // A zeroed Vulkan info struct with its type set.
 template <class T>
@@ -57,8 +59,7 @@ void Context::check(VkResult r, const char* what) const {
     if (r == VK_SUCCESS) return;
     if (r == VK_ERROR_OUT_OF_DEVICE_MEMORY || r == VK_ERROR_OUT_OF_HOST_MEMORY)
         throw GpuError(std::string("Vulkan: out of memory (") + what + ")");
-    throw GpuError(std::string("Vulkan: ") + what + " failed (VkResult " + std::to_string(r) +
-                   ")");
+    throw GpuError(std::string("Vulkan: ") + what + " failed (VkResult " + std::to_string(r) + ")");
 }
 
 Context::Context() {
@@ -68,8 +69,9 @@ Context::Context() {
     auto ici = vk_struct<VkInstanceCreateInfo>(VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO);
     ici.pApplicationInfo = &app;
     if (vkCreateInstance(&ici, nullptr, &instance_) != VK_SUCCESS)
-        throw GpuError("no Vulkan device: the Vulkan loader found no driver (install "
-                       "mesa-vulkan-drivers or a GPU driver)");
+        throw GpuError(
+            "no Vulkan device: the Vulkan loader found no driver (install "
+            "mesa-vulkan-drivers or a GPU driver)");
     uint32_t count = 0;
     vkEnumeratePhysicalDevices(instance_, &count, nullptr);
     std::vector<VkPhysicalDevice> devices(count);
@@ -121,6 +123,9 @@ Context::Context() {
     vkGetPhysicalDeviceProperties(physical_, &props);
     device_name_ = props.deviceName;
     max_range_ = props.limits.maxStorageBufferRange;
+    max_groups_ = props.limits.maxComputeWorkGroupCount[0];
+    loop_limited_ = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU &&
+                    device_name_.find("llvmpipe") != std::string::npos;
     timestamp_ns_ = double(props.limits.timestampPeriod);
     vkGetPhysicalDeviceMemoryProperties(physical_, &memory_);
 
@@ -139,7 +144,8 @@ Context::Context() {
     cpi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
     cpi.queueFamilyIndex = queue_family_;
     check(vkCreateCommandPool(device_, &cpi, nullptr, &command_pool_), "vkCreateCommandPool");
-    auto cai = vk_struct<VkCommandBufferAllocateInfo>(VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO);
+    auto cai =
+        vk_struct<VkCommandBufferAllocateInfo>(VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO);
     cai.commandPool = command_pool_;
     cai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
     cai.commandBufferCount = 1;
@@ -172,26 +178,29 @@ Context::Context() {
         VkDescriptorSetLayoutBinding b[kMaxBindings];
         for (uint32_t i = 0; i < code.bindings; ++i)
             b[i] = {i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr};
-        auto sli = vk_struct<VkDescriptorSetLayoutCreateInfo>(VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO);
+        auto sli = vk_struct<VkDescriptorSetLayoutCreateInfo>(
+            VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO);
         sli.bindingCount = code.bindings;
         sli.pBindings = b;
         check(vkCreateDescriptorSetLayout(device_, &sli, nullptr, &k.set_layout),
               "vkCreateDescriptorSetLayout");
         VkPushConstantRange range{VK_SHADER_STAGE_COMPUTE_BIT, 0, kPushBytes};
-        auto pli = vk_struct<VkPipelineLayoutCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO);
+        auto pli =
+            vk_struct<VkPipelineLayoutCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO);
         pli.setLayoutCount = 1;
         pli.pSetLayouts = &k.set_layout;
         pli.pushConstantRangeCount = 1;
         pli.pPushConstantRanges = &range;
-        check(vkCreatePipelineLayout(device_, &pli, nullptr, &k.layout),
-              "vkCreatePipelineLayout");
+        check(vkCreatePipelineLayout(device_, &pli, nullptr, &k.layout), "vkCreatePipelineLayout");
         auto smi = vk_struct<VkShaderModuleCreateInfo>(VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO);
         smi.codeSize = code.bytes;
         smi.pCode = code.words;
         VkShaderModule module;
         check(vkCreateShaderModule(device_, &smi, nullptr, &module), "vkCreateShaderModule");
-        auto cpci = vk_struct<VkComputePipelineCreateInfo>(VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO);
-        cpci.stage = vk_struct<VkPipelineShaderStageCreateInfo>(VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO);
+        auto cpci =
+            vk_struct<VkComputePipelineCreateInfo>(VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO);
+        cpci.stage = vk_struct<VkPipelineShaderStageCreateInfo>(
+            VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO);
         cpci.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
         cpci.stage.module = module;
         cpci.stage.pName = "main";
@@ -275,9 +284,30 @@ void Context::destroy(Buffer& b) {
     b = Buffer{};
 }
 
+uint32_t Context::groups_for(uint64_t n) const {
+    return uint32_t(
+        std::clamp<uint64_t>((n + kWorkgroupSize - 1) / kWorkgroupSize, 1, max_groups_));
+}
+
+uint32_t Context::threads_for(uint64_t work, uint64_t bytes_per_thread) const {
+    const uint64_t budget = std::min(kScratchBudgetBytes, max_range_);
+    const uint64_t fit = budget / std::max<uint64_t>(bytes_per_thread, 1) / kWorkgroupSize;
+    if (fit == 0)
+        throw GpuError("Vulkan: the scene needs " + std::to_string(bytes_per_thread) +
+                       " bytes of stack per thread, more than the device's buffers allow");
+    const uint64_t want = (std::max<uint64_t>(work, 1) + kWorkgroupSize - 1) / kWorkgroupSize;
+    return uint32_t(std::min({want, fit, uint64_t(max_groups_)}) * kWorkgroupSize);
+}
+
 void Context::begin() {
     if (recording_) throw std::logic_error("Context::begin while recording");
-    auto bi = vk_struct<VkCommandBufferBeginInfo>(VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO);
+    carried_ms_ = 0;
+    begin_part();
+}
+
+void Context::begin_part() {
+    VkCommandBufferBeginInfo bi =
+        vk_struct<VkCommandBufferBeginInfo>(VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO);
     bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
     check(vkBeginCommandBuffer(cmd_, &bi), "vkBeginCommandBuffer");
     recording_ = true;
@@ -297,14 +327,17 @@ void Context::barrier() {
     vkCmdPipelineBarrier(cmd_, stages, stages, 0, 1, &mb, 0, nullptr, 0, nullptr);
 }
 
-void Context::dispatch(KernelId id, std::initializer_list<const Buffer*> buffers,
-                       const void* push, uint32_t push_bytes, uint32_t groups) {
+void Context::dispatch(KernelId id, std::initializer_list<const Buffer*> buffers, const void* push,
+                       uint32_t push_bytes, uint32_t groups) {
     const Kernel& k = kernels_[size_t(id)];
     if (buffers.size() != k.bindings || push_bytes > kPushBytes)
         throw std::logic_error("Context::dispatch: bindings do not match the kernel");
-    if (sets_used_ == kMaxSets)
-        throw std::logic_error("Context::dispatch: too many dispatches in one submission");
-    auto ai = vk_struct<VkDescriptorSetAllocateInfo>(VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO);
+    if (sets_used_ == kMaxSets) {
+        carried_ms_ += submit_part();
+        begin_part();
+    }
+    auto ai =
+        vk_struct<VkDescriptorSetAllocateInfo>(VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO);
     ai.descriptorPool = descriptor_pool_;
     ai.descriptorSetCount = 1;
     ai.pSetLayouts = &k.set_layout;
@@ -326,11 +359,11 @@ void Context::dispatch(KernelId id, std::initializer_list<const Buffer*> buffers
     }
     vkUpdateDescriptorSets(device_, i, writes, 0, nullptr);
     vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, k.pipeline);
-    vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, k.layout, 0, 1, &set, 0,
-                            nullptr);
+    vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, k.layout, 0, 1, &set, 0, nullptr);
     uint8_t padded[kPushBytes] = {};
     std::memcpy(padded, push, push_bytes);
     vkCmdPushConstants(cmd_, k.layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, kPushBytes, padded);
+    if (groups > max_groups_) throw std::logic_error("Context::dispatch: too many workgroups");
     vkCmdDispatch(cmd_, std::max(groups, 1u), 1, 1);
     barrier();
 }
@@ -350,6 +383,10 @@ void Context::fill(const Buffer& dst, uint32_t value) {
 
 double Context::submit() {
     if (!recording_) throw std::logic_error("Context::submit without begin");
+    return carried_ms_ + submit_part();
+}
+
+double Context::submit_part() {
     if (timestamps_)
         vkCmdWriteTimestamp(cmd_, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps_, 1);
     check(vkEndCommandBuffer(cmd_), "vkEndCommandBuffer");

@@ -15,6 +15,9 @@
 
 namespace sdfprune::gpu {
 
+// local_size_x of every kernel.
+inline constexpr uint32_t kWorkgroupSize = 64;
+
 // The kernels, one per compute shader in shaders/gpu/.
 enum class KernelId : uint32_t { kPrune, kExpand, kCellInfo, kTrace, kDiscretize, kCount };
 
@@ -26,7 +29,7 @@ struct Buffer {
 };
 
 class Context {
-public:
+  public:
     // Opens the first Vulkan device with a compute queue (SDFPRUNE_VULKAN_DEVICE=N picks the
     // N-th); throws GpuError when there is none.
     Context();
@@ -37,6 +40,17 @@ public:
     const std::string& device_name() const { return device_name_; }
     // Largest storage buffer a shader may address, in bytes.
     uint64_t max_buffer_bytes() const { return max_range_; }
+    // Mesa's CPU driver (llvmpipe) ends an invocation's loops after kLoopLimit iterations in
+    // all; kernels must then keep each invocation's work under it (or report that they can't).
+    static constexpr uint64_t kLoopLimit = 65535;
+    bool loop_limited() const { return loop_limited_; }
+    // Workgroups for a grid-stride loop over n items: all of them, or the most one dispatch
+    // may have.
+    uint32_t groups_for(uint64_t n) const;
+    // Threads in flight (a multiple of kWorkgroupSize) for `work` items when each thread needs
+    // `bytes_per_thread` of scratch: as many as fit the scratch budget and one buffer's range.
+    // Throws GpuError when not even one workgroup's scratch fits.
+    uint32_t threads_for(uint64_t work, uint64_t bytes_per_thread) const;
 
     // A storage buffer in device memory, or host-visible (mapped) for uploads and readbacks.
     // Throws GpuError when the device has no memory left for it.
@@ -49,6 +63,8 @@ public:
 
     // Recording: begin(), any number of dispatch()/copy()/fill(), then submit() runs them in
     // order (each waits for the previous one's writes) and returns the GPU milliseconds they took.
+    // Long recordings are submitted in parts on the way (kMaxDispatches at a time).
+    static constexpr uint32_t kMaxDispatches = 4096;
     void begin();
     void dispatch(KernelId k, std::initializer_list<const Buffer*> buffers, const void* push,
                   uint32_t push_bytes, uint32_t groups);
@@ -61,7 +77,7 @@ public:
     void upload(const Buffer& dst, const void* data, uint64_t bytes, uint64_t dst_offset = 0);
     void download(const Buffer& src, void* data, uint64_t bytes, uint64_t src_offset = 0);
 
-private:
+  private:
     struct Kernel {
         VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
         VkPipelineLayout layout = VK_NULL_HANDLE;
@@ -69,6 +85,8 @@ private:
         uint32_t bindings = 0;
     };
     void barrier();
+    void begin_part();
+    double submit_part();
     void check(VkResult r, const char* what) const;
     uint32_t memory_type(uint32_t bits, bool host_visible) const;
 
@@ -87,8 +105,11 @@ private:
     VkPhysicalDeviceMemoryProperties memory_{};
     std::string device_name_;
     uint64_t max_range_ = 0;
+    uint32_t max_groups_ = 65535;
+    bool loop_limited_ = false;
     uint64_t live_ = 0, peak_ = 0;
     uint32_t sets_used_ = 0;
+    double carried_ms_ = 0;  // GPU time of the parts already submitted
     bool recording_ = false;
 };
 

@@ -29,8 +29,9 @@ void add_backend_option(CLI::App* sub, std::string& backend) {
 }
 
 void add_res_option(CLI::App* sub, uint32_t& res, const char* what, uint32_t max) {
-    sub->add_option("--res", res,
-                    std::string(what) + " per axis; the pruning grid follows it unless --grid is given")
+    sub->add_option(
+           "--res", res,
+           std::string(what) + " per axis; the pruning grid follows it unless --grid is given")
         ->capture_default_str()
         ->check(CLI::Range(1u, max));
 }
@@ -45,8 +46,9 @@ Prepared prepare(const std::string& scene_arg, const AppOptions& o) {
     Prepared p;
     p.scene = std::make_unique<Scene>(load_scene_arg(scene_arg));
     if (o.vulkan() && !o.pruned())
-        throw std::invalid_argument("--backend vulkan runs the pruned method only (drop "
-                                    "--method naive, or use --backend cpu)");
+        throw std::invalid_argument(
+            "--backend vulkan runs the pruned method only (drop "
+            "--method naive, or use --backend cpu)");
     if (!o.pruned()) return p;
     PruneOptions po = o.prune;
     if (o.lipschitz_bounds) po.bounds = CellBounds::kLipschitz;
@@ -82,7 +84,9 @@ Progress::Progress(std::string label, bool quiet)
       enabled_(!quiet && ::isatty(STDERR_FILENO)),
       start_(std::chrono::steady_clock::now()) {}
 
-Progress::~Progress() { done(); }
+Progress::~Progress() {
+    done();
+}
 
 void Progress::update(double fraction) {
     if (!enabled_ || ms_since(start_) < 1000) return;
@@ -103,8 +107,7 @@ void Progress::done() {
 }
 
 double ms_since(std::chrono::steady_clock::time_point t0) {
-    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-        .count();
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
 }  // namespace sdfprune::cli

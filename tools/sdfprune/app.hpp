@@ -56,13 +56,13 @@ std::string check_output(const std::string& path, std::initializer_list<const ch
 // A progress bar on stderr, shown only when stderr is a terminal, not --quiet, and the work has
 // lasted more than a second. update() is called from one thread.
 class Progress {
-public:
+  public:
     Progress(std::string label, bool quiet);
     ~Progress();
     void update(double fraction);
     void done();
 
-private:
+  private:
     std::string label_;
     bool enabled_;
     bool shown_ = false;

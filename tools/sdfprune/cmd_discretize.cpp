@@ -69,19 +69,18 @@ void add_discretize(CLI::App& app, std::vector<Command>& commands) {
              const double write_ms = ms_since(t1);
 
              if (!o.quiet) {
-                 std::printf( "wrote %s: %u³ float32 SDF samples (%s) of %s\n",
-                              args->output.c_str(), n,
-                              ext == ".npy" ? "[z][y][x]" : "OpenVDB level set \"surface\"",
-                              args->scene.c_str());
+                 std::printf("wrote %s: %u³ float32 SDF samples (%s) of %s\n", args->output.c_str(),
+                             n, ext == ".npy" ? "[z][y][x]" : "OpenVDB level set \"surface\"",
+                             args->scene.c_str());
                  if (const PruneStats* s = p.stats())
-                     std::printf("  pruned (grid %u³, %llu near-field cells exact, others their "
-                                 "far-field bound%s%s): prune %.1f ms, eval %.1f ms\n",
-                                 s->grid, (unsigned long long)s->near_field_cells,
-                                 p.device ? "; GPU times on " : "",
-                                 p.device ? p.device->name().c_str() : "", p.prune_ms, eval_ms);
+                     std::printf(
+                         "  pruned (grid %u³, %llu near-field cells exact, others their "
+                         "far-field bound%s%s): prune %.1f ms, eval %.1f ms\n",
+                         s->grid, (unsigned long long)s->near_field_cells,
+                         p.device ? "; GPU times on " : "",
+                         p.device ? p.device->name().c_str() : "", p.prune_ms, eval_ms);
                  else
-                     std::printf( "  naive (full tree at every cell): eval %.1f ms\n",
-                                  eval_ms);
+                     std::printf("  naive (full tree at every cell): eval %.1f ms\n", eval_ms);
              }
              if (o.json) {
                  JsonLine j;

@@ -48,9 +48,10 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
         std::string backend = "cpu";
     };
     auto args = std::make_shared<Args>();
-    CLI::App* sub = app.add_subcommand(
-        "stats", "Prune a scene over its grid and report active primitives per cell (the "
-                 "paper's Table 2 metric), tape lengths, time and memory.");
+    CLI::App* sub =
+        app.add_subcommand("stats",
+                           "Prune a scene over its grid and report active primitives per cell (the "
+                           "paper's Table 2 metric), tape lengths, time and memory.");
     sub->add_option("SCENE", args->scene, "scene file (.json) or builtin:NAME")->required();
     add_prune_options(sub, args->prune, args->lipschitz);
     sub->add_flag("--json", args->json, "print the figures as one JSON object on the last line");
@@ -59,78 +60,85 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
         "Examples:\n  sdfprune stats scenes/molecule.json\n"
         "  sdfprune stats scenes/trees.json --grid 128 --no-farfield --json\n"
         "  sdfprune stats scenes/molecule.json --backend vulkan   (times and bytes on the GPU)");
-    commands.push_back({sub, [args] {
-        const Scene sc = load_scene_arg(args->scene);
-        PruneOptions o = args->prune;
-        if (args->lipschitz) o.bounds = CellBounds::kLipschitz;
-        if (!o.hierarchy && !args->json)
-            std::fprintf(stderr, "pruning the full tree in all %u³ cells (no hierarchy)...\n",
-                         o.resolution);
-        // The CPU grid, or the device and its grid: the statistics are the same either way.
-        std::unique_ptr<PrunedGrid> cpu_grid;
-        std::unique_ptr<gpu::Device> device;
-        std::unique_ptr<gpu::Grid> device_grid;
-        if (args->backend == "vulkan") {
-            device = std::make_unique<gpu::Device>();
-            device_grid = std::make_unique<gpu::Grid>(gpu::prune(*device, sc, o));
-        } else {
-            cpu_grid = std::make_unique<PrunedGrid>(prune(sc, o));
-        }
-        const PruneStats& s = device_grid ? device_grid->stats() : cpu_grid->stats();
-        if (args->json) {
-            std::string levels;
-            for (uint32_t r : s.levels) levels += (levels.empty() ? "" : "x") + std::to_string(r);
-            JsonLine j;
-            j.add("scene", args->scene)
-                .add("nodes", sc.size())
-                .add("grid", s.grid)
-                .add("levels", levels)
-                .add("bounds", args->lipschitz ? "lipschitz" : "interval")
-                .add("backend", args->backend)
-                .add("far_field", o.far_field)
-                .add("hierarchy", o.hierarchy)
-                .add("farfield_c", o.far_field_c)
-                .add("cells", s.cells)
-                .add("near_field_cells", s.near_field_cells)
-                .add("active_avg", s.active_avg)
-                .add("active_std", s.active_std)
-                .add("active_max", s.active_max)
-                .add("near_field_active_avg", s.near_field_prims_avg)
-                .add("tape_avg", s.tape_avg)
-                .add("tape_max", s.tape_max)
-                .add("prune_ms", s.prune_ms)
-                .add("prune_peak_bytes", s.prune_peak_bytes)
-                .add("tape_bytes", s.tape_bytes)
-                .add("tape_words_visited", s.tape_words_visited)
-                .add("peak_rss_bytes", peak_rss_bytes());
-            if (device)
-                j.add("device", device->name()).add("wall_ms", device_grid->stats().wall_ms);
-            std::printf("%s\n", j.str().c_str());
-            return 0;
-        }
-        std::string levels;
-        for (uint32_t r : s.levels) levels += (levels.empty() ? "" : " -> ") + std::to_string(r) + "³";
-        std::printf("%s: %u nodes, grid %s%s%s\n", args->scene.c_str(), sc.size(), levels.c_str(),
-                    o.far_field ? "" : ", no far field", o.hierarchy ? "" : ", no hierarchy");
-        std::printf("  active primitives per cell (all cells, far = 1)  %.4f ± %.4f, max %u\n",
-                    s.active_avg, s.active_std, s.active_max);
-        std::printf("  near-field cells          %llu of %llu (%.2f %%), %.2f primitives each\n",
-                    (unsigned long long)s.near_field_cells, (unsigned long long)s.cells,
-                    100.0 * double(s.near_field_cells) / double(s.cells), s.near_field_prims_avg);
-        std::printf("  tape length (near-field)  %.2f nodes avg, %u max (full tree: %u)\n",
-                    s.tape_avg, s.tape_max, sc.size());
-        if (device)
-            std::printf("  pruning on %s: %.1f ms GPU (%.1f ms wall), peak %.1f MB device "
-                        "memory\n",
-                        device->name().c_str(), s.prune_ms, device_grid->stats().wall_ms,
-                        double(s.prune_peak_bytes) / 1e6);
-        else
-            std::printf("  pruning                   %.1f ms, peak %.1f MB in pruning buffers\n",
-                        s.prune_ms, double(s.prune_peak_bytes) / 1e6);
-        std::printf("  pruned grid               %.1f MB; process peak RSS %.1f MB\n",
-                    double(s.tape_bytes) / 1e6, double(peak_rss_bytes()) / 1e6);
-        return 0;
-    }});
+    commands.push_back(
+        {sub, [args] {
+             const Scene sc = load_scene_arg(args->scene);
+             PruneOptions o = args->prune;
+             if (args->lipschitz) o.bounds = CellBounds::kLipschitz;
+             if (!o.hierarchy && !args->json)
+                 std::fprintf(stderr, "pruning the full tree in all %u³ cells (no hierarchy)...\n",
+                              o.resolution);
+             // The CPU grid, or the device and its grid: the statistics are the same either way.
+             std::unique_ptr<PrunedGrid> cpu_grid;
+             std::unique_ptr<gpu::Device> device;
+             std::unique_ptr<gpu::Grid> device_grid;
+             if (args->backend == "vulkan") {
+                 device = std::make_unique<gpu::Device>();
+                 device_grid = std::make_unique<gpu::Grid>(gpu::prune(*device, sc, o));
+             } else {
+                 cpu_grid = std::make_unique<PrunedGrid>(prune(sc, o));
+             }
+             const PruneStats& s = device_grid ? device_grid->stats() : cpu_grid->stats();
+             if (args->json) {
+                 std::string levels;
+                 for (uint32_t r : s.levels)
+                     levels += (levels.empty() ? "" : "x") + std::to_string(r);
+                 JsonLine j;
+                 j.add("scene", args->scene)
+                     .add("nodes", sc.size())
+                     .add("grid", s.grid)
+                     .add("levels", levels)
+                     .add("bounds", args->lipschitz ? "lipschitz" : "interval")
+                     .add("backend", args->backend)
+                     .add("far_field", o.far_field)
+                     .add("hierarchy", o.hierarchy)
+                     .add("farfield_c", o.far_field_c)
+                     .add("cells", s.cells)
+                     .add("near_field_cells", s.near_field_cells)
+                     .add("active_avg", s.active_avg)
+                     .add("active_std", s.active_std)
+                     .add("active_max", s.active_max)
+                     .add("near_field_active_avg", s.near_field_prims_avg)
+                     .add("tape_avg", s.tape_avg)
+                     .add("tape_max", s.tape_max)
+                     .add("prune_ms", s.prune_ms)
+                     .add("prune_peak_bytes", s.prune_peak_bytes)
+                     .add("tape_bytes", s.tape_bytes)
+                     .add("tape_words_visited", s.tape_words_visited)
+                     .add("peak_rss_bytes", peak_rss_bytes());
+                 if (device)
+                     j.add("device", device->name()).add("wall_ms", device_grid->stats().wall_ms);
+                 std::printf("%s\n", j.str().c_str());
+                 return 0;
+             }
+             std::string levels;
+             for (uint32_t r : s.levels)
+                 levels += (levels.empty() ? "" : " -> ") + std::to_string(r) + "³";
+             std::printf("%s: %u nodes, grid %s%s%s\n", args->scene.c_str(), sc.size(),
+                         levels.c_str(), o.far_field ? "" : ", no far field",
+                         o.hierarchy ? "" : ", no hierarchy");
+             std::printf("  active primitives per cell (all cells, far = 1)  %.4f ± %.4f, max %u\n",
+                         s.active_avg, s.active_std, s.active_max);
+             std::printf(
+                 "  near-field cells          %llu of %llu (%.2f %%), %.2f primitives each\n",
+                 (unsigned long long)s.near_field_cells, (unsigned long long)s.cells,
+                 100.0 * double(s.near_field_cells) / double(s.cells), s.near_field_prims_avg);
+             std::printf("  tape length (near-field)  %.2f nodes avg, %u max (full tree: %u)\n",
+                         s.tape_avg, s.tape_max, sc.size());
+             if (device)
+                 std::printf(
+                     "  pruning on %s: %.1f ms GPU (%.1f ms wall), peak %.1f MB device "
+                     "memory\n",
+                     device->name().c_str(), s.prune_ms, device_grid->stats().wall_ms,
+                     double(s.prune_peak_bytes) / 1e6);
+             else
+                 std::printf(
+                     "  pruning                   %.1f ms, peak %.1f MB in pruning buffers\n",
+                     s.prune_ms, double(s.prune_peak_bytes) / 1e6);
+             std::printf("  pruned grid               %.1f MB; process peak RSS %.1f MB\n",
+                         double(s.tape_bytes) / 1e6, double(peak_rss_bytes()) / 1e6);
+             return 0;
+         }});
 }
 
 namespace {

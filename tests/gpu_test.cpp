@@ -1,0 +1,291 @@
+// gpu_test.cpp — the Vulkan backend against the CPU backend (the reference): the same
+// statistics and the same finest cells (far-field constants, tapes word for word) over random
+// scenes and options, the same images and samples, buffer growth, a deep chain, and the CLI's
+// handling of --backend. Runs on whatever Vulkan device is present (Mesa's lavapipe in CI).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <memory>
+
+#include "prune_check.hpp"
+#include "sdfprune/builtin.hpp"
+#include "sdfprune/discretize.hpp"
+#include "sdfprune/gpu.hpp"
+#include "sdfprune/io.hpp"
+#include "sdfprune/render.hpp"
+#include "test_util.hpp"
+
+namespace sdfprune::test {
+namespace {
+
+// One device for the whole file; a build with Vulkan must find one (make setup installs
+// lavapipe), a build without it skips.
+gpu::Device* device(std::string& why) {
+    static std::string error;
+    static std::unique_ptr<gpu::Device> dev = [] {
+        try {
+            return std::make_unique<gpu::Device>();
+        } catch (const gpu::GpuError& e) {
+            error = e.what();
+            return std::unique_ptr<gpu::Device>();
+        }
+    }();
+    why = error;
+    return dev.get();
+}
+
+#define SDFPRUNE_REQUIRE_DEVICE(var)                                                   \
+    if (!gpu::built_with_vulkan()) GTEST_SKIP() << "built without the Vulkan backend"; \
+    std::string why_;                                                                  \
+    gpu::Device* var = device(why_);                                                   \
+    ASSERT_NE(var, nullptr) << "no Vulkan device (install mesa-vulkan-drivers): " << why_
+
+void expect_same_stats(const PruneStats& cpu, const PruneStats& gpu, const std::string& what) {
+    SCOPED_TRACE(what);
+    EXPECT_EQ(cpu.near_field_cells, gpu.near_field_cells);
+    EXPECT_EQ(cpu.active_avg, gpu.active_avg);
+    EXPECT_EQ(cpu.active_std, gpu.active_std);
+    EXPECT_EQ(cpu.active_max, gpu.active_max);
+    EXPECT_EQ(cpu.tape_avg, gpu.tape_avg);
+    EXPECT_EQ(cpu.tape_max, gpu.tape_max);
+    EXPECT_EQ(cpu.levels, gpu.levels);
+    EXPECT_EQ(cpu.cells, gpu.cells);
+}
+
+// Every finest cell: same kind, same far-field constant, same tape.
+void expect_same_cells(const PrunedGrid& cpu, const gpu::Grid& gpu, const std::string& what) {
+    SCOPED_TRACE(what);
+    const uint32_t N = cpu.resolution();
+    uint64_t visited = 0, mismatches = 0;
+    gpu.for_each_finest_cell([&](uint64_t i, const gpu::Grid::CellContents& c) {
+        ++visited;
+        const uint32_t x = uint32_t(i % N), y = uint32_t(i / N % N), z = uint32_t(i / N / N);
+        const CellView v = cpu.cell(x, y, z);
+        const bool same =
+            v.far_field == c.far_field &&
+            (v.far_field ? v.constant == c.constant
+                         : std::equal(v.tape.begin(), v.tape.end(), c.tape.begin(), c.tape.end()));
+        if (!same && ++mismatches <= 3)
+            ADD_FAILURE() << "cell (" << x << ", " << y << ", " << z << "): cpu "
+                          << (v.far_field ? "far " + std::to_string(v.constant)
+                                          : "tape of " + std::to_string(v.tape.size()))
+                          << ", gpu "
+                          << (c.far_field ? "far " + std::to_string(c.constant)
+                                          : "tape of " + std::to_string(c.tape.size()));
+    });
+    EXPECT_EQ(visited, uint64_t(N) * N * N);
+    EXPECT_EQ(mismatches, 0u);
+}
+
+TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const TreeShape shapes[] = {TreeShape::kBalanced, TreeShape::kLeftDeep, TreeShape::kRightDeep,
+                                TreeShape::kMixed};
+    const Placement places[] = {Placement::kRigid, Placement::kUniform, Placement::kNonUniform,
+                                Placement::kSheared, Placement::kMixed};
+    for (uint64_t seed = 1; seed <= 12; ++seed) {
+        RandomSceneSpec spec;
+        spec.primitives = 4 + uint32_t(seed * 7 % 29);
+        spec.tree = shapes[seed % 4];
+        spec.placement = places[seed % 5];
+        spec.subtree_place = seed % 3 == 0 ? 0.3f : 0.0f;
+        spec.clip_aabb = seed % 6 == 5;
+        const Scene sc = random_scene(seed, spec);
+        PruneOptions o;
+        o.resolution = seed % 2 ? 32 : 24;
+        o.factor = seed % 3 == 1 ? 2 : 4;
+        o.far_field = seed % 4 != 3;
+        o.hierarchy = seed % 5 != 4;
+        o.far_field_c = seed % 2 ? 2.0f : 1.5f;
+        o.bounds = seed % 7 == 6 ? CellBounds::kLipschitz : CellBounds::kInterval;
+        const std::string what =
+            "seed " + std::to_string(seed) + ", " + tree_shape_name(spec.tree) + ", " +
+            placement_name(spec.placement) + ", grid " + std::to_string(o.resolution) + " factor " +
+            std::to_string(o.factor) + (o.far_field ? "" : " no-farfield") +
+            (o.hierarchy ? "" : " no-hierarchy");
+        const PrunedGrid cpu = prune(sc, o);
+        const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+        expect_same_stats(cpu.stats(), gpu.stats(), what);
+        expect_same_cells(cpu, gpu, what);
+    }
+}
+
+TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Scene sc = builtin_scene("demo");
+    PruneOptions o;
+    o.resolution = 64;
+    const PrunedGrid cpu = prune(sc, o);
+    const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+    // The demo's tapes at 64³ outgrow the initial pool (1 Mi words).
+    EXPECT_GT(gpu.stats().pool_grows, 0u);
+    expect_same_stats(cpu.stats(), gpu.stats(), "demo 64³");
+    expect_same_cells(cpu, gpu, "demo 64³");
+}
+
+TEST(Gpu, DeepChainPrunes) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    // Right-deep chains: the evaluation stack is as deep as the chain. lavapipe (llvmpipe)
+    // ends an invocation's loops after 65,535 iterations: there the 20,000-deep chain must
+    // give a clear error instead of wrong tapes.
+    const bool loop_limited = dev->name().find("llvmpipe") != std::string::npos;
+    for (uint32_t depth : {6000u, 20000u}) {
+        SceneBuilder b;
+        Shape chain = b.sphere(0.05f).translated(vec3(0.9f, 0, 0));
+        for (uint32_t i = 1; i <= depth; ++i) {
+            const float a = float(i) * 0.0031f;
+            const Shape s =
+                b.sphere(0.04f).translated(vec3(std::cos(a), std::sin(a), 0.1f * std::sin(3 * a)));
+            chain = smooth_union(s, chain, 0.02f);
+        }
+        const Scene sc = b.build(chain);
+        ASSERT_EQ(sc.max_stack, depth + 1);
+        PruneOptions o;
+        o.resolution = 16;
+        if (loop_limited && depth == 20000) {
+            EXPECT_THROW(gpu::prune(*dev, sc, o), gpu::GpuError);
+            continue;
+        }
+        const PrunedGrid cpu = prune(sc, o);
+        const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+        const std::string what = "chain of " + std::to_string(depth);
+        expect_same_stats(cpu.stats(), gpu.stats(), what);
+        expect_same_cells(cpu, gpu, what);
+    }
+}
+
+TEST(Gpu, ReferenceScenesMatchCpu) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    for (const char* file : {"molecule.json", "trees.json"}) {
+        SDFPRUNE_REQUIRE_SCENE(path, file);
+        const Scene sc = load_scene(path);
+        PruneOptions o;
+        o.resolution = 128;
+        const PrunedGrid cpu = prune(sc, o);
+        const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+        expect_same_stats(cpu.stats(), gpu.stats(), file);
+    }
+}
+
+// Images: the same rays and arithmetic; a driver may round differently, so a few pixels may
+// differ slightly (none do on lavapipe).
+void expect_similar(const Image& a, const Image& b, const std::string& what) {
+    SCOPED_TRACE(what);
+    ASSERT_EQ(a.rgb.size(), b.rgb.size());
+    size_t differ = 0;
+    for (size_t i = 0; i < a.rgb.size(); i += 3) {
+        int d = 0;
+        for (int c = 0; c < 3; ++c)
+            d = std::max(d, std::abs(int(a.rgb[i + c]) - int(b.rgb[i + c])));
+        differ += d > 2 ? 1 : 0;
+    }
+    EXPECT_LE(double(differ), 0.002 * double(a.rgb.size() / 3)) << differ << " pixels differ";
+}
+
+TEST(Gpu, RenderMatchesCpu) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    RandomSceneSpec spec;
+    spec.primitives = 24;
+    spec.placement = Placement::kMixed;
+    const Scene scenes[] = {builtin_scene("demo"), random_scene(77, spec)};
+    for (const Scene& sc : scenes) {
+        PruneOptions o;
+        o.resolution = 64;
+        const PrunedGrid cpu = prune(sc, o);
+        const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+        for (Shading shading : {Shading::kShaded, Shading::kNormals, Shading::kHeatmap}) {
+            RenderOptions ro;
+            ro.width = 160;
+            ro.height = 96;
+            ro.shading = shading;
+            ro.camera = orbit_camera(sc.aabb, 35, 20, 0, 40);
+            RenderStats cs, gs;
+            const Image a = render(cpu, ro, &cs);
+            const Image b = gpu::render(*dev, gpu, ro, &gs);
+            expect_similar(a, b, "shading " + std::to_string(int(shading)));
+            EXPECT_NEAR(cs.hit_fraction, gs.hit_fraction, 1e-3);
+            EXPECT_NEAR(cs.steps_avg, gs.steps_avg, 0.01 * cs.steps_avg);
+            EXPECT_GT(gs.hit_fraction, 0.0);
+        }
+    }
+}
+
+TEST(Gpu, DiscretizeMatchesCpu) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    RandomSceneSpec spec;
+    spec.primitives = 16;
+    spec.placement = Placement::kNonUniform;
+    const Scene sc = random_scene(5, spec);
+    PruneOptions o;
+    o.resolution = 32;
+    const PrunedGrid cpu = prune(sc, o);
+    const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+    for (uint32_t n : {32u, 20u, 48u}) {
+        std::vector<float> a(size_t(n) * n * n), b(a.size());
+        discretize_pruned(cpu, n, a);
+        gpu::discretize(*dev, gpu, n, b);
+        size_t bad = 0;
+        for (size_t i = 0; i < a.size(); ++i)
+            bad += std::fabs(a[i] - b[i]) <= 1e-6f * (1 + std::fabs(a[i])) ? 0 : 1;
+        EXPECT_EQ(bad, 0u) << "n = " << n;
+    }
+}
+
+TEST(GpuCli, StatsOnVulkanEqualCpu) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const CliResult cpu = run_cli("stats builtin:demo --grid 32 --json");
+    const CliResult gpu = run_cli("stats builtin:demo --grid 32 --json --backend vulkan");
+    ASSERT_EQ(cpu.status, 0) << cpu.err;
+    ASSERT_EQ(gpu.status, 0) << gpu.err;
+    const auto field = [](const std::string& json, const std::string& key) {
+        const size_t at = json.find("\"" + key + "\":");
+        return at == std::string::npos ? std::string("missing")
+                                       : json.substr(at, json.find(',', at) - at);
+    };
+    for (const char* key :
+         {"near_field_cells", "active_avg", "active_std", "active_max", "tape_avg", "tape_max"})
+        EXPECT_EQ(field(cpu.out, key), field(gpu.out, key)) << key;
+    EXPECT_NE(gpu.out.find("\"backend\":\"vulkan\""), std::string::npos);
+    EXPECT_NE(gpu.out.find("\"device\":"), std::string::npos);
+}
+
+TEST(GpuCli, RenderAndDiscretizeOnVulkan) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const std::string png = ::testing::TempDir() + "gpu_cli.png";
+    const std::string npy = ::testing::TempDir() + "gpu_cli.npy";
+    const CliResult r = run_cli(
+        "render builtin:sphere --width 64 --height 48 --grid 32 --backend "
+        "vulkan --json -o " +
+        png);
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_TRUE(std::filesystem::file_size(png) > 100);
+    const CliResult d =
+        run_cli("discretize builtin:sphere --res 16 --backend vulkan --json -o " + npy);
+    ASSERT_EQ(d.status, 0) << d.err;
+    EXPECT_EQ(std::filesystem::file_size(npy), 128u + 16u * 16 * 16 * 4);
+    std::remove(png.c_str());
+    std::remove(npy.c_str());
+}
+
+TEST(GpuCli, BadBackendUseExitsTwo) {
+    const CliResult bad = run_cli("stats builtin:sphere --backend metal");
+    EXPECT_EQ(bad.status, 2);
+    const CliResult naive = run_cli(
+        "render builtin:sphere -o /tmp/x.png --method naive "
+        "--backend vulkan");
+    EXPECT_EQ(naive.status, 2);
+    EXPECT_NE(naive.err.find("--backend vulkan"), std::string::npos) << naive.err;
+    // No driver at all: the loader is pointed at a driver list that does not exist.
+    const CliResult none = run_cli("stats builtin:sphere --grid 8 --backend vulkan",
+                                   "VK_ICD_FILENAMES=/nonexistent.json "
+                                   "VK_DRIVER_FILES=/nonexistent.json");
+    EXPECT_EQ(none.status, 2);
+    EXPECT_NE(none.err.find("Vulkan"), std::string::npos) << none.err;
+    EXPECT_EQ(std::count(none.err.begin(), none.err.end(), '\n'), 1) << none.err;
+    const CliResult cpu = run_cli("stats builtin:sphere --grid 8 --backend cpu");
+    EXPECT_EQ(cpu.status, 0) << cpu.err;
+}
+
+}  // namespace
+}  // namespace sdfprune::test
