@@ -7,6 +7,11 @@
 //   mode 2: cells of a level from their octant's tape (or far-field from a far octant)
 // New tapes are appended to the pool with an atomic counter; on overflow nothing is written
 // and the host grows the pool and runs the step again.
+//
+// A job is resumable: its state lives in the thread's scratch, and each dispatch (a "round")
+// runs at most pc.budget loop iterations of it. Devices without a loop limit use one round with
+// an unlimited budget; lavapipe, which ends an invocation's loops after 65,535 iterations in
+// all, runs one job per invocation over as many rounds as the longest parent tape needs.
 #include "scene.glsl"
 
 layout(local_size_x = 64) in;
@@ -24,8 +29,8 @@ layout(std430, binding = 7) buffer Counters {
     uint near_jobs;  // near-field cells in this step
     uint next_blocks;
 };
-// Per thread: 2 words per parent-tape entry (left operand; decision | alive << 2 | negate << 4),
-// then 4 words per stack slot (value, lo, hi, entry).
+// Per thread: the job's state (kStateWords), 2 words per parent-tape entry (left operand;
+// decision | alive << 2 | negate << 4), then 4 words per stack slot (value, lo, hi, entry).
 layout(std430, binding = 8) buffer Scratch { uint scratch[]; };
 
 layout(push_constant) uniform Push {
@@ -40,150 +45,196 @@ layout(push_constant) uniform Push {
     uint flags;      // 1: far field on; 2: interval bounds
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's jobs: [first_job, jobs)
+    uint round;       // 0: start the jobs; later rounds resume them
+    uint budget;      // loop iterations per job and round
 } pc;
 
-// Prunes the tape at `parent` over the box; returns true for near-field. Fills value, the
-// far-field constant, and for near-field cells the new tape (or the parent's when unchanged).
-bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out float value,
-               out float constant, out uint tape) {
+// The state of a job between rounds, at the start of its thread's scratch.
+const uint kStateWords = 8u;
+const uint kPhaseEvaluate = 0u, kPhaseSweep = 1u, kPhaseWrite = 2u, kPhaseDone = 3u;
+// Words: phase, i (next entry), top (stack size), out_len, prims, at (tape offset), value,
+// constant (float bits).
+
+// Runs (a budget's worth of) pruning the tape at `parent` over the box; returns true in the
+// round that finishes the job, with `near`, `value`, `constant` and `tape` (the new tape, or the parent's when
+// nothing was pruned) set.
+bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out bool near,
+               out float value, out float constant, out uint tape) {
     uint t = gl_GlobalInvocationID.x;
-    uint ebase = t * (2u * pc.max_len + 4u * pc.max_stack);
+    uint base = t * (kStateWords + 2u * pc.max_len + 4u * pc.max_stack);
+    uint ebase = base + kStateWords;
     uint sbase = ebase + 2u * pc.max_len;
     bool interval = (pc.flags & 2u) != 0u;
     uint len = pool[parent];
-    uint top = 0u;
-    // Stage 1: values and ranges at the centre, decisions (evaluate_cell).
-    for (uint i = 0u; i < len; ++i) {
-        uint w = pool[parent + 2u + i];
-        uint n = tape_node(w);
-        uint kind = nodes[n].kind;
-        float spread = nodes[n].lipschitz * R;
-        float v, lo, hi;
-        if (kind < kPrimitiveKindCount) {
-            uint p = nodes[n].primitive;
-            v = eval_primitive(kind, params[p], centre);
-            lo = v - spread;
-            hi = v + spread;
-            vec4 b0 = extras[p].bound0;
-            if (interval && b0.w > 0.0) {
-                vec2 r = similarity_range(b0.xyz, b0.w, extras[p].bound1.x, extras[p].bound1.y,
-                                          centre, half_size);
-                lo = max(lo, r.x);
-                hi = min(hi, r.y);
-            }
-        } else {
-            uint sr = sbase + (top - 1u) * 4u, sl = sbase + (top - 2u) * 4u;
-            top -= 2u;
-            float lv = uintBitsToFloat(scratch[sl]), llo = uintBitsToFloat(scratch[sl + 1u]),
-                  lhi = uintBitsToFloat(scratch[sl + 2u]);
-            float rv = uintBitsToFloat(scratch[sr]), rlo = uintBitsToFloat(scratch[sr + 1u]),
-                  rhi = uintBitsToFloat(scratch[sr + 2u]);
-            float sgn = operator_s(kind), k = nodes[n].blend;
-            uint d = prune_decision(sgn, k, llo, lhi, rlo, rhi);
-            scratch[ebase + 2u * i] = scratch[sl + 3u];
-            scratch[ebase + 2u * i + 1u] = d;
-            v = apply_operator(sgn, k, lv, rv);
-            if (d == kLeftWins) {
-                lo = llo;
-                hi = lhi;
-            } else if (d == kRightWins) {
-                lo = rlo;
-                hi = rhi;
-            } else if (interval) {
-                vec2 r2 = operator_range(sgn, k, llo, lhi, rlo, rhi);
-                lo = max(v - spread, r2.x);
-                hi = min(v + spread, r2.y);
-            } else {
+    if (pc.round == 0u) {
+        for (uint k = 0u; k < kStateWords; ++k) scratch[base + k] = 0u;
+    }
+    uint phase = scratch[base], i = scratch[base + 1u], top = scratch[base + 2u];
+    if (phase == kPhaseDone) return false;  // finished in an earlier round
+    uint out_len = scratch[base + 3u], prims = scratch[base + 4u], at = scratch[base + 5u];
+    uint budget = pc.budget;
+    near = true;
+    tape = kFarField;
+    if (phase == kPhaseEvaluate) {
+        // Stage 1: values and ranges at the centre, decisions (evaluate_cell).
+        for (; i < len && budget > 0u; ++i, --budget) {
+            uint w = pool[parent + 2u + i];
+            uint n = tape_node(w);
+            uint kind = nodes[n].kind;
+            float spread = nodes[n].lipschitz * R;
+            float v, lo, hi;
+            uint decision = kKeepBoth;
+            if (kind < kPrimitiveKindCount) {
+                uint p = nodes[n].primitive;
+                v = eval_primitive(kind, params[p], centre);
                 lo = v - spread;
                 hi = v + spread;
+                vec4 b0 = extras[p].bound0;
+                if (interval && b0.w > 0.0) {
+                    vec2 r = similarity_range(b0.xyz, b0.w, extras[p].bound1.x,
+                                              extras[p].bound1.y, centre, half_size);
+                    lo = max(lo, r.x);
+                    hi = min(hi, r.y);
+                }
+            } else {
+                uint sr = sbase + (top - 1u) * 4u, sl = sbase + (top - 2u) * 4u;
+                top -= 2u;
+                float lv = uintBitsToFloat(scratch[sl]), llo = uintBitsToFloat(scratch[sl + 1u]),
+                      lhi = uintBitsToFloat(scratch[sl + 2u]);
+                float rv = uintBitsToFloat(scratch[sr]), rlo = uintBitsToFloat(scratch[sr + 1u]),
+                      rhi = uintBitsToFloat(scratch[sr + 2u]);
+                float sgn = operator_s(kind), k = nodes[n].blend;
+                decision = prune_decision(sgn, k, llo, lhi, rlo, rhi);
+                scratch[ebase + 2u * i] = scratch[sl + 3u];
+                v = apply_operator(sgn, k, lv, rv);
+                if (decision == kLeftWins) {
+                    lo = llo;
+                    hi = lhi;
+                } else if (decision == kRightWins) {
+                    lo = rlo;
+                    hi = rhi;
+                } else if (interval) {
+                    vec2 r2 = operator_range(sgn, k, llo, lhi, rlo, rhi);
+                    lo = max(v - spread, r2.x);
+                    hi = min(v + spread, r2.y);
+                } else {
+                    lo = v - spread;
+                    hi = v + spread;
+                }
+            }
+            if (tape_negated(w)) {
+                v = -v;
+                float tmp = lo;
+                lo = -hi;
+                hi = -tmp;
+            }
+            scratch[ebase + 2u * i + 1u] = decision;  // flags cleared for stage 3
+            uint so = sbase + top * 4u;
+            scratch[so] = floatBitsToUint(v);
+            scratch[so + 1u] = floatBitsToUint(lo);
+            scratch[so + 2u] = floatBitsToUint(hi);
+            scratch[so + 3u] = i;
+            ++top;
+        }
+        if (i == len) {
+            float v = uintBitsToFloat(scratch[sbase]);
+            scratch[base + 6u] = floatBitsToUint(v);
+            phase = kPhaseSweep;
+            // Stage 2: the far-field test on the root's range (is_near_field).
+            if ((pc.flags & 1u) != 0u) {
+                float L = nodes[tape_node(pool[parent + 2u + len - 1u])].lipschitz;
+                float clearance = (pc.csize.w - 1.0) * L * R;
+                float margin = kPruneMarginAbs + kPruneMarginRel * (abs(v) + L * R);
+                float lo = uintBitsToFloat(scratch[sbase + 1u]) - margin;
+                float hi = uintBitsToFloat(scratch[sbase + 2u]) + margin;
+                if (lo > clearance && lo > 0.0) {
+                    scratch[base + 7u] = floatBitsToUint(lo);
+                    phase = kPhaseDone;
+                    near = false;
+                } else if (hi < -clearance && hi < 0.0) {
+                    scratch[base + 7u] = floatBitsToUint(hi);
+                    phase = kPhaseDone;
+                    near = false;
+                }
+            }
+            if (phase == kPhaseSweep) {
+                uint root_neg = tape_negated(pool[parent + 2u + len - 1u]) ? 1u : 0u;
+                scratch[ebase + 2u * (len - 1u) + 1u] |= (1u << 2) | (root_neg << 4);
+                i = len;
             }
         }
-        if (tape_negated(w)) {
-            v = -v;
-            float tmp = lo;
-            lo = -hi;
-            hi = -tmp;
+    }
+    if (phase == kPhaseSweep) {
+        // Stage 3: the top-down pass (compact_tape). Flags: alive (bits 2-3: 1 kept,
+        // 2 skipped), negate (bit 4). An entry's flags are final when the reverse sweep reaches
+        // it (parents come later), so the sweep also counts the kept entries.
+        for (; i > 0u && budget > 0u; --i, --budget) {
+            uint e = i - 1u;
+            uint f = scratch[ebase + 2u * e + 1u];
+            uint w = pool[parent + 2u + e];
+            if (((f >> 2) & 3u) != 1u) continue;
+            if (is_primitive(tape_node(w))) {
+                ++out_len;
+                ++prims;
+                continue;
+            }
+            uint l = scratch[ebase + 2u * e], r = e - 1u;
+            uint d = f & 3u;
+            if (d == kKeepBoth) {
+                ++out_len;
+                uint nl = tape_negated(pool[parent + 2u + l]) ? 1u : 0u;
+                uint nr = tape_negated(pool[parent + 2u + r]) ? 1u : 0u;
+                scratch[ebase + 2u * l + 1u] =
+                    (scratch[ebase + 2u * l + 1u] & 3u) | (1u << 2) | (nl << 4);
+                scratch[ebase + 2u * r + 1u] =
+                    (scratch[ebase + 2u * r + 1u] & 3u) | (1u << 2) | (nr << 4);
+                continue;
+            }
+            uint win = d == kLeftWins ? l : r;
+            uint neg = ((f >> 4) & 1u) ^ (tape_negated(pool[parent + 2u + win]) ? 1u : 0u);
+            scratch[ebase + 2u * e + 1u] = (f & 3u) | (2u << 2) | (f & 16u);
+            scratch[ebase + 2u * win + 1u] =
+                (scratch[ebase + 2u * win + 1u] & 3u) | (1u << 2) | (neg << 4);
         }
-        if (kind < kPrimitiveKindCount) scratch[ebase + 2u * i + 1u] = kKeepBoth;
-        uint so = sbase + top * 4u;
-        scratch[so] = floatBitsToUint(v);
-        scratch[so + 1u] = floatBitsToUint(lo);
-        scratch[so + 2u] = floatBitsToUint(hi);
-        scratch[so + 3u] = i;
-        ++top;
-    }
-    value = uintBitsToFloat(scratch[sbase]);
-    constant = 0.0;
-    tape = kFarField;
-    // Stage 2: the far-field test on the root's range (is_near_field).
-    if ((pc.flags & 1u) != 0u) {
-        float L = nodes[tape_node(pool[parent + 2u + len - 1u])].lipschitz;
-        float clearance = (pc.csize.w - 1.0) * L * R;
-        float margin = kPruneMarginAbs + kPruneMarginRel * (abs(value) + L * R);
-        float lo = uintBitsToFloat(scratch[sbase + 1u]) - margin;
-        float hi = uintBitsToFloat(scratch[sbase + 2u]) + margin;
-        if (lo > clearance && lo > 0.0) {
-            constant = lo;
-            return false;
-        }
-        if (hi < -clearance && hi < 0.0) {
-            constant = hi;
-            return false;
+        if (i == 0u) {
+            atomicMax(max_len, out_len);
+            if (out_len == len) {
+                at = parent;  // nothing pruned: share the parent's tape
+                phase = kPhaseDone;
+            } else {
+                at = atomicAdd(pool_used, out_len + 2u);
+                if (at < pc.pool_start || at + out_len + 2u > pool_capacity ||
+                    at + out_len + 2u < at) {
+                    overflow = 1u;
+                    at = kFarField;
+                    phase = kPhaseDone;
+                } else {
+                    pool[at] = out_len;
+                    pool[at + 1u] = prims;
+                    phase = kPhaseWrite;
+                    top = at + 2u;  // the next word to write
+                }
+            }
         }
     }
-    // Stage 3: the top-down pass (compact_tape). Flags: alive (bits 2-3: 1 kept, 2 skipped),
-    // negate (bit 4); stage 1 cleared them. An entry's flags are final when the reverse sweep
-    // reaches it (parents come later), so the sweep also counts the kept entries. Few loops:
-    // lavapipe stops an invocation's loops after 65535 iterations in all.
-    uint root_neg = tape_negated(pool[parent + 2u + len - 1u]) ? 1u : 0u;
-    scratch[ebase + 2u * (len - 1u) + 1u] |= (1u << 2) | (root_neg << 4);
-    uint out_len = 0u, prims = 0u;
-    for (uint i = len; i-- > 0u;) {
-        uint f = scratch[ebase + 2u * i + 1u];
-        uint w = pool[parent + 2u + i];
-        if (((f >> 2) & 3u) != 1u) continue;
-        if (is_primitive(tape_node(w))) {
-            ++out_len;
-            ++prims;
-            continue;
+    if (phase == kPhaseWrite) {
+        for (; i < len && budget > 0u; ++i, --budget) {
+            uint f = scratch[ebase + 2u * i + 1u];
+            if (((f >> 2) & 3u) != 1u) continue;
+            pool[top++] = tape_word(tape_node(pool[parent + 2u + i]), ((f >> 4) & 1u) != 0u);
         }
-        uint l = scratch[ebase + 2u * i], r = i - 1u;
-        uint d = f & 3u;
-        if (d == kKeepBoth) {
-            ++out_len;
-            uint nl = tape_negated(pool[parent + 2u + l]) ? 1u : 0u;
-            uint nr = tape_negated(pool[parent + 2u + r]) ? 1u : 0u;
-            scratch[ebase + 2u * l + 1u] = (scratch[ebase + 2u * l + 1u] & 3u) | (1u << 2) |
-                                           (nl << 4);
-            scratch[ebase + 2u * r + 1u] = (scratch[ebase + 2u * r + 1u] & 3u) | (1u << 2) |
-                                           (nr << 4);
-            continue;
-        }
-        uint win = d == kLeftWins ? l : r;
-        uint neg = ((f >> 4) & 1u) ^ (tape_negated(pool[parent + 2u + win]) ? 1u : 0u);
-        scratch[ebase + 2u * i + 1u] = (f & 3u) | (2u << 2) | (f & 16u);
-        scratch[ebase + 2u * win + 1u] = (scratch[ebase + 2u * win + 1u] & 3u) | (1u << 2) |
-                                         (neg << 4);
+        if (i == len) phase = kPhaseDone;
     }
-    atomicMax(max_len, out_len);
-    if (out_len == len) {
-        tape = parent;  // nothing pruned: share the parent's tape
-        return true;
-    }
-    uint at = atomicAdd(pool_used, out_len + 2u);
-    if (at < pc.pool_start || at + out_len + 2u > pool_capacity || at + out_len + 2u < at) {
-        overflow = 1u;
-        return true;
-    }
-    pool[at] = out_len;
-    pool[at + 1u] = prims;
-    uint o = at + 2u;
-    for (uint i = 0u; i < len; ++i) {
-        uint f = scratch[ebase + 2u * i + 1u];
-        if (((f >> 2) & 3u) != 1u) continue;
-        pool[o++] = tape_word(tape_node(pool[parent + 2u + i]), ((f >> 4) & 1u) != 0u);
-    }
-    tape = at;
+    scratch[base] = phase;
+    scratch[base + 1u] = i;
+    scratch[base + 2u] = top;
+    scratch[base + 3u] = out_len;
+    scratch[base + 4u] = prims;
+    scratch[base + 5u] = at;
+    value = uintBitsToFloat(scratch[base + 6u]);
+    constant = uintBitsToFloat(scratch[base + 7u]);
+    if (phase != kPhaseDone) return false;
+    if (near) tape = at;
     return true;
 }
 
@@ -198,15 +249,16 @@ void main() {
     for (uint job = pc.first_job + gl_GlobalInvocationID.x; job < pc.jobs; job += pc.threads) {
         Cell result;
         result.children = 0u;
+        bool near;
         if (pc.mode == 1u) {
             Block b = blocks[job / 8u];
             uint o = job % 8u;
             uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
                              b.z + ((o >> 2) & 1u) * hf);
             precise vec3 centre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
-            bool near = prune_box(b.tape, centre, half_cell * float(hf), radius * float(hf),
-                                  result.value, result.bound, result.tape);
-            if (!near) result.tape = kFarField;
+            if (!prune_box(b.tape, centre, half_cell * float(hf), radius * float(hf), near,
+                           result.value, result.bound, result.tape))
+                continue;
             octants[job] = result;
             continue;
         }
@@ -219,6 +271,7 @@ void main() {
             uint o = (lc.x >= hf ? 1u : 0u) | (lc.y >= hf ? 2u : 0u) | (lc.z >= hf ? 4u : 0u);
             Cell oct = octants[bi * 8u + o];
             if (oct.tape == kFarField) {
+                if (pc.round != 0u) continue;
                 // A far octant makes far cells (prune.cpp): its constant, and its centre value
                 // moved conservatively to the cell's centre.
                 uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
@@ -234,13 +287,10 @@ void main() {
             }
             parent = oct.tape;
         }
-        bool near = prune_box(parent, centre, half_cell, radius, result.value, result.bound,
-                              result.tape);
-        if (near) {
-            atomicAdd(near_jobs, 1u);
-        } else {
-            result.tape = kFarField;
-        }
+        if (!prune_box(parent, centre, half_cell, radius, near, result.value, result.bound,
+                       result.tape))
+            continue;
+        if (near) atomicAdd(near_jobs, 1u);
         cells[job] = result;
     }
 }

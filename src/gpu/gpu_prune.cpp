@@ -16,6 +16,7 @@ namespace {
 struct PrunePush {  // prune.comp: Push
     vec4 origin, csize;
     uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
+    uint32_t round, budget;
 };
 static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) <= 128);
 
@@ -101,16 +102,16 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     // One step: `jobs` cells or octants from their parents' tapes into `octants`/`cells`.
     const auto run_step = [&](uint32_t mode, uint32_t factor, uint64_t jobs, vec3 csize,
                               const Buffer& octants, const Buffer& cells) {
-        const uint64_t thread_bytes = (2ull * max_len + 4ull * sc.max_stack) * 4;
+        const uint64_t thread_bytes = (8ull + 2ull * max_len + 4ull * sc.max_stack) * 4;
         const uint32_t threads = ctx.threads_for(jobs, thread_bytes);
-        // Under a loop limit (lavapipe), one job per invocation and dispatch: three passes
-        // over the parent tape must fit.
+        // Under a loop limit (lavapipe), as many jobs per invocation as fit the limit, or one
+        // job resumed over as many rounds as its three passes over the parent tape need;
+        // elsewhere one unlimited round.
         const bool limited = ctx.loop_limited();
-        if (limited && 3ull * max_len + 64 > Context::kLoopLimit)
-            throw GpuError("tapes of " + std::to_string(max_len) + " nodes exceed what " +
-                           ctx.device_name() + " can prune (its loop limit of " +
-                           std::to_string(Context::kLoopLimit) +
-                           " iterations); use --backend cpu or a GPU");
+        const uint32_t budget = limited ? uint32_t(Context::kLoopLimit - 512) : 0xffffffffu;
+        const uint64_t per_job = 3ull * max_len + 16;
+        const uint64_t rounds = limited ? (per_job + budget - 1) / budget : 1;
+        const uint64_t jobs_per_invocation = limited ? std::max<uint64_t>(1, budget / per_job) : 0;
         if (scratch.size < threads * thread_bytes) {
             ctx.destroy(scratch);
             scratch = ctx.create_buffer(threads * thread_bytes);
@@ -127,17 +128,22 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                            sc.max_stack,
                            flags,
                            g.pool_words,
-                           0};
-            const uint64_t per_dispatch = limited ? threads : std::max<uint64_t>(jobs, 1);
+                           0,
+                           0,
+                           budget};
+            const uint64_t per_dispatch =
+                limited ? threads * jobs_per_invocation : std::max<uint64_t>(jobs, 1);
             ctx.begin();
-            for (uint64_t first = 0; first < std::max<uint64_t>(jobs, 1); first += per_dispatch) {
-                push.first_job = uint32_t(first);
-                push.jobs = uint32_t(std::min<uint64_t>(jobs, first + per_dispatch));
-                ctx.dispatch(KernelId::kPrune,
-                             {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, &octants, &cells,
-                              &counters, &scratch},
-                             &push, sizeof(push), threads / kWorkgroupSize);
-            }
+            for (uint64_t first = 0; first < std::max<uint64_t>(jobs, 1); first += per_dispatch)
+                for (uint32_t round = 0; round < rounds; ++round) {
+                    push.first_job = uint32_t(first);
+                    push.jobs = uint32_t(std::min<uint64_t>(jobs, first + per_dispatch));
+                    push.round = round;
+                    ctx.dispatch(KernelId::kPrune,
+                                 {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, &octants,
+                                  &cells, &counters, &scratch},
+                                 &push, sizeof(push), threads / kWorkgroupSize);
+                }
             gpu_ms += ctx.submit();
             if (!counter->overflow) break;
             // Grow the pool (keeping what it holds) and redo the step.
