@@ -28,7 +28,24 @@ layout(std430, binding = 7) buffer Counters {
     uint max_len;  // longest tape written or shared in this step
     uint near_jobs;  // near-field cells in this step
     uint next_blocks;
+    uint max_depth;  // deepest evaluation stack of the tapes written or shared in this step
+    uint octant_used;      // the octant pool, as pool_used, pool_capacity
+    uint octant_capacity;
 };
+// Octants' tapes (mode 1) live in a pool of their own, dropped after the level: a reference
+// with kInOctantPool set points there. Cells (mode 2) never share an octant's tape: they copy it.
+layout(std430, binding = 9) buffer OctantPool { uint octant_pool[]; };
+const uint kInOctantPool = 0x80000000u;
+
+uint tape_read(uint ref, uint k) {
+    return (ref & kInOctantPool) != 0u ? octant_pool[(ref & ~kInOctantPool) + k] : pool[ref + k];
+}
+void tape_write(uint ref, uint value) {
+    if ((ref & kInOctantPool) != 0u)
+        octant_pool[ref & ~kInOctantPool] = value;
+    else
+        pool[ref] = value;
+}
 // Per thread: the job's state (kStateWords), 2 words per parent-tape entry (left operand;
 // decision | alive << 2 | negate << 4), then 4 words per stack slot (value, lo, hi, entry).
 layout(std430, binding = 8) buffer Scratch { uint scratch[]; };
@@ -41,7 +58,7 @@ layout(push_constant) uniform Push {
     uint jobs;
     uint threads;
     uint max_len;    // longest parent tape (entry scratch per thread)
-    uint max_stack;  // deepest stack
+    uint max_stack;  // deepest evaluation stack of the parent tapes
     uint flags;      // 1: far field on; 2: interval bounds
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's jobs: [first_job, jobs)
@@ -50,10 +67,11 @@ layout(push_constant) uniform Push {
 } pc;
 
 // The state of a job between rounds, at the start of its thread's scratch.
-const uint kStateWords = 8u;
+const uint kStateWords = 12u;
 const uint kPhaseEvaluate = 0u, kPhaseSweep = 1u, kPhaseWrite = 2u, kPhaseDone = 3u;
-// Words: phase, i (next entry), top (stack size), out_len, prims, at (tape offset), value,
-// constant (float bits).
+// Words: phase, i (next entry), top (stack size; in the write phase the next word), out_len,
+// prims, at (tape offset), value, constant (float bits), the parent's stack depth, the new
+// tape's stack depth now and at most.
 
 // Runs (a budget's worth of) pruning the tape at `parent` over the box; returns true in the
 // round that finishes the job, with `near`, `value`, `constant` and `tape` (the new tape, or the parent's when
@@ -65,7 +83,7 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out bool near,
     uint ebase = base + kStateWords;
     uint sbase = ebase + 2u * pc.max_len;
     bool interval = (pc.flags & 2u) != 0u;
-    uint len = pool[parent];
+    uint len = tape_read(parent, 0u);
     if (pc.round == 0u) {
         for (uint k = 0u; k < kStateWords; ++k) scratch[base + k] = 0u;
     }
@@ -78,7 +96,7 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out bool near,
     if (phase == kPhaseEvaluate) {
         // Stage 1: values and ranges at the centre, decisions (evaluate_cell).
         for (; i < len && budget > 0u; ++i, --budget) {
-            uint w = pool[parent + 2u + i];
+            uint w = tape_read(parent, 2u + i);
             uint n = tape_node(w);
             uint kind = nodes[n].kind;
             float spread = nodes[n].lipschitz * R;
@@ -135,6 +153,7 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out bool near,
             scratch[so + 2u] = floatBitsToUint(hi);
             scratch[so + 3u] = i;
             ++top;
+            scratch[base + 8u] = max(scratch[base + 8u], top);
         }
         if (i == len) {
             float v = uintBitsToFloat(scratch[sbase]);
@@ -142,7 +161,7 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out bool near,
             phase = kPhaseSweep;
             // Stage 2: the far-field test on the root's range (is_near_field).
             if ((pc.flags & 1u) != 0u) {
-                float L = nodes[tape_node(pool[parent + 2u + len - 1u])].lipschitz;
+                float L = nodes[tape_node(tape_read(parent, 2u + len - 1u))].lipschitz;
                 float clearance = (pc.csize.w - 1.0) * L * R;
                 float margin = kPruneMarginAbs + kPruneMarginRel * (abs(v) + L * R);
                 float lo = uintBitsToFloat(scratch[sbase + 1u]) - margin;
@@ -158,7 +177,7 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out bool near,
                 }
             }
             if (phase == kPhaseSweep) {
-                uint root_neg = tape_negated(pool[parent + 2u + len - 1u]) ? 1u : 0u;
+                uint root_neg = tape_negated(tape_read(parent, 2u + len - 1u)) ? 1u : 0u;
                 scratch[ebase + 2u * (len - 1u) + 1u] |= (1u << 2) | (root_neg << 4);
                 i = len;
             }
@@ -171,7 +190,7 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out bool near,
         for (; i > 0u && budget > 0u; --i, --budget) {
             uint e = i - 1u;
             uint f = scratch[ebase + 2u * e + 1u];
-            uint w = pool[parent + 2u + e];
+            uint w = tape_read(parent, 2u + e);
             if (((f >> 2) & 3u) != 1u) continue;
             if (is_primitive(tape_node(w))) {
                 ++out_len;
@@ -182,8 +201,8 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out bool near,
             uint d = f & 3u;
             if (d == kKeepBoth) {
                 ++out_len;
-                uint nl = tape_negated(pool[parent + 2u + l]) ? 1u : 0u;
-                uint nr = tape_negated(pool[parent + 2u + r]) ? 1u : 0u;
+                uint nl = tape_negated(tape_read(parent, 2u + l)) ? 1u : 0u;
+                uint nr = tape_negated(tape_read(parent, 2u + r)) ? 1u : 0u;
                 scratch[ebase + 2u * l + 1u] =
                     (scratch[ebase + 2u * l + 1u] & 3u) | (1u << 2) | (nl << 4);
                 scratch[ebase + 2u * r + 1u] =
@@ -191,26 +210,32 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out bool near,
                 continue;
             }
             uint win = d == kLeftWins ? l : r;
-            uint neg = ((f >> 4) & 1u) ^ (tape_negated(pool[parent + 2u + win]) ? 1u : 0u);
+            uint neg = ((f >> 4) & 1u) ^ (tape_negated(tape_read(parent, 2u + win)) ? 1u : 0u);
             scratch[ebase + 2u * e + 1u] = (f & 3u) | (2u << 2) | (f & 16u);
             scratch[ebase + 2u * win + 1u] =
                 (scratch[ebase + 2u * win + 1u] & 3u) | (1u << 2) | (neg << 4);
         }
         if (i == 0u) {
             atomicMax(max_len, out_len);
-            if (out_len == len) {
+            if (out_len == len && (parent & kInOctantPool) == 0u) {
                 at = parent;  // nothing pruned: share the parent's tape
+                atomicMax(max_depth, scratch[base + 8u]);
                 phase = kPhaseDone;
             } else {
-                at = atomicAdd(pool_used, out_len + 2u);
-                if (at < pc.pool_start || at + out_len + 2u > pool_capacity ||
-                    at + out_len + 2u < at) {
+                bool octant = pc.mode == 1u;
+                at = octant ? atomicAdd(octant_used, out_len + 2u)
+                            : atomicAdd(pool_used, out_len + 2u);
+                uint start = octant ? 0u : pc.pool_start;
+                uint capacity = octant ? octant_capacity : pool_capacity;
+                if (at < start || at + out_len + 2u > capacity || at + out_len + 2u < at ||
+                    at >= kInOctantPool) {
                     overflow = 1u;
                     at = kFarField;
                     phase = kPhaseDone;
                 } else {
-                    pool[at] = out_len;
-                    pool[at + 1u] = prims;
+                    if (octant) at |= kInOctantPool;
+                    tape_write(at, out_len);
+                    tape_write(at + 1u, prims);
                     phase = kPhaseWrite;
                     top = at + 2u;  // the next word to write
                 }
@@ -221,9 +246,17 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out bool near,
         for (; i < len && budget > 0u; ++i, --budget) {
             uint f = scratch[ebase + 2u * i + 1u];
             if (((f >> 2) & 3u) != 1u) continue;
-            pool[top++] = tape_word(tape_node(pool[parent + 2u + i]), ((f >> 4) & 1u) != 0u);
+            uint node = tape_node(tape_read(parent, 2u + i));
+            tape_write(top++, tape_word(node, ((f >> 4) & 1u) != 0u));
+            // Stack depth of the new tape: a primitive pushes, an operator pops two, pushes one.
+            uint depth = is_primitive(node) ? scratch[base + 9u] + 1u : scratch[base + 9u] - 1u;
+            scratch[base + 9u] = depth;
+            scratch[base + 10u] = max(scratch[base + 10u], depth);
         }
-        if (i == len) phase = kPhaseDone;
+        if (i == len) {
+            atomicMax(max_depth, scratch[base + 10u]);
+            phase = kPhaseDone;
+        }
     }
     scratch[base] = phase;
     scratch[base + 1u] = i;

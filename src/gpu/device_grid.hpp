@@ -38,7 +38,8 @@ static_assert(sizeof(GpuGridParams) == 64);
 
 // Counters of prune.comp / expand.comp.
 struct GpuCounters {
-    uint32_t pool_used, pool_capacity, overflow, max_len, near_jobs, next_blocks, pad[2];
+    uint32_t pool_used, pool_capacity, overflow, max_len, near_jobs, next_blocks, max_depth;
+    uint32_t octant_used, octant_capacity, pad[3];
 };
 
 // The pruned grid on the device.

@@ -90,9 +90,32 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     const GpuBlock root_block{0, 0, 0, 0};
     ctx.upload(blocks, &root_block, sizeof(root_block));
     uint64_t block_count = 1;
-    uint32_t max_len = sc.size();  // longest tape of the current parents
+    uint32_t max_len = sc.size();       // longest tape of the current parents
+    uint32_t max_depth = sc.max_stack;  // deepest evaluation stack of the current parents
     Buffer scratch;
+    // The octants' tapes of the current level (prune.comp: OctantPool), reused level by level.
+    uint64_t octant_capacity = 1 << 16;
+    Buffer octant_pool = ctx.create_buffer(octant_capacity * 4);
     double gpu_ms = 0;
+
+    // Replaces `pool` by one of at least `need` words (at most the device's limit), keeping
+    // its first `keep` words.
+    const auto grow = [&](Buffer& pool, uint64_t& cap, uint64_t need, uint64_t keep) {
+        if (cap >= max_pool_words)
+            throw GpuError("tape pool exceeds the device's largest storage buffer (" +
+                           std::to_string(ctx.max_buffer_bytes()) + " bytes)");
+        const uint64_t grown = std::min(std::max(cap * 2, need + need / 4), max_pool_words);
+        Buffer bigger = ctx.create_buffer(grown * 4);
+        if (keep > 0) {
+            ctx.begin();
+            ctx.copy(pool, bigger, keep * 4);
+            ctx.submit();
+        }
+        ctx.destroy(pool);
+        pool = bigger;
+        cap = grown;
+        ++st.pool_grows;
+    };
 
     const vec3 origin = sc.aabb.min, extent = sc.aabb.max - sc.aabb.min;
     const float L = sc.lipschitz[sc.root()];
@@ -102,7 +125,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     // One step: `jobs` cells or octants from their parents' tapes into `octants`/`cells`.
     const auto run_step = [&](uint32_t mode, uint32_t factor, uint64_t jobs, vec3 csize,
                               const Buffer& octants, const Buffer& cells) {
-        const uint64_t thread_bytes = (8ull + 2ull * max_len + 4ull * sc.max_stack) * 4;
+        const uint64_t thread_bytes = (12ull + 2ull * max_len + 4ull * max_depth) * 4;
         const uint32_t threads = ctx.threads_for(jobs, thread_bytes);
         // Under a loop limit (lavapipe), as many jobs per invocation as fit the limit, or one
         // job resumed over as many rounds as its three passes over the parent tape need;
@@ -117,7 +140,18 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             scratch = ctx.create_buffer(threads * thread_bytes);
         }
         for (;;) {
-            *counter = GpuCounters{g.pool_words, uint32_t(capacity), 0, 0, 0, 0, {0, 0}};
+            *counter = GpuCounters{g.pool_words,
+                                   uint32_t(capacity),
+                                   0,
+                                   0,
+                                   0,
+                                   0,
+                                   0,
+                                   0,
+                                   uint32_t(octant_capacity),
+                                   0,
+                                   0,
+                                   0};
             PrunePush push{vec4(origin.x, origin.y, origin.z, L),
                            vec4(csize.x, csize.y, csize.z, opt.far_field_c),
                            mode,
@@ -125,7 +159,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                            uint32_t(jobs),
                            threads,
                            max_len,
-                           sc.max_stack,
+                           max_depth,
                            flags,
                            g.pool_words,
                            0,
@@ -141,26 +175,16 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                     push.round = round;
                     ctx.dispatch(KernelId::kPrune,
                                  {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, &octants,
-                                  &cells, &counters, &scratch},
+                                  &cells, &counters, &scratch, &octant_pool},
                                  &push, sizeof(push), threads / kWorkgroupSize);
                 }
             gpu_ms += ctx.submit();
             if (!counter->overflow) break;
-            // Grow the pool (keeping what it holds) and redo the step.
-            const uint64_t need = uint64_t(counter->pool_used);
-            uint64_t grown = std::max<uint64_t>(capacity * 2, need + need / 4);
-            if (capacity >= max_pool_words)
-                throw GpuError("tape pool exceeds the device's largest storage buffer (" +
-                               std::to_string(ctx.max_buffer_bytes()) + " bytes)");
-            grown = std::min(grown, max_pool_words);
-            Buffer bigger = ctx.create_buffer(grown * 4);
-            ctx.begin();
-            ctx.copy(g.pool, bigger, uint64_t(g.pool_words) * 4);
-            ctx.submit();
-            ctx.destroy(g.pool);
-            g.pool = bigger;
-            capacity = grown;
-            ++st.pool_grows;
+            // Grow the pool that overflowed (keeping what the step started with) and redo it.
+            if (counter->pool_used > capacity)
+                grow(g.pool, capacity, counter->pool_used, g.pool_words);
+            if (counter->octant_used > octant_capacity)
+                grow(octant_pool, octant_capacity, counter->octant_used, 0);
         }
         g.pool_words = counter->pool_used;
         return *counter;
@@ -182,12 +206,14 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             Buffer octants = ctx.create_buffer(block_count * 8 * sizeof(PrunedCell));
             c = run_step(1, f, block_count * 8, csize, octants, cells);
             max_len = std::max(c.max_len, 1u);
+            max_depth = std::max(c.max_depth, 1u);
             c = run_step(2, f, total, csize, octants, cells);
             ctx.destroy(octants);
         } else {
             c = run_step(0, f, total, csize, cells, cells);
         }
         max_len = std::max(c.max_len, 1u);
+        max_depth = std::max(c.max_depth, 1u);
         if (!finest) {
             const uint32_t nf = res[li + 1] / res[li];
             Buffer next = ctx.create_buffer(uint64_t(c.near_jobs) * sizeof(GpuBlock));
@@ -206,6 +232,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     }
     ctx.destroy(blocks);
     ctx.destroy(scratch);
+    ctx.destroy(octant_pool);
 
     // All levels' cells in one buffer, for the lookups of the tracing and discretizing kernels.
     uint64_t cell_total = 0;

@@ -33,7 +33,7 @@ struct KernelCode {
 
 // Binding counts must match the shaders' layouts (shaders/gpu/*.comp).
 const KernelCode kKernels[] = {
-    {kPruneSpv, sizeof(kPruneSpv), 9},           {kExpandSpv, sizeof(kExpandSpv), 4},
+    {kPruneSpv, sizeof(kPruneSpv), 10},          {kExpandSpv, sizeof(kExpandSpv), 4},
     {kCellInfoSpv, sizeof(kCellInfoSpv), 3},     {kTraceSpv, sizeof(kTraceSpv), 9},
     {kDiscretizeSpv, sizeof(kDiscretizeSpv), 9},
 };
