@@ -95,39 +95,20 @@ Image render(Device& device, const Grid& grid, const RenderOptions& opt, RenderS
                                "); use --backend cpu or a GPU");
     }
 
-    Image img;
-    img.width = W;
-    img.height = H;
-    img.rgb.assign(pixels * 3, 0);
     std::vector<vec3> color(pixels);
-    uint64_t steps = 0, evals = 0, hits = 0;
-    double evals_max = 0;
+    std::vector<uint32_t> evals(pixels);
+    TraceTotals totals;
+    totals.trace_ms = gpu_ms;
     for (uint64_t i = 0; i < pixels; ++i) {
         const GpuPixel& p = host[i];
         const float v = 1.0f - 2.0f * (float(i / W) + 0.5f) / float(H);
         color[i] = p.color.w > 0 ? p.color.xyz() : background(v);
-        hits += p.color.w > 0 ? 1 : 0;
-        steps += p.steps;
-        evals += p.evals;
-        evals_max = std::max(evals_max, double(p.evals));
+        evals[i] = p.evals;
+        totals.hits += p.color.w > 0 ? 1 : 0;
+        totals.steps += p.steps;
+        totals.evals += p.evals;
     }
-    if (opt.shading == Shading::kHeatmap) {
-        const double top = opt.heatmap_max > 0 ? opt.heatmap_max : evals_max;
-        for (uint64_t i = 0; i < pixels; ++i) color[i] = heat_color(double(host[i].evals), top);
-        to_rgb8(color, img);
-        draw_heatmap_legend(img, top);
-    } else {
-        to_rgb8(color, img);
-    }
-    if (stats) {
-        const double px = double(pixels);
-        stats->trace_ms = gpu_ms;
-        stats->steps_avg = double(steps) / px;
-        stats->evals_avg = double(evals) / px;
-        stats->hit_fraction = double(hits) / px;
-        stats->evals_max = evals_max;
-    }
-    return img;
+    return finish_image(opt, color, evals, totals, stats);
 }
 
 void discretize(Device& device, const Grid& grid, uint32_t n, std::span<float> out,

@@ -2,6 +2,7 @@
 // legend, conversion to 8-bit sRGB.
 #pragma once
 
+#include <span>
 #include <vector>
 
 #include "sdfprune/render.hpp"
@@ -18,6 +19,15 @@ struct CameraFrame {
     float normal_h = 0;  // step of the tetrahedron-stencil gradient
 };
 CameraFrame camera_frame(const Scene& scene, const RenderOptions& options);
+
+// The last step of every tracer: the 8-bit image from the pixels' linear colors (or, for the
+// heatmap, from their node evaluations, with a legend) and the statistics.
+struct TraceTotals {
+    double trace_ms = 0;
+    uint64_t steps = 0, evals = 0, hits = 0;
+};
+Image finish_image(const RenderOptions& options, std::vector<vec3>& color,
+                   std::span<const uint32_t> evals, const TraceTotals& totals, RenderStats* stats);
 
 // Sky gradient; v in [-1, 1] from the bottom to the top of the view.
 vec3 background(float v);

@@ -173,10 +173,6 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
     const auto t_start = std::chrono::steady_clock::now();
     const uint32_t W = opt.width, H = opt.height;
     if (W == 0 || H == 0) throw std::invalid_argument("image size must be positive");
-    Image img;
-    img.width = W;
-    img.height = H;
-    img.rgb.assign(size_t(W) * H * 3, 0);
     std::vector<uint32_t> evals(size_t(W) * H, 0);
     std::vector<vec3> color(size_t(W) * H);
 
@@ -266,6 +262,17 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
     const double trace_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start)
             .count();
+    return finish_image(opt, color, evals, {trace_ms, total_steps, total_evals, hits}, stats);
+}
+
+}  // namespace
+
+Image finish_image(const RenderOptions& opt, std::vector<vec3>& color,
+                   std::span<const uint32_t> evals, const TraceTotals& totals, RenderStats* stats) {
+    Image img;
+    img.width = opt.width;
+    img.height = opt.height;
+    img.rgb.assign(size_t(opt.width) * opt.height * 3, 0);
     double max_evals = 0;
     for (uint32_t e : evals) max_evals = std::max(max_evals, double(e));
     if (opt.shading == Shading::kHeatmap) {
@@ -277,17 +284,15 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
         to_rgb8(color, img);
     }
     if (stats) {
-        const double px = double(W) * H;
-        stats->trace_ms = trace_ms;
-        stats->steps_avg = double(total_steps) / px;
-        stats->evals_avg = double(total_evals) / px;
-        stats->hit_fraction = double(hits) / px;
+        const double px = double(opt.width) * opt.height;
+        stats->trace_ms = totals.trace_ms;
+        stats->steps_avg = double(totals.steps) / px;
+        stats->evals_avg = double(totals.evals) / px;
+        stats->hit_fraction = double(totals.hits) / px;
         stats->evals_max = max_evals;
     }
     return img;
 }
-
-}  // namespace
 
 Image render(const PrunedGrid& grid, const RenderOptions& options, RenderStats* stats) {
     const Scene& sc = grid.scene();
