@@ -6,7 +6,9 @@
 #include <algorithm>
 #include <atomic>
 #include <cstdio>
+#include <cstring>
 #include <string>
+#include <unordered_map>
 #include <unordered_set>
 
 #include "prune_check.hpp"
@@ -302,9 +304,10 @@ void expect_stats_match(const PrunedGrid& g, const std::string& what) {
 
 // Walks the raw hierarchy as prune.hpp documents it (level 0 z-major, children blocks of f³)
 // and checks: the blocks tile every level exactly once; a near-field child's tape uses only
-// nodes of its parent's tape, is no longer, and is the parent's own tape when equally long;
-// near-field cells store the tree's value at their centre; far-field cells store a bound and a
-// centre value with the sign of f there and no larger magnitude.
+// nodes of its parent's tape, is no longer, and equals it when equally long (coarse tapes are
+// the full tree's unless PruneOptions::coarse_tapes); near-field cells store the tree's value at
+// their centre; far-field cells store a bound and a centre value with the sign of f there and no
+// larger magnitude.
 void check_hierarchy(const PrunedGrid& g, Failures& fail) {
     const Scene& sc = g.scene();
     const Aabb& box = g.aabb();
@@ -407,10 +410,10 @@ void check_hierarchy(const PrunedGrid& g, Failures& fail) {
                     os << "tape longer than its parent's";
                     where(os);
                 });
-            if (ref.parent_tape != kNone && tape.size() == parent.size() &&
-                c.tape != ref.parent_tape)
+            if (tape.size() == parent.size() &&
+                !std::equal(tape.begin(), tape.end(), parent.begin()))
                 fail.add([&](std::ostream& os) {
-                    os << "unchanged tape not shared with the parent";
+                    os << "tape as long as its parent's but different";
                     where(os);
                 });
             if (finest) continue;
@@ -452,6 +455,7 @@ TEST(PruneStats, SingleSphere) {
         PruneOptions o;
         o.resolution = 64;
         o.bounds = bounds;
+        o.coarse_tapes = true;
         const PrunedGrid g = prune(sc, o);
         const PruneStats& st = g.stats();
         EXPECT_EQ(st.active_max, 1u);
@@ -540,6 +544,7 @@ TEST(PruneStats, RandomScenesMatchBruteForce) {
         o.resolution = i % 2 ? 64 : 32;
         o.factor = i % 3 == 2 ? 2 : 4;
         o.bounds = i % 2 ? CellBounds::kLipschitz : CellBounds::kInterval;
+        o.coarse_tapes = true;
         const PrunedGrid g = prune(sc, o);
         const std::string what = "scene " + std::to_string(i);
         expect_stats_match(g, what);
@@ -555,6 +560,76 @@ TEST(PruneStats, RandomScenesMatchBruteForce) {
         Failures fail2(what + " hierarchy, no far field");
         check_hierarchy(all, fail2);
         EXPECT_EQ(fail2.count(), 0u);
+    }
+}
+
+// Dropping the coarse tapes (the default) changes nothing else: same cells, same finest tapes,
+// same statistics; coarse near-field cells refer to the full tree (offset 0). Identical tapes
+// pruned in one chunk of 1024 cells are stored once.
+TEST(PruneStats, CoarseTapesOnlyChangeCoarseCells) {
+    for (uint32_t i = 0; i < 4; ++i) {
+        test::RandomSceneSpec spec;
+        spec.primitives = 12 + 6 * i;
+        spec.tree = test::TreeShape(i % 4);
+        spec.placement = test::Placement(i % 5);
+        const Scene sc = test::random_scene(4100 + i, spec);
+        PruneOptions o;
+        o.resolution = i % 2 ? 64 : 48;
+        o.factor = i == 3 ? 2 : 4;
+        o.far_field = i != 2;
+        const PrunedGrid dropped = prune(sc, o);
+        o.coarse_tapes = true;
+        const PrunedGrid kept = prune(sc, o);
+        const std::string what = "scene " + std::to_string(i);
+        ASSERT_EQ(dropped.level_count(), kept.level_count()) << what;
+        EXPECT_LT(dropped.tape_pool().size(), kept.tape_pool().size()) << what;
+        const auto full = dropped.tape_at(0);
+        EXPECT_TRUE(std::equal(full.begin(), full.end(), sc.full_tape.begin(), sc.full_tape.end()))
+            << what;
+        uint64_t differ = 0, coarse_near = 0, duplicates = 0;
+        for (uint32_t l = 0; l < kept.level_count(); ++l) {
+            const bool finest = l + 1 == kept.level_count();
+            const auto a = dropped.level_cells(l), b = kept.level_cells(l);
+            ASSERT_EQ(a.size(), b.size()) << what;
+            std::unordered_map<std::string, uint32_t> chunk_tapes;  // tape words -> offset
+            for (size_t c = 0; c < a.size(); ++c) {
+                if (c % 1024 == 0) chunk_tapes.clear();
+                const bool same_rest = a[c].children == b[c].children &&
+                                       std::memcmp(&a[c].value, &b[c].value, 4) == 0 &&
+                                       std::memcmp(&a[c].bound, &b[c].bound, 4) == 0;
+                if (b[c].tape == PrunedCell::kFarField) {
+                    differ += same_rest && a[c].tape == PrunedCell::kFarField ? 0 : 1;
+                    continue;
+                }
+                if (!finest) {
+                    ++coarse_near;
+                    differ += same_rest && a[c].tape == 0 ? 0 : 1;
+                    continue;
+                }
+                const auto ta = dropped.tape_at(a[c].tape), tb = kept.tape_at(b[c].tape);
+                const bool same_tape =
+                    std::equal(ta.begin(), ta.end(), tb.begin(), tb.end()) &&
+                    dropped.tape_pool()[a[c].tape + 1] == kept.tape_pool()[b[c].tape + 1];
+                differ += same_rest && same_tape ? 0 : 1;
+                const std::string key(reinterpret_cast<const char*>(ta.data()), ta.size_bytes());
+                const auto [it, fresh] = chunk_tapes.try_emplace(key, a[c].tape);
+                duplicates += !fresh && it->second != a[c].tape ? 1 : 0;
+            }
+        }
+        EXPECT_EQ(differ, 0u) << what;
+        EXPECT_GT(coarse_near, 0u) << what;
+        EXPECT_EQ(duplicates, 0u) << what;
+        const PruneStats &sa = dropped.stats(), &sb = kept.stats();
+        EXPECT_EQ(sa.near_field_cells, sb.near_field_cells) << what;
+        EXPECT_EQ(sa.active_avg, sb.active_avg) << what;
+        EXPECT_EQ(sa.active_std, sb.active_std) << what;
+        EXPECT_EQ(sa.tape_avg, sb.tape_avg) << what;
+        EXPECT_EQ(sa.tape_max, sb.tape_max) << what;
+        EXPECT_EQ(sa.tape_words_visited, sb.tape_words_visited) << what;
+        EXPECT_LT(sa.tape_bytes, sb.tape_bytes) << what;
+        Failures fail(what + " hierarchy, coarse tapes dropped");
+        check_hierarchy(dropped, fail);
+        EXPECT_EQ(fail.count(), 0u);
     }
 }
 
@@ -575,6 +650,7 @@ TEST(PruneStats, FarFieldSignsHoldForSmallC) {
                 o.resolution = factor == 4 ? 128 : 64;
                 o.factor = factor;
                 o.far_field_c = C;
+                o.coarse_tapes = o.resolution <= 64;  // for check_hierarchy
                 const PrunedGrid g = prune(sc, o);
                 std::ostringstream what;
                 what << "scene " << i << ", grid " << o.resolution << ", factor " << factor

@@ -8,8 +8,10 @@
 //     value everywhere in the cell, usually a handful of nodes, or
 //   - far-field: a constant c with sign(c) = sign(f) and |c| <= |f| everywhere in the cell,
 //     a safe sphere-tracing step.
-// Storage is sparse: only children of near-field cells exist; a child whose tape did not change
-// shares its parent's tape. Output is identical whatever the thread count.
+// Storage is sparse: only children of near-field cells exist, and identical tapes of cells pruned
+// together (a chunk of 1024 cells) are stored once. Only the finest level's tapes are kept unless
+// PruneOptions::coarse_tapes asks for the coarse ones too. Output is identical whatever the thread
+// count.
 //
 // Thread-safety: a PrunedGrid is immutable; any number of threads may query it. It refers to
 // the Scene it was built from, which must outlive it.
@@ -41,7 +43,11 @@ struct PruneOptions {
     bool hierarchy = true;      // false: prune the full tree directly in every finest cell
     float far_field_c = 2.0f;   // a cell is far-field when |f(centre)| > C·L·R (C >= 1)
     CellBounds bounds = CellBounds::kInterval;
-    int threads = 0;            // 0 = all hardware threads
+    // Keep the pruned tapes of coarse near-field cells in the tape pool (inspection, tests).
+    // False: those cells refer to the full tree's tape (offset 0), and the pool holds only the
+    // finest level's tapes: every lookup is the same, memory is far smaller on large scenes.
+    bool coarse_tapes = false;
+    int threads = 0;  // 0 = all hardware threads
     // Called from the calling thread with the fraction done in [0, 1]; may be empty.
     std::function<void(double)> progress;
     // When set and true, prune() stops early and throws PruneCancelled.
@@ -58,9 +64,9 @@ struct PruneCancelled : std::runtime_error {
 std::vector<uint32_t> grid_levels(uint32_t resolution, uint32_t factor, bool hierarchy = true);
 
 struct PruneStats {
-    uint32_t grid = 0;               // finest resolution
-    uint64_t cells = 0;              // grid³
-    uint64_t near_field_cells = 0;   // finest cells holding a tape
+    uint32_t grid = 0;              // finest resolution
+    uint64_t cells = 0;             // grid³
+    uint64_t near_field_cells = 0;  // finest cells holding a tape
     // Active primitives per finest cell over all cells, a far-field cell counting as 1 (the
     // metric of the paper's Table 2).
     double active_avg = 0, active_std = 0;
@@ -70,8 +76,10 @@ struct PruneStats {
     uint32_t tape_max = 0;
     double near_field_prims_avg = 0;  // active primitives over near-field finest cells only
     double prune_ms = 0;              // wall time of prune()
-    uint64_t prune_peak_bytes = 0;    // peak bytes held by pruning's own buffers
-    uint64_t tape_bytes = 0;          // bytes of the final structure (cells + tapes)
+    // Peak bytes allocated at once by pruning's own buffers: tapes (the pool, the parents' and
+    // the current level's), cells, blocks, per-thread scratch. The scene is not counted.
+    uint64_t prune_peak_bytes = 0;
+    uint64_t tape_bytes = 0;          // bytes of the final structure (cells + tape pool)
     uint64_t cells_pruned = 0;        // cells whose tape was pruned, all levels
     uint64_t tape_words_visited = 0;  // tape words processed by the pruning, all levels
     std::vector<uint32_t> levels;
@@ -80,12 +88,14 @@ struct PruneStats {
 // One cell of a level.
 struct PrunedCell {
     static constexpr uint32_t kFarField = 0xffffffffu;
-    uint32_t tape = kFarField;  // offset of the tape's header in PrunedGrid::tape_pool()
-    uint32_t children = 0;      // near-field, not finest: first cell of its child block
+    // Offset of the tape's header in PrunedGrid::tape_pool(). Coarse levels: 0 (the full tree,
+    // valid but not pruned) unless PruneOptions::coarse_tapes.
+    uint32_t tape = kFarField;
+    uint32_t children = 0;  // near-field, not finest: first cell of its child block
     // The tree's value at the cell centre; for far-field cells made from a far-field octant
     // (see prune.cpp) a same-sign value no larger in magnitude, which is all lookups need.
     float value = 0;
-    float bound = 0;            // far-field: constant valid over the whole cell
+    float bound = 0;  // far-field: constant valid over the whole cell
 };
 
 // The far-field arithmetic, in one place (sdf_math.h; PrunedGrid::far_field_constant,
@@ -96,13 +106,13 @@ using math::far_field_reach;
 // What a finest cell holds.
 struct CellView {
     bool far_field = true;
-    float constant = 0;                // far-field: sign(f)·(lower bound of |f|) in this cell
-    std::span<const uint32_t> tape;    // near-field
-    uint32_t primitives = 0;           // near-field: primitives in the tape
+    float constant = 0;              // far-field: sign(f)·(lower bound of |f|) in this cell
+    std::span<const uint32_t> tape;  // near-field
+    uint32_t primitives = 0;         // near-field: primitives in the tape
 };
 
 class PrunedGrid {
-public:
+  public:
     const Scene& scene() const { return *scene_; }
     const Aabb& aabb() const { return scene_->aabb; }
     uint32_t resolution() const { return levels_.back().res; }
@@ -143,16 +153,17 @@ public:
     // z-major order (index (z·r + y)·r + x). Each near-field cell of level l < last has its
     // children in level l+1 at [children, children + f³), f = level_resolution(l+1) /
     // level_resolution(l), in the same z-major order within the block; far-field cells have no
-    // children. The tape pool holds each tape as [length, primitive count, words...].
+    // children. The tape pool holds each tape as [length, primitive count, words...], the full
+    // tree's first (offset 0); cells may share a tape.
     std::span<const PrunedCell> level_cells(uint32_t level) const { return levels_[level].cells; }
     uint32_t level_count() const { return uint32_t(levels_.size()); }
     uint32_t level_resolution(uint32_t level) const { return levels_[level].res; }
-    std::span<const uint32_t> tape_pool() const { return pool_; }
+    std::span<const uint32_t> tape_pool() const { return {pool_.data, pool_.size}; }
     std::span<const uint32_t> tape_at(uint32_t offset) const {
-        return {pool_.data() + offset + 2, pool_[offset]};
+        return {pool_.data + offset + 2, pool_.data[offset]};
     }
 
-private:
+  private:
     friend PrunedGrid prune(const Scene&, const PruneOptions&);
     struct Level {
         uint32_t res = 0;     // cells per axis of the whole level
@@ -176,7 +187,21 @@ private:
     const Scene* scene_ = nullptr;
     PruneOptions options_;
     std::vector<Level> levels_;
-    std::vector<uint32_t> pool_;
+    // The tape pool grows with realloc while the finest level is appended: a large block is
+    // moved page by page (mremap on Linux) where a std::vector would copy it next to its old
+    // buffer, holding both at once.
+    struct Pool {
+        uint32_t* data = nullptr;
+        size_t size = 0, capacity = 0;
+        Pool() = default;
+        Pool(const Pool& other);
+        Pool(Pool&& other) noexcept;
+        Pool& operator=(Pool other) noexcept;
+        ~Pool();
+        void append(std::span<const uint32_t> words);  // grows the capacity by half at least
+        void shrink_to_fit();
+    };
+    Pool pool_;
     vec3 cell_size_;
     vec3 inv_cell_size_;
     std::vector<vec3> level_size_;  // cell size of each level
@@ -196,8 +221,8 @@ PrunedGrid prune(const Scene& scene, const PruneOptions& options = {});
 // An axis-aligned cell.
 struct CellBox {
     vec3 centre;
-    vec3 half;      // half sizes
-    float radius;   // half-diagonal R = |half|
+    vec3 half;     // half sizes
+    float radius;  // half-diagonal R = |half|
 };
 
 // Working memory of one pruning thread.

@@ -1,15 +1,29 @@
 // prune.cpp — the hierarchy (DESIGN.md §5): level by level, every child of a near-field cell
 // is pruned starting from its parent's tape, in parallel over fixed chunks of cells so that the
 // result does not depend on the thread count. Children of far-field cells are not stored.
+//
+// Memory: a level's tapes stay in their chunks' buffers, which are the next level's parents; the
+// chunks are pruned in waves, and after each wave the parents' buffers no block left refers to
+// are freed. Finest tapes go to the pool wave by wave; coarse tapes are dropped once they have
+// served as parents (PruneOptions::coarse_tapes keeps them).
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <bit>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
+#include <new>
 #include <thread>
+#include <unordered_map>
+#include <utility>
+
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 #include "sdfprune/eval.hpp"
 #include "sdfprune/prune.hpp"
@@ -27,24 +41,105 @@ std::vector<uint32_t> grid_levels(uint32_t resolution, uint32_t factor, bool hie
     return levels;
 }
 
+PrunedGrid::Pool::Pool(const Pool& other) : size(other.size), capacity(other.size) {
+    if (size == 0) return;
+    data = static_cast<uint32_t*>(std::malloc(size * sizeof(uint32_t)));
+    if (!data) throw std::bad_alloc();
+    std::memcpy(data, other.data, size * sizeof(uint32_t));
+}
+
+PrunedGrid::Pool::Pool(Pool&& other) noexcept
+    : data(std::exchange(other.data, nullptr)),
+      size(std::exchange(other.size, 0)),
+      capacity(std::exchange(other.capacity, 0)) {}
+
+PrunedGrid::Pool& PrunedGrid::Pool::operator=(Pool other) noexcept {
+    std::swap(data, other.data);
+    std::swap(size, other.size);
+    std::swap(capacity, other.capacity);
+    return *this;
+}
+
+PrunedGrid::Pool::~Pool() {
+    std::free(data);
+}
+
+void PrunedGrid::Pool::append(std::span<const uint32_t> words) {
+    if (words.empty()) return;
+    if (size + words.size() > capacity) {
+        const size_t want = std::max(size + words.size(), capacity + capacity / 2);
+        void* p = std::realloc(data, want * sizeof(uint32_t));
+        if (!p) throw std::bad_alloc();
+        data = static_cast<uint32_t*>(p);
+        capacity = want;
+    }
+    std::memcpy(data + size, words.data(), words.size_bytes());
+    size += words.size();
+}
+
+void PrunedGrid::Pool::shrink_to_fit() {
+    if (size == 0 || size == capacity) return;
+    if (void* p = std::realloc(data, size * sizeof(uint32_t))) {
+        data = static_cast<uint32_t*>(p);
+        capacity = size;
+    }
+}
+
 namespace {
 
 // Cells pruned per parallel task: fixed, so chunk boundaries (and the output) never depend on
 // the number of threads.
 constexpr uint32_t kChunkCells = 1024;
 
-// Tape offsets inside a chunk's own buffer are marked with this bit until the chunk is merged.
-constexpr uint32_t kLocalTape = 0x80000000u;
+// Freed bytes worth handing back to the system (return_freed_memory).
+constexpr uint64_t kReturnBytes = 64u << 20;
 
+// One chunk's output: its cells' tapes as [length, primitives, words...] (the cells hold offsets
+// into this buffer until it is placed in the pool), and statistics.
 struct ChunkOut {
-    std::vector<uint32_t> words;  // tapes as [length, primitives, words...]
+    std::vector<uint32_t> words;
     // Finest level only: statistics of the chunk's near-field cells.
     uint64_t near = 0, tape_sum = 0, prim_sum = 0, prim_sq_sum = 0;
     uint32_t tape_max = 0, prim_max = 0;
     uint64_t words_visited = 0, pruned = 0;
 };
 
-uint64_t bytes_of(const auto& v) { return uint64_t(v.capacity()) * sizeof(v[0]); }
+// Adds a chunk's counts to the sums in `st` (in chunk order, whatever the thread count).
+void add_chunk_stats(const ChunkOut& o, PruneStats& st) {
+    st.near_field_cells += o.near;
+    st.tape_avg += double(o.tape_sum);
+    st.tape_max = std::max(st.tape_max, o.tape_max);
+    st.active_avg += double(o.prim_sum);
+    st.active_std += double(o.prim_sq_sum);
+    st.active_max = std::max(st.active_max, o.prim_max);
+    st.cells_pruned += o.pruned;
+    st.tape_words_visited += o.words_visited;
+}
+
+uint64_t bytes_of(const auto& v) {
+    return uint64_t(v.capacity()) * sizeof(v[0]);
+}
+
+// The words of the tape whose header ([length, primitives]) is at `header`.
+std::span<const uint32_t> tape_words(const uint32_t* header) {
+    return {header + 2, header[0]};
+}
+
+// FNV-1a over a tape's header and words: finds identical tapes within a chunk.
+uint64_t tape_hash(std::span<const uint32_t> tape) {
+    uint64_t h = 0xcbf29ce484222325ull;
+    for (const uint32_t w : tape) h = (h ^ w) * 0x100000001b3ull;
+    return h;
+}
+
+// Hands memory freed to the C library back to the system. glibc keeps freed blocks below its
+// (self-raising) mmap threshold in its heaps, where the parents freed during a level would go on
+// counting in the process's memory; elsewhere nothing to do.
+void return_freed_memory() {
+#if defined(__GLIBC__)
+    malloc_trim(0);
+#endif
+}
 
 }  // namespace
 
@@ -61,11 +156,11 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     g.cell_size_ = extent / float(N);
     g.inv_cell_size_ = vec3(1.0f / g.cell_size_.x, 1.0f / g.cell_size_.y, 1.0f / g.cell_size_.z);
 
-    // The full tape is the parent of level 0.
-    g.pool_.reserve(sc.size() + 2);
-    g.pool_.push_back(sc.size());
-    g.pool_.push_back(sc.primitive_count());
-    g.pool_.insert(g.pool_.end(), sc.full_tape.begin(), sc.full_tape.end());
+    // The full tape opens the pool and is the parent of level 0.
+    std::vector<uint32_t> root{sc.size(), sc.primitive_count()};
+    root.insert(root.end(), sc.full_tape.begin(), sc.full_tape.end());
+    g.pool_.append(root);
+    const auto pool_bytes = [&] { return uint64_t(g.pool_.capacity) * sizeof(uint32_t); };
 
     tbb::enumerable_thread_specific<CellScratch> scratch;
     PruneStats& st = g.stats_;
@@ -76,12 +171,18 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
 
     // Far-field cells above the finest level count for all the finest cells they cover.
     uint64_t far_finest = 0;
-    // Parents of the current level: for each block, its origin (in this level's cells) and tape.
+    // The previous level's tapes, one buffer per chunk, and the current level's blocks: one per
+    // near-field parent, with its origin (in this level's cells), its parent's chunk and tape.
     struct Block {
         uint32_t x, y, z;
-        uint32_t tape;
+        uint32_t chunk;
+        const uint32_t* tape;  // header in parents[chunk]
     };
-    std::vector<Block> blocks{{0, 0, 0, 0}};
+    std::vector<std::vector<uint32_t>> parents;
+    parents.push_back(std::move(root));
+    std::vector<Block> blocks{{0, 0, 0, 0, parents[0].data()}};
+    uint64_t parent_bytes = bytes_of(parents[0]), done_cells_bytes = 0;
+    uint64_t unreturned = 0;  // bytes freed since the last return_freed_memory()
 
     for (uint32_t li = 0; li < res.size(); ++li) {
         const bool finest = li + 1 == res.size();
@@ -111,95 +212,86 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
             if (opt.progress && std::this_thread::get_id() == caller)
                 opt.progress((double(li) + double(done) / chunks) / double(res.size()));
         };
-        with_threads(opt.threads, [&] {
-            tbb::parallel_for(uint32_t(0), chunks, [&](uint32_t c) {
-                struct OnExit {
-                    const decltype(report)& f;
-                    ~OnExit() { f(); }
-                } on_exit{report};
-                if (cancelled.load(std::memory_order_relaxed)) return;
-                if (opt.cancel && opt.cancel->load(std::memory_order_relaxed)) {
-                    cancelled = true;
+        const auto prune_chunk = [&](uint32_t c) {
+            struct OnExit {
+                const decltype(report)& f;
+                ~OnExit() { f(); }
+            } on_exit{report};
+            if (cancelled.load(std::memory_order_relaxed)) return;
+            if (opt.cancel && opt.cancel->load(std::memory_order_relaxed)) {
+                cancelled = true;
+                return;
+            }
+            CellScratch& s = scratch.local();
+            ChunkOut& out = outs[c];
+            const uint64_t begin = uint64_t(c) * kChunkCells;
+            const uint64_t end = std::min(total, begin + kChunkCells);
+            const vec3 origin = sc.aabb.min;
+            // The chunk's tapes by hash: a tape equal to one already stored is not stored again.
+            std::unordered_map<uint64_t, uint32_t> stored;
+
+            // Prunes cell i from `parent`, leaving far-field cells without a tape.
+            const auto prune_cell = [&](uint64_t i, std::span<const uint32_t> parent,
+                                        const CellBox& box) {
+                PrunedCell& cell = level.cells[i];
+                cell.value = evaluate_cell(sc, parent, box, opt.bounds, s);
+                out.words_visited += parent.size();
+                ++out.pruned;
+                float constant = 0;
+                if (opt.far_field &&
+                    !is_near_field(sc, parent, box, opt.far_field_c, s, constant)) {
+                    cell.tape = PrunedCell::kFarField;
+                    cell.bound = constant;
                     return;
                 }
-                CellScratch& s = scratch.local();
-                ChunkOut& out = outs[c];
-                const uint64_t begin = uint64_t(c) * kChunkCells;
-                const uint64_t end = std::min(total, begin + kChunkCells);
-                uint32_t last_local = kNone;  // the chunk's previous new tape, for sharing
-                const vec3 origin = sc.aabb.min;
-
-                // Prunes cell i from `parent` (referenced as parent_ref when shared); returns
-                // false for a far-field cell.
-                const auto prune_cell = [&](uint64_t i, std::span<const uint32_t> parent,
-                                            const auto& parent_ref, const CellBox& box) {
-                    PrunedCell& cell = level.cells[i];
-                    cell.value = evaluate_cell(sc, parent, box, opt.bounds, s);
-                    out.words_visited += parent.size();
-                    ++out.pruned;
-                    float constant = 0;
-                    if (opt.far_field &&
-                        !is_near_field(sc, parent, box, opt.far_field_c, s, constant)) {
-                        cell.tape = PrunedCell::kFarField;
-                        cell.bound = constant;
-                        return;
-                    }
-                    const size_t at = out.words.size();
-                    out.words.push_back(0);
-                    out.words.push_back(0);
-                    const uint32_t prims = compact_tape(sc, parent, s, out.words);
-                    const uint32_t len = uint32_t(out.words.size() - at - 2);
-                    out.words[at] = len;
-                    out.words[at + 1] = prims;
-                    if (len == parent.size()) {
-                        // Nothing pruned: share the parent's tape.
-                        out.words.resize(at);
-                        cell.tape = parent_ref();
-                    } else if (last_local != kNone && out.words[last_local] == len &&
-                               std::equal(out.words.begin() + at + 2, out.words.end(),
-                                          out.words.begin() + last_local + 2)) {
-                        out.words.resize(at);
-                        cell.tape = kLocalTape | last_local;
-                    } else {
-                        cell.tape = kLocalTape | uint32_t(at);
-                        last_local = uint32_t(at);
-                    }
-                    if (finest) {
-                        ++out.near;
-                        out.tape_sum += len;
-                        out.tape_max = std::max(out.tape_max, len);
-                        out.prim_sum += prims;
-                        out.prim_sq_sum += uint64_t(prims) * prims;
-                        out.prim_max = std::max(out.prim_max, prims);
-                    }
-                };
-                const auto cell_box = [&](uint32_t x, uint32_t y, uint32_t z) {
-                    CellBox box = proto;
-                    box.centre = origin + vec3(float(x) + 0.5f, float(y) + 0.5f,
-                                               float(z) + 0.5f) * csize;
-                    return box;
-                };
-
-                if (!split) {
-                    for (uint64_t i = begin; i < end; ++i) {
-                        const Block& b = blocks[i / per_block];
-                        const uint32_t local = uint32_t(i % per_block);
-                        const std::span<const uint32_t> parent(g.pool_.data() + b.tape + 2,
-                                                               g.pool_[b.tape]);
-                        prune_cell(i, parent, [&] { return b.tape; },
-                                   cell_box(b.x + local % f, b.y + (local / f) % f,
-                                            b.z + local / (f * f)));
-                    }
-                    return;
+                const size_t at = out.words.size();
+                out.words.push_back(0);
+                out.words.push_back(0);
+                const uint32_t prims = compact_tape(sc, parent, s, out.words);
+                const uint32_t len = uint32_t(out.words.size() - at - 2);
+                out.words[at] = len;
+                out.words[at + 1] = prims;
+                const std::span<const uint32_t> tape(out.words.data() + at, len + 2);
+                const auto [it, fresh] = stored.try_emplace(tape_hash(tape), uint32_t(at));
+                if (!fresh && out.words[it->second] == len &&
+                    std::equal(tape.begin(), tape.end(), out.words.begin() + it->second)) {
+                    out.words.resize(at);
+                    cell.tape = it->second;
+                } else {
+                    cell.tape = uint32_t(at);
                 }
+                if (finest) {
+                    ++out.near;
+                    out.tape_sum += len;
+                    out.tape_max = std::max(out.tape_max, len);
+                    out.prim_sum += prims;
+                    out.prim_sq_sum += uint64_t(prims) * prims;
+                    out.prim_max = std::max(out.prim_max, prims);
+                }
+            };
+            const auto cell_box = [&](uint32_t x, uint32_t y, uint32_t z) {
+                CellBox box = proto;
+                box.centre =
+                    origin + vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * csize;
+                return box;
+            };
+
+            if (!split) {
+                for (uint64_t i = begin; i < end; ++i) {
+                    const Block& b = blocks[i / per_block];
+                    const uint32_t local = uint32_t(i % per_block);
+                    prune_cell(
+                        i, tape_words(b.tape),
+                        cell_box(b.x + local % f, b.y + (local / f) % f, b.z + local / (f * f)));
+                }
+            } else {
                 // Each block in two steps: its 8 octants are pruned first (not stored), then
                 // each cell from its octant's tape. Shorter parent tapes for the cells, same
                 // guarantees: a tape valid in an octant is valid in every cell inside it.
                 const uint32_t hf = f / 2;
                 for (uint64_t bi = begin / per_block; bi < end / per_block; ++bi) {
                     const Block& b = blocks[bi];
-                    const std::span<const uint32_t> parent(g.pool_.data() + b.tape + 2,
-                                                           g.pool_[b.tape]);
+                    const std::span<const uint32_t> parent = tape_words(b.tape);
                     for (uint32_t o = 0; o < 8; ++o) {
                         const uint32_t ox = (o & 1) * hf, oy = ((o >> 1) & 1) * hf,
                                        oz = ((o >> 2) & 1) * hf;
@@ -208,37 +300,20 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                         obox.radius = proto.radius * float(hf);
                         obox.centre = origin + vec3(float(b.x + ox) + 0.5f * float(hf),
                                                     float(b.y + oy) + 0.5f * float(hf),
-                                                    float(b.z + oz) + 0.5f * float(hf)) * csize;
+                                                    float(b.z + oz) + 0.5f * float(hf)) *
+                                                   csize;
                         const float ov = evaluate_cell(sc, parent, obox, opt.bounds, s);
                         out.words_visited += parent.size();
                         float oconst = 0;
-                        const bool far = opt.far_field && !is_near_field(sc, parent, obox,
-                                                                          opt.far_field_c, s,
-                                                                          oconst);
+                        const bool far =
+                            opt.far_field &&
+                            !is_near_field(sc, parent, obox, opt.far_field_c, s, oconst);
                         std::span<const uint32_t> otape = parent;
-                        uint32_t oref = b.tape;
                         if (!far) {
                             s.octant.clear();
                             compact_tape(sc, parent, s, s.octant);
-                            if (s.octant.size() < parent.size()) {
-                                otape = s.octant;
-                                oref = kNone;  // stored on first use
-                            }
+                            if (s.octant.size() < parent.size()) otape = s.octant;
                         }
-                        const auto octant_ref = [&] {
-                            if (oref == kNone) {
-                                oref = kLocalTape | uint32_t(out.words.size());
-                                out.words.push_back(uint32_t(s.octant.size()));
-                                out.words.push_back(0);
-                                out.words.insert(out.words.end(), s.octant.begin(),
-                                                 s.octant.end());
-                                uint32_t prims = 0;
-                                for (uint32_t w : s.octant)
-                                    prims += sc.is_primitive(math::tape_node(w)) ? 1 : 0;
-                                out.words[(oref & ~kLocalTape) + 1] = prims;
-                            }
-                            return oref;
-                        };
                         for (uint32_t lz = oz; lz < oz + hf; ++lz)
                             for (uint32_t ly = oy; ly < oy + hf; ++ly)
                                 for (uint32_t lx = ox; lx < ox + hf; ++lx) {
@@ -247,7 +322,7 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                                     if (!far) {
                                         // otape may be s.octant: the cell's pruning uses the
                                         // other scratch arrays only.
-                                        prune_cell(i, otape, octant_ref, box);
+                                        prune_cell(i, otape, box);
                                         continue;
                                     }
                                     // A far octant makes far cells: its constant holds in each;
@@ -258,52 +333,73 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                                         g.lipschitz_ * math::length(box.centre - obox.centre);
                                     cell.tape = PrunedCell::kFarField;
                                     cell.bound = oconst;
-                                    cell.value = ov > 0 ? std::max(ov - reach, oconst) : std::min(ov + reach, oconst);
+                                    cell.value = ov > 0 ? std::max(ov - reach, oconst)
+                                                        : std::min(ov + reach, oconst);
                                 }
                     }
                 }
-            });
+            }
+            // Coarse buffers live on as the next level's parents: no slack.
+            if (!finest) out.words.shrink_to_fit();
+        };
+
+        // Moves chunk c's tapes into the pool (or, for coarse tapes not kept, points its
+        // near-field cells to the full tree's tape).
+        const auto place_chunk = [&](uint32_t c, bool into_pool) {
+            const uint64_t base = g.pool_.size;
+            if (into_pool) {
+                if (base + outs[c].words.size() >= PrunedCell::kFarField)
+                    throw std::length_error("tape pool exceeds 2^32 - 1 words");
+                g.pool_.append(outs[c].words);
+            }
+            const uint64_t end = std::min(total, uint64_t(c + 1) * kChunkCells);
+            for (uint64_t i = uint64_t(c) * kChunkCells; i < end; ++i) {
+                uint32_t& t = level.cells[i].tape;
+                if (t != PrunedCell::kFarField) t = into_pool ? uint32_t(base + t) : 0;
+            }
+        };
+        uint64_t level_bytes = bytes_of(level.cells);  // this level's cells and kept buffers
+        uint32_t released = 0;                         // parents[0, released) are freed
+        with_threads(opt.threads, [&] {
+            // Waves of chunks: enough for load balance, few enough that parents are freed early
+            // and finest buffers are few. Output does not depend on the wave size.
+            const uint32_t wave =
+                16 * uint32_t(std::max(1, tbb::this_task_arena::max_concurrency()));
+            for (uint32_t w0 = 0; w0 < chunks; w0 += wave) {
+                const uint32_t w1 = std::min(chunks, w0 + wave);
+                tbb::parallel_for(w0, w1, prune_chunk);
+                if (cancelled) return;
+                uint64_t wave_bytes = 0;
+                for (uint32_t c = w0; c < w1; ++c) {
+                    wave_bytes += bytes_of(outs[c].words);
+                    add_chunk_stats(outs[c], st);
+                }
+                if (finest) {
+                    for (uint32_t c = w0; c < w1; ++c) place_chunk(c, true);
+                } else {
+                    level_bytes += wave_bytes;
+                    wave_bytes = 0;
+                }
+                peak = std::max(peak, pool_bytes() + parent_bytes + level_bytes + wave_bytes +
+                                          done_cells_bytes + bytes_of(blocks));
+                if (finest)
+                    for (uint32_t c = w0; c < w1; ++c) std::vector<uint32_t>().swap(outs[c].words);
+                // Free the parents that no block from the next wave on refers to.
+                const uint64_t next_cell = uint64_t(w1) * kChunkCells;
+                const uint32_t needed = next_cell < total ? blocks[next_cell / per_block].chunk
+                                                          : uint32_t(parents.size());
+                for (; released < needed; ++released) {
+                    parent_bytes -= bytes_of(parents[released]);
+                    unreturned += bytes_of(parents[released]);
+                    std::vector<uint32_t>().swap(parents[released]);
+                }
+                if (unreturned >= kReturnBytes) {
+                    return_freed_memory();
+                    unreturned = 0;
+                }
+            }
         });
         if (cancelled) throw PruneCancelled();
-
-        // Merge the chunks' tapes into the pool, in chunk order (deterministic).
-        uint64_t chunk_bytes = 0;
-        std::vector<uint64_t> base(chunks);
-        uint64_t offset = g.pool_.size();
-        for (uint32_t c = 0; c < chunks; ++c) {
-            base[c] = offset;
-            offset += outs[c].words.size();
-            chunk_bytes += bytes_of(outs[c].words);
-        }
-        if (offset >= kLocalTape) throw std::length_error("tape pool exceeds 2^31 words");
-        peak = std::max(peak, bytes_of(g.pool_) + chunk_bytes + bytes_of(level.cells) +
-                                  bytes_of(blocks) + [&] {
-                                      uint64_t b = 0;
-                                      for (const PrunedGrid::Level& l : g.levels_)
-                                          b += bytes_of(l.cells);
-                                      return b;
-                                  }());
-        g.pool_.reserve(offset);
-        for (uint32_t c = 0; c < chunks; ++c) {
-            g.pool_.insert(g.pool_.end(), outs[c].words.begin(), outs[c].words.end());
-            const uint64_t begin = uint64_t(c) * kChunkCells;
-            const uint64_t end = std::min(total, begin + kChunkCells);
-            for (uint64_t i = begin; i < end; ++i) {
-                uint32_t& t = level.cells[i].tape;
-                if (t != PrunedCell::kFarField && (t & kLocalTape))
-                    t = uint32_t(base[c] + (t & ~kLocalTape));
-            }
-            ChunkOut& o = outs[c];
-            st.near_field_cells += o.near;
-            st.tape_avg += double(o.tape_sum);
-            st.tape_max = std::max(st.tape_max, o.tape_max);
-            st.active_avg += double(o.prim_sum);
-            st.active_std += double(o.prim_sq_sum);
-            st.active_max = std::max(st.active_max, o.prim_max);
-            st.cells_pruned += o.pruned;
-            st.tape_words_visited += o.words_visited;
-            std::vector<uint32_t>().swap(o.words);
-        }
 
         // Far-field cells of this level, and the next level's blocks: one per near-field cell.
         const uint64_t below = uint64_t(N / level.res);
@@ -311,19 +407,35 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
         for (uint64_t i = 0; i < total; ++i) {
             PrunedCell& cell = level.cells[i];
             if (cell.tape == PrunedCell::kFarField) {
-                if (!finest) far_finest += below * below * below;
-                else ++far_finest;
+                if (!finest)
+                    far_finest += below * below * below;
+                else
+                    ++far_finest;
                 continue;
             }
             if (finest) continue;
             const Block& b = blocks[i / per_block];
             const uint32_t local = uint32_t(i % per_block);
             const uint32_t nf = res[li + 1] / res[li];
+            const uint32_t c = uint32_t(i / kChunkCells);
             cell.children = uint32_t(next.size() * nf * nf * nf);
             next.push_back({(b.x + local % f) * nf, (b.y + (local / f) % f) * nf,
-                            (b.z + local / (f * f)) * nf, cell.tape});
+                            (b.z + local / (f * f)) * nf, c, outs[c].words.data() + cell.tape});
         }
         blocks.swap(next);
+        if (!finest) {
+            // This level's buffers become the parents; the cells' offsets into them go.
+            parents.clear();
+            parent_bytes = 0;
+            for (uint32_t c = 0; c < chunks; ++c) {
+                place_chunk(c, opt.coarse_tapes);
+                parent_bytes += bytes_of(outs[c].words);
+                parents.push_back(std::move(outs[c].words));
+            }
+            peak = std::max(peak, pool_bytes() + parent_bytes + bytes_of(level.cells) +
+                                      done_cells_bytes + bytes_of(blocks));
+        }
+        done_cells_bytes += bytes_of(level.cells);
         const uint32_t scale = N / level.res;
         if (std::has_single_bit(scale) && std::has_single_bit(level.factor)) {
             level.pow2 = true;
@@ -334,6 +446,7 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
         g.levels_.push_back(std::move(level));
         if (opt.progress) opt.progress(double(li + 1) / double(res.size()));
     }
+    g.pool_.shrink_to_fit();
 
     g.build_shortcut();
 
@@ -346,13 +459,13 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     const double mean_sq = (near_sq + double(far_finest)) / cells;
     st.active_std = std::sqrt(std::max(0.0, mean_sq - st.active_avg * st.active_avg));
     if (far_finest > 0) st.active_max = std::max(st.active_max, 1u);
-    st.tape_bytes = bytes_of(g.pool_);
+    st.tape_bytes = pool_bytes();
     for (const PrunedGrid::Level& l : g.levels_) st.tape_bytes += bytes_of(l.cells);
     st.prune_peak_bytes = std::max(peak, st.tape_bytes);
     for (const CellScratch& s : scratch)
         st.prune_peak_bytes += bytes_of(s.value) * 3 + bytes_of(s.left) * 4 + bytes_of(s.alive) * 2;
-    st.prune_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                      .count();
+    st.prune_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     return g;
 }
 
@@ -376,8 +489,8 @@ vec3 PrunedGrid::cell_center(uint32_t ix, uint32_t iy, uint32_t iz) const {
            vec3(float(ix) + 0.5f, float(iy) + 0.5f, float(iz) + 0.5f) * cell_size_;
 }
 
-float PrunedGrid::far_field_constant(uint32_t level, const PrunedCell& c, uint32_t ix,
-                                     uint32_t iy, uint32_t iz) const {
+float PrunedGrid::far_field_constant(uint32_t level, const PrunedCell& c, uint32_t ix, uint32_t iy,
+                                     uint32_t iz) const {
     // The Lipschitz bound from the coarse centre over the distance to this finest cell's far
     // corner; tighter than the coarse cell's own constant for cells near its centre.
     const uint32_t scale = resolution() / levels_[level].res;
@@ -403,7 +516,7 @@ CellView PrunedGrid::cell(uint32_t ix, uint32_t iy, uint32_t iz) const {
         if (li + 1 == levels_.size()) {
             v.far_field = false;
             v.tape = tape_at(c.tape);
-            v.primitives = pool_[c.tape + 1];
+            v.primitives = pool_.data[c.tape + 1];
             return v;
         }
         block_start = c.children;
