@@ -99,11 +99,12 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
         o.hierarchy = seed % 5 != 4;
         o.far_field_c = seed % 2 ? 2.0f : 1.5f;
         o.bounds = seed % 7 == 6 ? CellBounds::kLipschitz : CellBounds::kInterval;
+        o.refine = uint32_t(seed % 3 + 1);
         const std::string what =
             "seed " + std::to_string(seed) + ", " + tree_shape_name(spec.tree) + ", " +
             placement_name(spec.placement) + ", grid " + std::to_string(o.resolution) + " factor " +
-            std::to_string(o.factor) + (o.far_field ? "" : " no-farfield") +
-            (o.hierarchy ? "" : " no-hierarchy");
+            std::to_string(o.factor) + " refine " + std::to_string(o.refine) +
+            (o.far_field ? "" : " no-farfield") + (o.hierarchy ? "" : " no-hierarchy");
         const PrunedGrid cpu = prune(sc, o);
         const gpu::Grid gpu = gpu::prune(*dev, sc, o);
         expect_same_stats(cpu.stats(), gpu.stats(), what);

@@ -489,13 +489,33 @@ TEST(PruneStats, SphereNearFieldSetIsAsPredicted) {
     const vec3 c0(0.13f, -0.07f, 0.21f);
     const Scene sc =
         b.build(b.sphere(1.1f).translated(c0), {vec3(-2, -1.7f, -1.9f), vec3(1.8f, 2.1f, 2.0f)});
-    for (const CellBounds bounds : {CellBounds::kInterval, CellBounds::kLipschitz}) {
+    // The cell-level rule with both bounds, then exact ranges over 3³ sub-boxes (refine).
+    const struct {
+        CellBounds bounds;
+        uint32_t refine;
+    } configs[] = {
+        {CellBounds::kInterval, 1}, {CellBounds::kLipschitz, 1}, {CellBounds::kInterval, 3}};
+    for (const auto& config : configs) {
+        const CellBounds bounds = config.bounds;
         PruneOptions o;
         o.resolution = 48;
         o.bounds = bounds;
+        o.refine = config.refine;
         const PrunedGrid g = prune(sc, o);
         const vec3 cs = g.cell_size();
         const double R = math::length(cs) * 0.5;
+        // Exact range of the sphere over the box (centre c, half sizes h): its nearest and
+        // farthest points' distances to the sphere's centre, minus the radius.
+        const auto range = [&](const vec3& c, const vec3& h, double& fmin, double& fmax) {
+            double dn = 0, df = 0;
+            for (int a = 0; a < 3; ++a) {
+                const double d = std::fabs(double(c[a]) - c0[a]);
+                dn += std::pow(std::max(d - h[a], 0.0), 2);
+                df += std::pow(d + h[a], 2);
+            }
+            fmin = std::sqrt(dn) - 1.1;
+            fmax = std::sqrt(df) - 1.1;
+        };
         uint64_t judged = 0, wrong = 0, near = 0;
         for (uint32_t z = 0; z < 48; ++z)
             for (uint32_t y = 0; y < 48; ++y)
@@ -511,10 +531,24 @@ TEST(PruneStats, SphereNearFieldSetIsAsPredicted) {
                     const double fmin = std::sqrt(dn) - 1.1, fmax = std::sqrt(df) - 1.1,
                                  fc = std::sqrt(dc) - 1.1;
                     double margin;  // signed distance of the cell from the decision threshold
-                    if (bounds == CellBounds::kInterval)
+                    if (config.refine > 1) {
+                        // Near when some sub-box's range comes within the cell's clearance R.
+                        margin = -INFINITY;
+                        const uint32_t S = config.refine;
+                        CellBox box;
+                        box.centre = c;
+                        box.half = cs * 0.5f;
+                        for (uint32_t b = 0; b < S * S * S; ++b) {
+                            double lo, hi;
+                            range(sub_box_centre(box, S, b % S, b / S % S, b / (S * S)),
+                                  box.half / float(S), lo, hi);
+                            margin = std::max(margin, std::min(R - lo, hi + R));
+                        }
+                    } else if (bounds == CellBounds::kInterval) {
                         margin = std::min(R - fmin, fmax + R);  // > 0: near
-                    else
+                    } else {
                         margin = 2 * R - std::fabs(fc);
+                    }
                     if (std::fabs(margin) < 1e-4) continue;
                     ++judged;
                     const bool expect_near = margin > 0;
@@ -528,6 +562,42 @@ TEST(PruneStats, SphereNearFieldSetIsAsPredicted) {
         EXPECT_GT(judged, 48u * 48 * 48 - 100);
         EXPECT_GT(near, 1000u);
     }
+}
+
+// Sub-box refinement only removes: a cell near-field with it is near-field without it, and its
+// tape keeps no primitive more (both stay exact: the property tests check the values).
+TEST(PruneStats, RefinementOnlyRemoves) {
+    uint64_t removed = 0;  // near-field cells made far, and primitives dropped
+    for (uint32_t i = 0; i < 4; ++i) {
+        test::RandomSceneSpec spec;
+        spec.primitives = 12 + 6 * i;
+        spec.tree = test::TreeShape(i % 4);
+        spec.placement = test::Placement((i + 1) % 5);
+        const Scene sc = test::random_scene(900 + i, spec);
+        PruneOptions plain, refined;
+        plain.resolution = refined.resolution = 32;
+        plain.refine = 1;
+        refined.refine = 2 + i % 3;
+        const PrunedGrid a = prune(sc, plain), b = prune(sc, refined);
+        for (uint32_t z = 0; z < 32; ++z)
+            for (uint32_t y = 0; y < 32; ++y)
+                for (uint32_t x = 0; x < 32; ++x) {
+                    const CellView u = a.cell(x, y, z), v = b.cell(x, y, z);
+                    if (u.far_field) {
+                        EXPECT_TRUE(v.far_field) << x << "," << y << "," << z;
+                        continue;
+                    }
+                    if (v.far_field) {
+                        ++removed;
+                        continue;
+                    }
+                    EXPECT_LE(v.primitives, u.primitives) << x << "," << y << "," << z;
+                    removed += u.primitives - v.primitives;
+                }
+        EXPECT_LE(b.stats().active_avg, a.stats().active_avg);
+        EXPECT_LE(b.stats().near_field_cells, a.stats().near_field_cells);
+    }
+    EXPECT_GT(removed, 0u) << "refinement removed nothing";
 }
 
 // Brute-force statistics and the hierarchy of random multi-primitive scenes, for both bounds,

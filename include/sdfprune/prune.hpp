@@ -43,6 +43,10 @@ struct PruneOptions {
     bool hierarchy = true;      // false: prune the full tree directly in every finest cell
     float far_field_c = 2.0f;   // a cell is far-field when |f(centre)| > C·L·R (C >= 1)
     CellBounds bounds = CellBounds::kInterval;
+    // Finest cells are decided again over refine³ sub-boxes (1 = off): an operator is skipped
+    // where every sub-box decides it the same way, and the cell is far-field where every
+    // sub-box's range clears its margin. Tighter, still exact (the ranges cover the cell).
+    uint32_t refine = 3;
     // Keep the pruned tapes of coarse near-field cells in the tape pool (inspection, tests).
     // False: those cells refer to the full tree's tape (offset 0), and the pool holds only the
     // finest level's tapes: every lookup is the same, memory is far smaller on large scenes.
@@ -230,7 +234,9 @@ struct CellScratch {
     std::vector<float> value, lo, hi;
     std::vector<uint32_t> left, right, decision, stack;
     std::vector<uint8_t> alive, negate;
-    std::vector<uint32_t> octant;  // the tape of the octant being split (prune.cpp)
+    std::vector<uint32_t> octant;    // the tape of the octant being split (prune.cpp)
+    std::vector<uint32_t> combined;  // refine_cell: the sub-boxes' common decisions
+    std::vector<uint32_t> refined;   // refine_cell's input tape (prune.cpp)
     void reserve(size_t n);
 };
 
@@ -243,6 +249,21 @@ float evaluate_cell(const Scene& scene, std::span<const uint32_t> tape, const Ce
 // far-field constant (sign of f, |c| <= |f| over the cell).
 bool is_near_field(const Scene& scene, std::span<const uint32_t> tape, const CellBox& box,
                    float far_field_c, const CellScratch& s, float& constant);
+
+// Stage 1b, for finest cells with PruneOptions::refine = S > 1, on the tape stage 3 made for the
+// cell: decides every operator over each of the cell's S³ sub-boxes and keeps a decision only
+// where all agree (leaving `s` ready for compact_tape); returns false when every sub-box's range
+// clears the cell's far-field margin, with the constant (the sub-boxes' tightest common bound).
+bool refine_cell(const Scene& scene, std::span<const uint32_t> tape, const CellBox& box,
+                 uint32_t subdivisions, CellBounds bounds, bool far_field, float far_field_c,
+                 CellScratch& s, float& constant);
+
+// The centre of sub-box (i, j, k) of `box` split into S³.
+inline vec3 sub_box_centre(const CellBox& box, uint32_t S, uint32_t i, uint32_t j, uint32_t k) {
+    const vec3 sub_half = box.half / float(S);
+    return box.centre - box.half +
+           vec3(float(2 * i + 1), float(2 * j + 1), float(2 * k + 1)) * sub_half;
+}
 
 // Stage 3: the top-down pass: keeps active operators with no inactive ancestor and the
 // primitives under them, re-attaching kept nodes through skipped operators with composed signs.

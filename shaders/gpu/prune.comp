@@ -5,6 +5,8 @@
 //   mode 0: cells of a level from their block's tape (blocks[job / f³])
 //   mode 1: the 8 octants of each block from the block's tape (not stored as cells)
 //   mode 2: cells of a level from their octant's tape (or far-field from a far octant)
+//   mode 3: finest near-field cells decided again over refine³ sub-boxes (refine_cell), from
+//           `cells` into the buffer of binding 5
 // New tapes are appended to the pool with an atomic counter; on overflow nothing is written
 // and the host grows the pool and runs the step again.
 //
@@ -64,19 +66,24 @@ layout(push_constant) uniform Push {
     uint first_job;   // this dispatch's jobs: [first_job, jobs)
     uint round;       // 0: start the jobs; later rounds resume them
     uint budget;      // loop iterations per job and round
+    uint refine;      // mode 3: sub-boxes per axis
 } pc;
 
 // The state of a job between rounds, at the start of its thread's scratch.
-const uint kStateWords = 12u;
+const uint kStateWords = 16u;
 const uint kPhaseEvaluate = 0u, kPhaseSweep = 1u, kPhaseWrite = 2u, kPhaseDone = 3u;
 // Words: phase, i (next entry), top (stack size; in the write phase the next word), out_len,
 // prims, at (tape offset), value, constant (float bits), the parent's stack depth, the new
-// tape's stack depth now and at most.
+// tape's stack depth now and at most, the sub-box, the far-field flags (1: every sub-box so far
+// clears above, 2: below) and the lowest and highest root bounds so far (float bits).
 
 // Runs (a budget's worth of) pruning the tape at `parent` over the box; returns true in the
 // round that finishes the job, with `near`, `value`, `constant` and `tape` (the new tape, or the parent's when
 // nothing was pruned) set.
-bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out bool near,
+// With subs > 1 (mode 3) the tape is evaluated over each of the box's subs³ sub-boxes, an
+// operator is decided only where all of them agree, and the far-field test asks every sub-box's
+// root range to clear the box's margin (refine_cell in src/prune/prune_cell.cpp).
+bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, uint subs, out bool near,
                out float value, out float constant, out uint tape) {
     uint t = gl_GlobalInvocationID.x;
     uint base = t * (kStateWords + 2u * pc.max_len + 4u * pc.max_stack);
@@ -86,6 +93,9 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out bool near,
     uint len = tape_read(parent, 0u);
     if (pc.round == 0u) {
         for (uint k = 0u; k < kStateWords; ++k) scratch[base + k] = 0u;
+        scratch[base + 12u] = (pc.flags & 1u) != 0u ? 3u : 0u;
+        scratch[base + 13u] = floatBitsToUint(kInfinity);
+        scratch[base + 14u] = floatBitsToUint(-kInfinity);
     }
     uint phase = scratch[base], i = scratch[base + 1u], top = scratch[base + 2u];
     if (phase == kPhaseDone) return false;  // finished in an earlier round
@@ -93,24 +103,31 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out bool near,
     uint budget = pc.budget;
     near = true;
     tape = kFarField;
-    if (phase == kPhaseEvaluate) {
-        // Stage 1: values and ranges at the centre, decisions (evaluate_cell).
+    uint nsub = subs * subs * subs;
+    vec3 sub_half = subs == 1u ? half_size : half_size / float(subs);
+    float sub_R = subs == 1u ? R : length(sub_half);
+    uint sb = scratch[base + 11u];
+    while (phase == kPhaseEvaluate && budget > 0u) {
+        // Stage 1: values and ranges at the (sub-)box centre, decisions (evaluate_cell).
+        uvec3 sc = uvec3(sb % subs, (sb / subs) % subs, sb / (subs * subs));
+        precise vec3 sub_centre =
+            subs == 1u ? centre : centre - half_size + vec3(2u * sc + 1u) * sub_half;
         for (; i < len && budget > 0u; ++i, --budget) {
             uint w = tape_read(parent, 2u + i);
             uint n = tape_node(w);
             uint kind = nodes[n].kind;
-            float spread = nodes[n].lipschitz * R;
+            float spread = nodes[n].lipschitz * sub_R;
             float v, lo, hi;
             uint decision = kKeepBoth;
             if (kind < kPrimitiveKindCount) {
                 uint p = nodes[n].primitive;
-                v = eval_primitive(kind, params[p], centre);
+                v = eval_primitive(kind, params[p], sub_centre);
                 lo = v - spread;
                 hi = v + spread;
                 vec4 b0 = extras[p].bound0;
                 if (interval && b0.w > 0.0) {
                     vec2 r = similarity_range(b0.xyz, b0.w, extras[p].bound1.x,
-                                              extras[p].bound1.y, centre, half_size);
+                                              extras[p].bound1.y, sub_centre, sub_half);
                     lo = max(lo, r.x);
                     hi = min(hi, r.y);
                 }
@@ -146,7 +163,9 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out bool near,
                 lo = -hi;
                 hi = -tmp;
             }
-            scratch[ebase + 2u * i + 1u] = decision;  // flags cleared for stage 3
+            // Flags cleared for stage 3; over sub-boxes, a decision all of them share.
+            uint e = ebase + 2u * i + 1u;
+            scratch[e] = sb == 0u || scratch[e] == decision ? decision : kKeepBoth;
             uint so = sbase + top * 4u;
             scratch[so] = floatBitsToUint(v);
             scratch[so + 1u] = floatBitsToUint(lo);
@@ -155,34 +174,42 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, out bool near,
             ++top;
             scratch[base + 8u] = max(scratch[base + 8u], top);
         }
-        if (i == len) {
-            float v = uintBitsToFloat(scratch[sbase]);
-            scratch[base + 6u] = floatBitsToUint(v);
-            phase = kPhaseSweep;
-            // Stage 2: the far-field test on the root's range (is_near_field).
-            if ((pc.flags & 1u) != 0u) {
-                float L = nodes[tape_node(tape_read(parent, 2u + len - 1u))].lipschitz;
-                float clearance = (pc.csize.w - 1.0) * L * R;
-                float margin = kPruneMarginAbs + kPruneMarginRel * (abs(v) + L * R);
-                float lo = uintBitsToFloat(scratch[sbase + 1u]) - margin;
-                float hi = uintBitsToFloat(scratch[sbase + 2u]) + margin;
-                if (lo > clearance && lo > 0.0) {
-                    scratch[base + 7u] = floatBitsToUint(lo);
-                    phase = kPhaseDone;
-                    near = false;
-                } else if (hi < -clearance && hi < 0.0) {
-                    scratch[base + 7u] = floatBitsToUint(hi);
-                    phase = kPhaseDone;
-                    near = false;
-                }
-            }
-            if (phase == kPhaseSweep) {
-                uint root_neg = tape_negated(tape_read(parent, 2u + len - 1u)) ? 1u : 0u;
-                scratch[ebase + 2u * (len - 1u) + 1u] |= (1u << 2) | (root_neg << 4);
-                i = len;
-            }
+        if (i < len) break;  // out of budget: resume in the next round
+        // Stage 2 for this sub-box: the far-field test on its root range against the box's
+        // margin (is_near_field).
+        float v = uintBitsToFloat(scratch[sbase]);
+        if (sb == 0u) scratch[base + 6u] = floatBitsToUint(v);
+        float L = nodes[tape_node(tape_read(parent, 2u + len - 1u))].lipschitz;
+        float clearance = (pc.csize.w - 1.0) * L * R;
+        float margin = kPruneMarginAbs + kPruneMarginRel * (abs(v) + L * sub_R);
+        float lo = uintBitsToFloat(scratch[sbase + 1u]) - margin;
+        float hi = uintBitsToFloat(scratch[sbase + 2u]) + margin;
+        uint far_flags = scratch[base + 12u];
+        if (!(lo > clearance && lo > 0.0)) far_flags &= ~1u;
+        if (!(hi < -clearance && hi < 0.0)) far_flags &= ~2u;
+        scratch[base + 12u] = far_flags;
+        scratch[base + 13u] = floatBitsToUint(min(uintBitsToFloat(scratch[base + 13u]), lo));
+        scratch[base + 14u] = floatBitsToUint(max(uintBitsToFloat(scratch[base + 14u]), hi));
+        ++sb;
+        i = 0u;
+        top = 0u;
+        if (sb < nsub) continue;
+        phase = kPhaseSweep;
+        if ((far_flags & 1u) != 0u) {
+            scratch[base + 7u] = scratch[base + 13u];
+            phase = kPhaseDone;
+            near = false;
+        } else if ((far_flags & 2u) != 0u) {
+            scratch[base + 7u] = scratch[base + 14u];
+            phase = kPhaseDone;
+            near = false;
+        } else {
+            uint root_neg = tape_negated(tape_read(parent, 2u + len - 1u)) ? 1u : 0u;
+            scratch[ebase + 2u * (len - 1u) + 1u] |= (1u << 2) | (root_neg << 4);
+            i = len;
         }
     }
+    scratch[base + 11u] = sb;
     if (phase == kPhaseSweep) {
         // Stage 3: the top-down pass (compact_tape). Flags: alive (bits 2-3: 1 kept,
         // 2 skipped), negate (bit 4). An entry's flags are final when the reverse sweep reaches
@@ -289,7 +316,7 @@ void main() {
             uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
                              b.z + ((o >> 2) & 1u) * hf);
             precise vec3 centre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
-            if (!prune_box(b.tape, centre, half_cell * float(hf), radius * float(hf), near,
+            if (!prune_box(b.tape, centre, half_cell * float(hf), radius * float(hf), 1u, near,
                            result.value, result.bound, result.tape))
                 continue;
             octants[job] = result;
@@ -300,6 +327,27 @@ void main() {
         uvec3 lc = uvec3(local % f, (local / f) % f, local / (f * f));
         precise vec3 centre = origin + (vec3(b.x + lc.x, b.y + lc.y, b.z + lc.z) + 0.5) * cs;
         uint parent = b.tape;
+        if (pc.mode == 3u) {
+            // Reads `cells`, writes the refined cells to `octants` (binding 5): a step redone
+            // after a pool overflow starts again from unchanged cells.
+            Cell c = cells[job];
+            if (c.tape == kFarField) {
+                if (pc.round == 0u) octants[job] = c;
+                continue;
+            }
+            float unused;
+            if (!prune_box(c.tape, centre, half_cell, radius, pc.refine, near, unused,
+                           result.bound, result.tape))
+                continue;
+            if (!near) {
+                c.tape = kFarField;
+                c.bound = result.bound;
+            } else {
+                c.tape = result.tape;
+            }
+            octants[job] = c;
+            continue;
+        }
         if (pc.mode == 2u) {
             uint o = (lc.x >= hf ? 1u : 0u) | (lc.y >= hf ? 2u : 0u) | (lc.z >= hf ? 4u : 0u);
             Cell oct = octants[bi * 8u + o];
@@ -320,7 +368,7 @@ void main() {
             }
             parent = oct.tape;
         }
-        if (!prune_box(parent, centre, half_cell, radius, near, result.value, result.bound,
+        if (!prune_box(parent, centre, half_cell, radius, 1u, near, result.value, result.bound,
                        result.tape))
             continue;
         if (near) atomicAdd(near_jobs, 1u);

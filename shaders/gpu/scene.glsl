@@ -22,6 +22,8 @@ layout(std430, binding = 2) readonly buffer Extras { PrimitiveExtra extras[]; };
 // Tapes as [length, primitives, words...]; the full tree's tape is at offset 0.
 layout(std430, binding = 3) buffer Pool { uint pool[]; };
 
+#define kInfinity uintBitsToFloat(0x7f800000u)
+
 bool is_primitive(uint node) { return nodes[node].kind < kPrimitiveKindCount; }
 
 float eval_node_primitive(uint n, vec3 p) {

@@ -30,7 +30,6 @@ layout(std430, binding = 7) writeonly buffer Pixels { Pixel pixels[]; };
 // One slice of the image per dispatch: pixels [first, first + count), one per thread.
 layout(push_constant) uniform Push { uint first, count, stack_threads; } pc;
 
-#define kInfinity uintBitsToFloat(0x7f800000u)
 
 bool ray_box(vec3 o, vec3 inv_dir, vec3 lo, vec3 hi, out float t0, out float t1) {
     t0 = 0.0;

@@ -13,10 +13,13 @@
 namespace sdfprune::gpu {
 namespace {
 
+// prune.comp: kStateWords, the words of a job's state at the start of its thread's scratch.
+constexpr uint64_t kPruneStateWords = 16;
+
 struct PrunePush {  // prune.comp: Push
     vec4 origin, csize;
     uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
-    uint32_t round, budget;
+    uint32_t round, budget, refine;
 };
 static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) <= 128);
 
@@ -125,14 +128,15 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     // One step: `jobs` cells or octants from their parents' tapes into `octants`/`cells`.
     const auto run_step = [&](uint32_t mode, uint32_t factor, uint64_t jobs, vec3 csize,
                               const Buffer& octants, const Buffer& cells) {
-        const uint64_t thread_bytes = (12ull + 2ull * max_len + 4ull * max_depth) * 4;
+        const uint64_t thread_bytes = (kPruneStateWords + 2ull * max_len + 4ull * max_depth) * 4;
         const uint32_t threads = ctx.threads_for(jobs, thread_bytes);
         // Under a loop limit (lavapipe), as many jobs per invocation as fit the limit, or one
         // job resumed over as many rounds as its three passes over the parent tape need;
         // elsewhere one unlimited round.
         const bool limited = ctx.loop_limited();
         const uint32_t budget = limited ? uint32_t(Context::kLoopLimit - 512) : 0xffffffffu;
-        const uint64_t per_job = 3ull * max_len + 16;
+        const uint64_t evaluations = mode == 3 ? uint64_t(opt.refine) * opt.refine * opt.refine : 1;
+        const uint64_t per_job = (evaluations + 2) * max_len + evaluations + 16;
         const uint64_t rounds = limited ? (per_job + budget - 1) / budget : 1;
         const uint64_t jobs_per_invocation = limited ? std::max<uint64_t>(1, budget / per_job) : 0;
         if (scratch.size < threads * thread_bytes) {
@@ -164,7 +168,8 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                            g.pool_words,
                            0,
                            0,
-                           budget};
+                           budget,
+                           opt.refine};
             const uint64_t per_dispatch =
                 limited ? threads * jobs_per_invocation : std::max<uint64_t>(jobs, 1);
             ctx.begin();
@@ -211,6 +216,16 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             ctx.destroy(octants);
         } else {
             c = run_step(0, f, total, csize, cells, cells);
+        }
+        if (finest && opt.refine > 1) {
+            // The finest cells decided again over their sub-boxes (refine_cell), into a new
+            // cell array.
+            max_len = std::max(c.max_len, 1u);
+            max_depth = std::max(c.max_depth, 1u);
+            Buffer refined = ctx.create_buffer(total * sizeof(PrunedCell));
+            run_step(3, f, total, csize, refined, cells);
+            ctx.destroy(cells);
+            cells = refined;
         }
         max_len = std::max(c.max_len, 1u);
         max_depth = std::max(c.max_depth, 1u);

@@ -247,7 +247,21 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                 const size_t at = out.words.size();
                 out.words.push_back(0);
                 out.words.push_back(0);
-                const uint32_t prims = compact_tape(sc, parent, s, out.words);
+                uint32_t prims = compact_tape(sc, parent, s, out.words);
+                if (finest && opt.refine > 1) {
+                    // Decided again over the cell's sub-boxes, from the tape just made.
+                    s.refined.assign(out.words.begin() + at + 2, out.words.end());
+                    float refined_constant = 0;
+                    if (!refine_cell(sc, s.refined, box, opt.refine, opt.bounds, opt.far_field,
+                                     opt.far_field_c, s, refined_constant)) {
+                        out.words.resize(at);
+                        cell.tape = PrunedCell::kFarField;
+                        cell.bound = refined_constant;
+                        return;
+                    }
+                    out.words.resize(at + 2);
+                    prims = compact_tape(sc, s.refined, s, out.words);
+                }
                 const uint32_t len = uint32_t(out.words.size() - at - 2);
                 out.words[at] = len;
                 out.words[at + 1] = prims;

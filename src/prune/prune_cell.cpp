@@ -35,8 +35,8 @@ float evaluate_cell(const Scene& sc, std::span<const uint32_t> tape, const CellB
             hi = v + spread;
             const PrimitiveBound& b = sc.bound[p];
             if (interval && b.scale > 0) {
-                const vec2 r = math::similarity_range(b.centre, b.scale, b.f0, b.rho, box.centre,
-                                                      box.half);
+                const vec2 r =
+                    math::similarity_range(b.centre, b.scale, b.f0, b.rho, box.centre, box.half);
                 lo = std::max(lo, r.x);
                 hi = std::min(hi, r.y);
             }
@@ -87,8 +87,8 @@ bool is_near_field(const Scene& sc, std::span<const uint32_t> tape, const CellBo
     // the Lipschitz range is f(c) ± L·R. With tighter ranges (CellBounds::kInterval) the same
     // guarantee is tested on the range itself, so far-field constants keep |c| >= (C − 1)·L·R.
     const float clearance = (far_field_c - 1.0f) * L * box.radius;
-    const float margin = math::kPruneMarginAbs +
-                         math::kPruneMarginRel * (std::fabs(v) + L * box.radius);
+    const float margin =
+        math::kPruneMarginAbs + math::kPruneMarginRel * (std::fabs(v) + L * box.radius);
     const float lo = s.lo[root] - margin, hi = s.hi[root] + margin;
     if (lo > clearance && lo > 0.0f) {
         constant = lo;
@@ -98,6 +98,66 @@ bool is_near_field(const Scene& sc, std::span<const uint32_t> tape, const CellBo
         constant = hi;
         return false;
     }
+    return true;
+}
+
+bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box, uint32_t S,
+                 CellBounds bounds, bool far_field, float far_field_c, CellScratch& s,
+                 float& constant) {
+    const uint32_t n = uint32_t(tape.size());
+    s.combined.assign(n, math::kKeepBoth);
+    const float L = sc.lipschitz[math::tape_node(tape[n - 1])];
+    const float clearance = (far_field_c - 1.0f) * L * box.radius;
+    bool all_above = far_field, all_below = far_field;
+    float lowest = INFINITY, highest = -INFINITY;
+    CellBox sub;
+    sub.half = box.half / float(S);
+    sub.radius = math::length(sub.half);
+    // Visits sub-box (i, j, k); returns false when the others cannot change the result.
+    bool first = true;
+    const auto visit = [&](uint32_t i, uint32_t j, uint32_t k) {
+        sub.centre = sub_box_centre(box, S, i, j, k);
+        const float v = evaluate_cell(sc, tape, sub, bounds, s);
+        // Whether some operator is still decided the same way in every sub-box so far.
+        bool any_decided = false;
+        for (uint32_t e = 0; e < n; ++e) {
+            if (sc.is_primitive(math::tape_node(tape[e]))) continue;
+            if (first)
+                s.combined[e] = s.decision[e];
+            else if (s.combined[e] != s.decision[e])
+                s.combined[e] = math::kKeepBoth;
+            any_decided = any_decided || s.combined[e] != math::kKeepBoth;
+        }
+        first = false;
+        // The far-field test of is_near_field on this sub-box's root range, against the whole
+        // cell's clearance.
+        const float margin =
+            math::kPruneMarginAbs + math::kPruneMarginRel * (std::fabs(v) + L * sub.radius);
+        const float lo = s.lo[n - 1] - margin, hi = s.hi[n - 1] + margin;
+        all_above = all_above && lo > clearance && lo > 0.0f;
+        all_below = all_below && hi < -clearance && hi < 0.0f;
+        lowest = std::min(lowest, lo);
+        highest = std::max(highest, hi);
+        return any_decided || all_above || all_below;
+    };
+    // The middle and the corners first: where decisions and the far field fail soonest. The
+    // order changes nothing but when the loop may stop.
+    const uint32_t mid = S / 2, last = S - 1;
+    bool go = visit(mid, mid, mid);
+    for (uint32_t c = 0; c < 8 && go; ++c) {
+        const uint32_t i = c & 1 ? last : 0, j = c & 2 ? last : 0, k = c & 4 ? last : 0;
+        if (!(i == mid && j == mid && k == mid)) go = visit(i, j, k);
+    }
+    for (uint32_t b = 0; b < S * S * S && go; ++b) {
+        const uint32_t i = b % S, j = b / S % S, k = b / (S * S);
+        const bool corner = (i == 0 || i == last) && (j == 0 || j == last) && (k == 0 || k == last);
+        if (!corner && !(i == mid && j == mid && k == mid)) go = visit(i, j, k);
+    }
+    if (all_above || all_below) {
+        constant = all_above ? lowest : highest;
+        return false;
+    }
+    for (uint32_t e = 0; e < n; ++e) s.decision[e] = s.combined[e];
     return true;
 }
 

@@ -51,7 +51,10 @@ Prepared prepare(const std::string& scene_arg, const AppOptions& o) {
             "--method naive, or use --backend cpu)");
     if (!o.pruned()) return p;
     PruneOptions po = o.prune;
-    if (o.lipschitz_bounds) po.bounds = CellBounds::kLipschitz;
+    if (o.lipschitz_bounds) {
+        po.bounds = CellBounds::kLipschitz;
+        po.refine = 1;
+    }
     if (o.vulkan()) {
         p.device = std::make_unique<gpu::Device>();
         p.device_grid = std::make_unique<gpu::Grid>(gpu::prune(*p.device, *p.scene, po));

@@ -32,8 +32,13 @@ void add_prune_options(CLI::App* sub, PruneOptions& o, bool& lipschitz_bounds) {
                     "far-field threshold C: a cell is far when |f| > C·L·R at its centre")
         ->capture_default_str()
         ->check(CLI::Range(1.0f, 1000.0f));
+    sub->add_option("--refine", o.refine,
+                    "finest cells are decided again over S³ sub-boxes (1 = off)")
+        ->capture_default_str()
+        ->check(CLI::Range(1u, 8u));
     sub->add_flag("--lipschitz-bounds", lipschitz_bounds,
-                  "use the paper's centre ± L·R ranges only (no exact primitive ranges)");
+                  "the paper's rule: centre ± L·R ranges only (no exact primitive ranges, no "
+                  "sub-box refinement)");
     sub->add_option("--threads", o.threads, "worker threads (0 = all cores)")
         ->capture_default_str()
         ->check(CLI::Range(0, 1024));
@@ -64,7 +69,10 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
         {sub, [args] {
              const Scene sc = load_scene_arg(args->scene);
              PruneOptions o = args->prune;
-             if (args->lipschitz) o.bounds = CellBounds::kLipschitz;
+             if (args->lipschitz) {
+                 o.bounds = CellBounds::kLipschitz;
+                 o.refine = 1;
+             }
              if (!o.hierarchy && !args->json)
                  std::fprintf(stderr, "pruning the full tree in all %u³ cells (no hierarchy)...\n",
                               o.resolution);
@@ -93,6 +101,7 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                      .add("far_field", o.far_field)
                      .add("hierarchy", o.hierarchy)
                      .add("farfield_c", o.far_field_c)
+                     .add("refine", o.refine)
                      .add("cells", s.cells)
                      .add("near_field_cells", s.near_field_cells)
                      .add("active_avg", s.active_avg)
