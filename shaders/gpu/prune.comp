@@ -331,7 +331,7 @@ void main() {
             // Reads `cells`, writes the refined cells to `octants` (binding 5): a step redone
             // after a pool overflow starts again from unchanged cells.
             Cell c = cells[job];
-            if (c.tape == kFarField) {
+            if (c.tape == kFarField || pool[c.tape] > kRefineMaxTape) {
                 if (pc.round == 0u) octants[job] = c;
                 continue;
             }

@@ -176,6 +176,11 @@ SDFPRUNE_FN uint prune_decision(float s, float k, float a_lo, float a_hi, float 
     return kKeepBoth;
 }
 
+// Sub-box refinement of finest cells (PruneOptions::refine) is for short tapes only: its cost
+// grows with the tape's length times the sub-boxes, its gain is in the few operators of the
+// cells near blends.
+SDFPRUNE_CONST uint kRefineMaxTape = 128u;
+
 // Lower (x) and upper (y) bound of an undecided operator over a cell from its operands' ranges.
 // Every operator is non-decreasing in both operands (d/da of the smooth min is in [1/2, 1]), so
 // its range over a box of operand values is spanned by the box's two extreme corners.

@@ -248,7 +248,8 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                 out.words.push_back(0);
                 out.words.push_back(0);
                 uint32_t prims = compact_tape(sc, parent, s, out.words);
-                if (finest && opt.refine > 1) {
+                if (finest && opt.refine > 1 &&
+                    out.words.size() - at - 2 <= math::kRefineMaxTape) {
                     // Decided again over the cell's sub-boxes, from the tape just made.
                     s.refined.assign(out.words.begin() + at + 2, out.words.end());
                     float refined_constant = 0;
