@@ -4,7 +4,7 @@ JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 PACKAGES = build-essential cmake ninja-build pkg-config libtbb-dev libcli11-dev rapidjson-dev \
            libgtest-dev libbenchmark-dev libpng-dev libopenvdb-dev libboost-iostreams-dev \
-           valgrind clang-format libvulkan-dev glslc spirv-tools mesa-vulkan-drivers
+           valgrind clang-format time libvulkan-dev glslc spirv-tools mesa-vulkan-drivers
 
 .PHONY: setup build test run bench sanitize format clean
 

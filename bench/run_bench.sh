@@ -62,5 +62,29 @@ log "scaling series"
   echo
   cat "$work/scaling.md"
 } >> "$work/BENCHMARKS.md"
+# The issue's target for the largest fluid: pruning time and the whole process's peak memory.
+big="$work/fluid-$MAX_COUNT.json"
+if [ -f "$big" ]; then
+  log "stats fluid --count $MAX_COUNT (peak memory)"
+  /usr/bin/time -f '%e %M' -o "$work/time.txt" "$bin" stats "$big" --json > "$work/big.json"
+  j=$(tail -n 1 "$work/big.json")
+  read -r wall kib < "$work/time.txt"
+  f() { sed -E "s/.*\"$1\":\"?([^,\"}]*)\"?.*/\1/" <<<"$j"; }
+  {
+    echo
+    echo "## The $MAX_COUNT-sphere fluid at 256³ (\`sdfprune stats\`, whole process)"
+    echo
+    echo "\`sdfprune generate fluid --count $MAX_COUNT\`, then \`/usr/bin/time -f '%e %M' sdfprune stats"
+    echo "fluid.json --json\` (the issue's target: under 300 s and 4 GB on this machine)."
+    echo
+    echo "| nodes | prune | whole command | peak RSS | pruning buffers | final structure | near-field cells | active avg ± std, max | tape avg |"
+    echo "|---|---|---|---|---|---|---|---|---|"
+    awk -v n="$(f nodes)" -v p="$(f prune_ms)" -v w="$wall" -v k="$kib" -v pb="$(f prune_peak_bytes)" \
+        -v tb="$(f tape_bytes)" -v nc="$(f near_field_cells)" -v aa="$(f active_avg)" -v as="$(f active_std)" \
+        -v am="$(f active_max)" -v ta="$(f tape_avg)" 'BEGIN {
+      printf "| %d | %.1f s | %.1f s | %.2f GB (%d KiB) | %.2f GB | %.2f GB | %d | %.4f ± %.3f, %d | %.1f |\n",
+        n, p / 1000, w, k * 1024 / 1e9, k, pb / 1e9, tb / 1e9, nc, aa, as, am, ta }'
+  } >> "$work/BENCHMARKS.md"
+fi
 mv "$work/BENCHMARKS.md" BENCHMARKS.md
 log "wrote BENCHMARKS.md and docs/scaling.png"

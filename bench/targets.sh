@@ -36,8 +36,8 @@ echo "| scene | bounds | active avg ± std | max | near-field cells | prims per 
 echo "|---|---|---|---|---|---|---|---|"
 for s in molecule trees; do
   case $s in molecule) paper="1.12 ± 0.98, 62";; trees) paper="1.10 ± 0.97, 36";; esac
-  for b in lipschitz interval; do
-    flag=""; [ $b = lipschitz ] && flag=--lipschitz-bounds
+  for b in lipschitz interval refined; do
+    case $b in lipschitz) flag=--lipschitz-bounds;; interval) flag="--refine 1";; refined) flag="";; esac
     log "stats $s ($b)"
     j=$("$bin" stats "$scenes/$s.json" $flag --json | tail -n 1)
     printf "| %s | %s | %.4f ± %.3f | %s | %s (%.2f %%) | %.2f | %.2f / %s | %s |\n" "$s" "$b" \
@@ -47,9 +47,10 @@ for s in molecule trees; do
   done
 done
 echo
-echo "\`lipschitz\`: the paper's rule (centre ± L·R). \`interval\` (default): the same rule on exact"
-echo "ranges of primitives over the cell box (similarity maps), operator ranges from their operands'"
-echo "ranges, and the far-field test on the root's range (see README, *Pruning*)."
+echo "\`lipschitz\`: the paper's rule (centre ± L·R). \`interval\` (\`--refine 1\`): the same rule on"
+echo "exact ranges of primitives over the cell box (similarity maps), operator ranges from their"
+echo "operands' ranges, and the far-field test on the root's range. \`refined\` (the default): in"
+echo "addition, finest cells decided again over their 3³ sub-boxes (see README, *Pruning*)."
 echo
 echo "## Pruning time and memory at 256³"
 echo
@@ -57,10 +58,11 @@ echo "| scene | levels | prune time | tape words visited | peak in pruning buffe
 echo "|---|---|---|---|---|---|---|---|"
 for s in molecule trees; do
   case $s in molecule) paper="8.9 ms / 1.47 GB (GPU)";; trees) paper="2.73 ms / 0.64 GB (GPU)";; esac
-  for f in 4 2; do
+  for f in "4" "2" "4 --refine 1"; do
     log "prune $s factor $f"
     j=$("$bin" stats "$scenes/$s.json" --factor $f --json | tail -n 1)
-    printf "| %s | %s | %.0f ms | %s | %.1f MB | %.1f MB | %.1f MB | %s |\n" "$s" "$(field "$j" levels)" \
+    printf "| %s | %s%s | %.0f ms | %s | %.1f MB | %.1f MB | %.1f MB | %s |\n" "$s" "$(field "$j" levels)" \
+      "$([ "$(field "$j" refine)" = 1 ] && echo ", no refinement")" \
       "$(field "$j" prune_ms)" "$(field "$j" tape_words_visited)" \
       "$(calc '%.3f' "$(field "$j" prune_peak_bytes) / 1e6")" "$(calc '%.3f' "$(field "$j" tape_bytes) / 1e6")" \
       "$(calc '%.3f' "$(field "$j" peak_rss_bytes) / 1e6")" "$paper"
