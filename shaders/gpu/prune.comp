@@ -35,7 +35,8 @@ layout(std430, binding = 7) buffer Counters {
     uint octant_capacity;
 };
 // Octants' tapes (mode 1) live in a pool of their own, dropped after the level: a reference
-// with kInOctantPool set points there. Cells (mode 2) never share an octant's tape: they copy it.
+// with kInOctantPool set points there. So do the finest cells' tapes that refinement (mode 3)
+// replaces (flag 4). Tapes for the main pool never share one of these: they copy it.
 layout(std430, binding = 9) buffer OctantPool { uint octant_pool[]; };
 const uint kInOctantPool = 0x80000000u;
 
@@ -61,12 +62,13 @@ layout(push_constant) uniform Push {
     uint threads;
     uint max_len;    // longest parent tape (entry scratch per thread)
     uint max_stack;  // deepest evaluation stack of the parent tapes
-    uint flags;      // 1: far field on; 2: interval bounds
+    uint flags;      // 1: far field on; 2: interval bounds; 4: new tapes go to the octant pool
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's jobs: [first_job, jobs)
     uint round;       // 0: start the jobs; later rounds resume them
     uint budget;      // loop iterations per job and round
     uint refine;      // mode 3: sub-boxes per axis
+    uint octant_start;  // octant pool words in use before this step
 } pc;
 
 // The state of a job between rounds, at the start of its thread's scratch.
@@ -244,15 +246,16 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, uint subs, out
         }
         if (i == 0u) {
             atomicMax(max_len, out_len);
-            if (out_len == len && (parent & kInOctantPool) == 0u) {
+            bool transient = pc.mode == 1u || (pc.flags & 4u) != 0u;
+            if (out_len == len && ((parent & kInOctantPool) == 0u || transient)) {
                 at = parent;  // nothing pruned: share the parent's tape
                 atomicMax(max_depth, scratch[base + 8u]);
                 phase = kPhaseDone;
             } else {
-                bool octant = pc.mode == 1u;
+                bool octant = transient;
                 at = octant ? atomicAdd(octant_used, out_len + 2u)
                             : atomicAdd(pool_used, out_len + 2u);
-                uint start = octant ? 0u : pc.pool_start;
+                uint start = octant ? pc.octant_start : pc.pool_start;
                 uint capacity = octant ? octant_capacity : pool_capacity;
                 if (at < start || at + out_len + 2u > capacity || at + out_len + 2u < at ||
                     at >= kInOctantPool) {
@@ -330,14 +333,17 @@ void main() {
         if (pc.mode == 3u) {
             // Reads `cells`, writes the refined cells to `octants` (binding 5): a step redone
             // after a pool overflow starts again from unchanged cells.
+            // Long tapes are not refined (kRefineMaxTape); their one evaluation changes nothing
+            // and copies them from the octant pool to the main pool.
             Cell c = cells[job];
-            if (c.tape == kFarField || pool[c.tape] > kRefineMaxTape) {
+            if (c.tape == kFarField) {
                 if (pc.round == 0u) octants[job] = c;
                 continue;
             }
+            uint subs = tape_read(c.tape, 0u) > kRefineMaxTape ? 1u : pc.refine;
             float unused;
-            if (!prune_box(c.tape, centre, half_cell, radius, pc.refine, near, unused,
-                           result.bound, result.tape))
+            if (!prune_box(c.tape, centre, half_cell, radius, subs, near, unused, result.bound,
+                           result.tape))
                 continue;
             if (!near) {
                 c.tape = kFarField;

@@ -19,7 +19,7 @@ constexpr uint64_t kPruneStateWords = 16;
 struct PrunePush {  // prune.comp: Push
     vec4 origin, csize;
     uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
-    uint32_t round, budget, refine;
+    uint32_t round, budget, refine, octant_start;
 };
 static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) <= 128);
 
@@ -124,10 +124,12 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     const float L = sc.lipschitz[sc.root()];
     const uint32_t flags =
         (opt.far_field ? 1u : 0u) | (opt.bounds == CellBounds::kInterval ? 2u : 0u);
+    uint64_t octant_words = 0;  // in use in octant_pool, from earlier steps of this level
 
     // One step: `jobs` cells or octants from their parents' tapes into `octants`/`cells`.
+    // `transient`: new tapes go to the octant pool (the finest cells' tapes before refinement).
     const auto run_step = [&](uint32_t mode, uint32_t factor, uint64_t jobs, vec3 csize,
-                              const Buffer& octants, const Buffer& cells) {
+                              const Buffer& octants, const Buffer& cells, bool transient) {
         const uint64_t thread_bytes = (kPruneStateWords + 2ull * max_len + 4ull * max_depth) * 4;
         const uint32_t threads = ctx.threads_for(jobs, thread_bytes);
         // Under a loop limit (lavapipe), as many jobs per invocation as fit the limit, or one
@@ -144,18 +146,12 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             scratch = ctx.create_buffer(threads * thread_bytes);
         }
         for (;;) {
-            *counter = GpuCounters{g.pool_words,
-                                   uint32_t(capacity),
-                                   0,
-                                   0,
-                                   0,
-                                   0,
-                                   0,
-                                   0,
-                                   uint32_t(octant_capacity),
-                                   0,
-                                   0,
-                                   0};
+            GpuCounters start{};
+            start.pool_used = g.pool_words;
+            start.pool_capacity = uint32_t(capacity);
+            start.octant_capacity = uint32_t(octant_capacity);
+            start.octant_used = uint32_t(octant_words);
+            *counter = start;
             PrunePush push{vec4(origin.x, origin.y, origin.z, L),
                            vec4(csize.x, csize.y, csize.z, opt.far_field_c),
                            mode,
@@ -164,12 +160,13 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                            threads,
                            max_len,
                            max_depth,
-                           flags,
+                           flags | (transient ? 4u : 0u),
                            g.pool_words,
                            0,
                            0,
                            budget,
-                           opt.refine};
+                           opt.refine,
+                           uint32_t(octant_words)};
             const uint64_t per_dispatch =
                 limited ? threads * jobs_per_invocation : std::max<uint64_t>(jobs, 1);
             ctx.begin();
@@ -186,12 +183,16 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             gpu_ms += ctx.submit();
             if (!counter->overflow) break;
             // Grow the pool that overflowed (keeping what the step started with) and redo it.
-            if (counter->pool_used > capacity)
-                grow(g.pool, capacity, counter->pool_used, g.pool_words);
-            if (counter->octant_used > octant_capacity)
-                grow(octant_pool, octant_capacity, counter->octant_used, 0);
+            // A counter that wrapped past 2^32 words asks for the most the device allows.
+            const bool main_over = counter->pool_used > capacity,
+                       octant_over = counter->octant_used > octant_capacity;
+            if (main_over || !octant_over)
+                grow(g.pool, capacity, main_over ? counter->pool_used : max_pool_words,
+                     g.pool_words);
+            if (octant_over) grow(octant_pool, octant_capacity, counter->octant_used, octant_words);
         }
         g.pool_words = counter->pool_used;
+        octant_words = counter->octant_used;
         return *counter;
     };
 
@@ -209,13 +210,15 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         GpuCounters c;
         if (split) {
             Buffer octants = ctx.create_buffer(block_count * 8 * sizeof(PrunedCell));
-            c = run_step(1, f, block_count * 8, csize, octants, cells);
+            octant_words = 0;
+            c = run_step(1, f, block_count * 8, csize, octants, cells, false);
             max_len = std::max(c.max_len, 1u);
             max_depth = std::max(c.max_depth, 1u);
-            c = run_step(2, f, total, csize, octants, cells);
+            c = run_step(2, f, total, csize, octants, cells, finest && opt.refine > 1);
             ctx.destroy(octants);
         } else {
-            c = run_step(0, f, total, csize, cells, cells);
+            octant_words = 0;
+            c = run_step(0, f, total, csize, cells, cells, finest && opt.refine > 1);
         }
         if (finest && opt.refine > 1) {
             // The finest cells decided again over their sub-boxes (refine_cell), into a new
@@ -223,7 +226,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             max_len = std::max(c.max_len, 1u);
             max_depth = std::max(c.max_depth, 1u);
             Buffer refined = ctx.create_buffer(total * sizeof(PrunedCell));
-            run_step(3, f, total, csize, refined, cells);
+            run_step(3, f, total, csize, refined, cells, false);
             ctx.destroy(cells);
             cells = refined;
         }
