@@ -26,6 +26,7 @@ if "$bin" stats builtin:sphere --grid 8 --backend vulkan >/dev/null 2>&1; then
   esac
   echo "GPU timestamps; device memory as allocated by the backend; statistics compared with the"
   echo "CPU backend's at the same settings. Fluid: \`sdfprune generate fluid\` (27,977 nodes, seed 1)."
+  echo "T_p + T_s comes from the render command, which prunes again (its own T_p)."
   echo
   echo "| scene | T_p prune | T_s trace 1920x1080 | T_p + T_s | T_d discretize 256³ | M_p device memory | statistics vs CPU | paper RTX 4060: T_p / T_s / T_d / M_p |"
   echo "|---|---|---|---|---|---|---|---|"
@@ -57,7 +58,7 @@ if "$bin" stats builtin:sphere --grid 8 --backend vulkan >/dev/null 2>&1; then
     [ -n "$d" ] && td=$(printf "%.1f ms" "$(field "$d" eval_ms)")
     printf "| %s | %.1f ms | %s | %s | %s | %.1f MB | %s | %s |\n" "$s" "$(field "$g" prune_ms)" "$ts" "$tpts" \
       "$td" "$(calc '%.3f' "$(field "$g" prune_peak_bytes) / 1e6")" "$same" "$paper"
-    [ -s "$tmp/err" ] && log "vulkan $s: $(head -c 300 "$tmp/err")"
+    if [ -s "$tmp/err" ]; then log "vulkan $s: $(head -c 300 "$tmp/err")"; fi
   done
 else
   echo
