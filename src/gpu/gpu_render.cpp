@@ -119,6 +119,8 @@ void discretize(Device& device, const Grid& grid, uint32_t n, std::span<float> o
     if (n == 0) throw std::invalid_argument("discretize: resolution must be >= 1");
     const uint64_t total = uint64_t(n) * n * n;
     if (out.size() != total) throw std::invalid_argument("discretize: output must hold n³ values");
+    if (total > 0xffffffffull)  // the kernel indexes samples with 32 bits
+        throw std::invalid_argument("discretize --backend vulkan: at most 1625³ samples");
     if (ctx.loop_limited() && uint64_t(g.stats.tape_max) + 64 >= Context::kLoopLimit)
         throw GpuError("tapes of " + std::to_string(g.stats.tape_max) +
                        " nodes exceed the loop "
