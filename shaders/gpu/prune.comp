@@ -6,14 +6,15 @@
 //   mode 1: the 8 octants of each block from the block's tape (not stored as cells)
 //   mode 2: cells of a level from their octant's tape (or far-field from a far octant)
 //   mode 3: finest near-field cells decided again over refine³ sub-boxes (refine_cell), from
-//           `cells` into the buffer of binding 5
+//           `cells` into the buffer of binding 5; tapes longer than kRefineMaxTape are copied
 // New tapes are appended to the pool with an atomic counter; on overflow nothing is written
 // and the host grows the pool and runs the step again.
 //
 // A job is resumable: its state lives in the thread's scratch, and each dispatch (a "round")
 // runs at most pc.budget loop iterations of it. Devices without a loop limit use one round with
 // an unlimited budget; lavapipe, which ends an invocation's loops after 65,535 iterations in
-// all, runs one job per invocation over as many rounds as the longest parent tape needs.
+// all, gets as many jobs per invocation as fit that, or one job over as many rounds as its
+// parent tape needs.
 #include "scene.glsl"
 
 layout(local_size_x = 64) in;
