@@ -89,6 +89,13 @@ struct PruneStats {
     std::vector<uint32_t> levels;
 };
 
+// Fills the averages of `st` (near_field_cells, cells and active_max counted already) from the
+// sums over near-field finest cells of primitives, their squares and tape lengths, and the
+// number of far-field finest cells (each counting 1 active primitive: Table 2's metric). The
+// CPU and GPU backends both finish their statistics with it.
+void finish_prune_stats(PruneStats& st, double prim_sum, double prim_sq_sum, double tape_sum,
+                        uint64_t far_finest);
+
 // One cell of a level.
 struct PrunedCell {
     static constexpr uint32_t kFarField = 0xffffffffu;
@@ -106,6 +113,13 @@ struct PrunedCell {
 // discretize's fill and the GPU kernels use it).
 using math::far_field_combine;
 using math::far_field_reach;
+
+// The far-field constant of finest cell (ix, iy, iz) (cells of size `cell_size` from `origin`)
+// lying in far-field cell `c`, `scale` finest cells wide, of a field with Lipschitz bound
+// `lipschitz`: the tighter of c.bound and the Lipschitz bound from c's centre value over the
+// distance to the finest cell's far corner. PrunedGrid::far_field_constant; the GPU read-back.
+float far_field_cell_constant(vec3 origin, vec3 cell_size, uint32_t scale, float lipschitz,
+                              const PrunedCell& c, uint32_t ix, uint32_t iy, uint32_t iz);
 
 // What a finest cell holds.
 struct CellView {

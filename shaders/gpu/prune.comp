@@ -184,12 +184,12 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, uint subs, out
         if (sb == 0u) scratch[base + 6u] = floatBitsToUint(v);
         float L = nodes[tape_node(tape_read(parent, 2u + len - 1u))].lipschitz;
         float clearance = (pc.csize.w - 1.0) * L * R;
-        float margin = kPruneMarginAbs + kPruneMarginRel * (abs(v) + L * sub_R);
-        float lo = uintBitsToFloat(scratch[sbase + 1u]) - margin;
-        float hi = uintBitsToFloat(scratch[sbase + 2u]) + margin;
+        vec2 range = far_field_range(v, uintBitsToFloat(scratch[sbase + 1u]),
+                                     uintBitsToFloat(scratch[sbase + 2u]), L, sub_R);
+        float lo = range.x, hi = range.y;
         uint far_flags = scratch[base + 12u];
-        if (!(lo > clearance && lo > 0.0)) far_flags &= ~1u;
-        if (!(hi < -clearance && hi < 0.0)) far_flags &= ~2u;
+        if (!clears_above(lo, clearance)) far_flags &= ~1u;
+        if (!clears_below(hi, clearance)) far_flags &= ~2u;
         scratch[base + 12u] = far_flags;
         scratch[base + 13u] = floatBitsToUint(min(uintBitsToFloat(scratch[base + 13u]), lo));
         scratch[base + 14u] = floatBitsToUint(max(uintBitsToFloat(scratch[base + 14u]), hi));

@@ -200,6 +200,16 @@ SDFPRUNE_FN vec2 similarity_range(vec3 centre, float scale, float f0, float rho,
 }
 
 // ---- far field -------------------------------------------------------------------------------
+// The far-field test of a (sub-)box of radius R: its root's range [lo, hi], widened by the
+// rounding margin of the value v at its centre (L: the root's Lipschitz bound) ...
+SDFPRUNE_FN vec2 far_field_range(float v, float lo, float hi, float L, float R) {
+    float margin = kPruneMarginAbs + kPruneMarginRel * (abs(v) + L * R);
+    return vec2(lo - margin, hi + margin);
+}
+// ... must clear the cell's `clearance` = (C − 1)·L·R_cell above zero or below it.
+SDFPRUNE_FN bool clears_above(float lo, float clearance) { return lo > clearance && lo > 0.0f; }
+SDFPRUNE_FN bool clears_below(float hi, float clearance) { return hi < -clearance && hi < 0.0f; }
+
 // The reach of a far-field cell's centre value over `distance` with Lipschitz bound
 // `lipschitz`, rounding margins included (PrunedGrid::far_field_constant, discretization) ...
 SDFPRUNE_FN float far_field_reach(float lipschitz, float distance) {

@@ -54,15 +54,8 @@ void Grid::for_each_finest_cell(
                     const PrunedCell& c =
                         cells[l.offset + block_start + ((sz % f) * f + sy % f) * f + sx % f];
                     if (c.tape == PrunedCell::kFarField) {
-                        const vec3 coarse = sc.aabb.min + vec3(float(sx) + 0.5f, float(sy) + 0.5f,
-                                                               float(sz) + 0.5f) *
-                                                              (cs * float(scale));
-                        const vec3 centre =
-                            sc.aabb.min +
-                            vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * cs;
-                        const vec3 d = math::abs(centre - coarse) + cs * 0.5f;
-                        out.constant = far_field_combine(c.value, c.bound,
-                                                         far_field_reach(L, math::length(d)));
+                        out.constant =
+                            far_field_cell_constant(sc.aabb.min, cs, scale, L, c, x, y, z);
                         break;
                     }
                     if (li + 1 == g.level_info.size()) {

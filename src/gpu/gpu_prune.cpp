@@ -314,13 +314,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             st.active_max = std::max(st.active_max, prims);
         }
     }
-    const double cells = double(st.cells);
-    st.near_field_prims_avg = st.near_field_cells ? prim_sum / double(st.near_field_cells) : 0;
-    st.tape_avg = st.near_field_cells ? tape_sum / double(st.near_field_cells) : 0;
-    st.active_avg = (prim_sum + double(far_finest)) / cells;
-    const double mean_sq = (prim_sq + double(far_finest)) / cells;
-    st.active_std = std::sqrt(std::max(0.0, mean_sq - st.active_avg * st.active_avg));
-    if (far_finest > 0) st.active_max = std::max(st.active_max, 1u);
+    finish_prune_stats(st, prim_sum, prim_sq, tape_sum, far_finest);
     st.tape_bytes = uint64_t(g.pool_words) * 4 + cell_total * sizeof(PrunedCell);
     ctx.destroy(counters);
     return grid;

@@ -248,8 +248,7 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                 out.words.push_back(0);
                 out.words.push_back(0);
                 uint32_t prims = compact_tape(sc, parent, s, out.words);
-                if (finest && opt.refine > 1 &&
-                    out.words.size() - at - 2 <= math::kRefineMaxTape) {
+                if (finest && opt.refine > 1 && out.words.size() - at - 2 <= math::kRefineMaxTape) {
                     // Decided again over the cell's sub-boxes, from the tape just made.
                     s.refined.assign(out.words.begin() + at + 2, out.words.end());
                     float refined_constant = 0;
@@ -465,15 +464,8 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
 
     g.build_shortcut();
 
-    // Table 2 statistics: far-field cells count 1 active primitive.
-    const double cells = double(st.cells);
-    const double near_prims = st.active_avg, near_sq = st.active_std;
-    st.near_field_prims_avg = st.near_field_cells ? near_prims / double(st.near_field_cells) : 0;
-    st.tape_avg = st.near_field_cells ? st.tape_avg / double(st.near_field_cells) : 0;
-    st.active_avg = (near_prims + double(far_finest)) / cells;
-    const double mean_sq = (near_sq + double(far_finest)) / cells;
-    st.active_std = std::sqrt(std::max(0.0, mean_sq - st.active_avg * st.active_avg));
-    if (far_finest > 0) st.active_max = std::max(st.active_max, 1u);
+    // Until here active_avg, active_std and tape_avg held the near-field cells' sums.
+    finish_prune_stats(st, st.active_avg, st.active_std, st.tape_avg, far_finest);
     st.tape_bytes = pool_bytes();
     for (const PrunedGrid::Level& l : g.levels_) st.tape_bytes += bytes_of(l.cells);
     st.prune_peak_bytes = std::max(peak, st.tape_bytes);
@@ -482,6 +474,17 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     st.prune_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     return g;
+}
+
+void finish_prune_stats(PruneStats& st, double prim_sum, double prim_sq_sum, double tape_sum,
+                        uint64_t far_finest) {
+    const double cells = double(st.cells), near = double(st.near_field_cells);
+    st.near_field_prims_avg = st.near_field_cells ? prim_sum / near : 0;
+    st.tape_avg = st.near_field_cells ? tape_sum / near : 0;
+    st.active_avg = (prim_sum + double(far_finest)) / cells;
+    const double mean_sq = (prim_sq_sum + double(far_finest)) / cells;
+    st.active_std = std::sqrt(std::max(0.0, mean_sq - st.active_avg * st.active_avg));
+    if (far_finest > 0) st.active_max = std::max(st.active_max, 1u);
 }
 
 bool PrunedGrid::cell_index(vec3 p, uint32_t& ix, uint32_t& iy, uint32_t& iz) const {
@@ -504,16 +507,23 @@ vec3 PrunedGrid::cell_center(uint32_t ix, uint32_t iy, uint32_t iz) const {
            vec3(float(ix) + 0.5f, float(iy) + 0.5f, float(iz) + 0.5f) * cell_size_;
 }
 
-float PrunedGrid::far_field_constant(uint32_t level, const PrunedCell& c, uint32_t ix, uint32_t iy,
-                                     uint32_t iz) const {
+float far_field_cell_constant(vec3 origin, vec3 cell_size, uint32_t scale, float lipschitz,
+                              const PrunedCell& c, uint32_t ix, uint32_t iy, uint32_t iz) {
     // The Lipschitz bound from the coarse centre over the distance to this finest cell's far
     // corner; tighter than the coarse cell's own constant for cells near its centre.
-    const uint32_t scale = resolution() / levels_[level].res;
-    const vec3 coarse = scene_->aabb.min + vec3(float(ix / scale) + 0.5f, float(iy / scale) + 0.5f,
-                                                float(iz / scale) + 0.5f) *
-                                               (cell_size_ * float(scale));
-    const vec3 d = math::abs(cell_center(ix, iy, iz) - coarse) + cell_size_ * 0.5f;
-    return far_field_combine(c.value, c.bound, far_field_reach(lipschitz_, math::length(d)));
+    const vec3 coarse = origin + vec3(float(ix / scale) + 0.5f, float(iy / scale) + 0.5f,
+                                      float(iz / scale) + 0.5f) *
+                                     (cell_size * float(scale));
+    const vec3 centre =
+        origin + vec3(float(ix) + 0.5f, float(iy) + 0.5f, float(iz) + 0.5f) * cell_size;
+    const vec3 d = math::abs(centre - coarse) + cell_size * 0.5f;
+    return far_field_combine(c.value, c.bound, far_field_reach(lipschitz, math::length(d)));
+}
+
+float PrunedGrid::far_field_constant(uint32_t level, const PrunedCell& c, uint32_t ix, uint32_t iy,
+                                     uint32_t iz) const {
+    return far_field_cell_constant(scene_->aabb.min, cell_size_, resolution() / levels_[level].res,
+                                   lipschitz_, c, ix, iy, iz);
 }
 
 CellView PrunedGrid::cell(uint32_t ix, uint32_t iy, uint32_t iz) const {

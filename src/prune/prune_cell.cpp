@@ -87,15 +87,13 @@ bool is_near_field(const Scene& sc, std::span<const uint32_t> tape, const CellBo
     // the Lipschitz range is f(c) ± L·R. With tighter ranges (CellBounds::kInterval) the same
     // guarantee is tested on the range itself, so far-field constants keep |c| >= (C − 1)·L·R.
     const float clearance = (far_field_c - 1.0f) * L * box.radius;
-    const float margin =
-        math::kPruneMarginAbs + math::kPruneMarginRel * (std::fabs(v) + L * box.radius);
-    const float lo = s.lo[root] - margin, hi = s.hi[root] + margin;
-    if (lo > clearance && lo > 0.0f) {
-        constant = lo;
+    const vec2 range = math::far_field_range(v, s.lo[root], s.hi[root], L, box.radius);
+    if (math::clears_above(range.x, clearance)) {
+        constant = range.x;
         return false;
     }
-    if (hi < -clearance && hi < 0.0f) {
-        constant = hi;
+    if (math::clears_below(range.y, clearance)) {
+        constant = range.y;
         return false;
     }
     return true;
@@ -131,13 +129,11 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
         first = false;
         // The far-field test of is_near_field on this sub-box's root range, against the whole
         // cell's clearance.
-        const float margin =
-            math::kPruneMarginAbs + math::kPruneMarginRel * (std::fabs(v) + L * sub.radius);
-        const float lo = s.lo[n - 1] - margin, hi = s.hi[n - 1] + margin;
-        all_above = all_above && lo > clearance && lo > 0.0f;
-        all_below = all_below && hi < -clearance && hi < 0.0f;
-        lowest = std::min(lowest, lo);
-        highest = std::max(highest, hi);
+        const vec2 range = math::far_field_range(v, s.lo[n - 1], s.hi[n - 1], L, sub.radius);
+        all_above = all_above && math::clears_above(range.x, clearance);
+        all_below = all_below && math::clears_below(range.y, clearance);
+        lowest = std::min(lowest, range.x);
+        highest = std::max(highest, range.y);
         return any_decided || all_above || all_below;
     };
     // The middle and the corners first: where decisions and the far field fail soonest. The
