@@ -228,6 +228,63 @@ TEST(Gpu, DiscretizeMatchesCpu) {
     }
 }
 
+// A device whose shaders address at most 1 MiB of one buffer: images and grids come back in
+// many chunks and slices and still equal the CPU's; a grid too large for it is refused with a
+// clear error instead of being addressed out of range.
+TEST(Gpu, SmallBufferRangeSplitsTheWork) {
+    if (!gpu::built_with_vulkan()) GTEST_SKIP() << "built without the Vulkan backend";
+    setenv("SDFPRUNE_VULKAN_MAX_BUFFER", "1048576", 1);
+    std::unique_ptr<gpu::Device> small;
+    try {
+        small = std::make_unique<gpu::Device>();
+    } catch (const gpu::GpuError& e) {
+        unsetenv("SDFPRUNE_VULKAN_MAX_BUFFER");
+        FAIL() << "no Vulkan device (install mesa-vulkan-drivers): " << e.what();
+    }
+    unsetenv("SDFPRUNE_VULKAN_MAX_BUFFER");
+    RandomSceneSpec spec;
+    spec.primitives = 24;
+    spec.placement = Placement::kMixed;
+    const Scene sc = random_scene(77, spec);
+    PruneOptions o;
+    o.resolution = 16;
+    const PrunedGrid cpu = prune(sc, o);
+    const gpu::Grid gpu = gpu::prune(*small, sc, o);
+    expect_same_stats(cpu.stats(), gpu.stats(), "16^3 on a 1 MiB device");
+
+    RenderOptions ro;
+    ro.width = 256;  // 49,152 pixels of 32 bytes: chunks of 32,768
+    ro.height = 192;
+    ro.camera = orbit_camera(sc.aabb, 35, 20, 0, 40);
+    RenderStats cs, gs;
+    ro.shading = Shading::kHeatmap;  // every pixel shows its own work, hit or miss
+    expect_similar(render(cpu, ro, &cs), gpu::render(*small, gpu, ro, &gs), "chunked image");
+    EXPECT_NEAR(cs.hit_fraction, gs.hit_fraction, 1e-3);
+    EXPECT_NEAR(cs.steps_avg, gs.steps_avg, 0.01 * cs.steps_avg);
+    EXPECT_GT(gs.hit_fraction, 0.0);
+
+    const uint32_t n = 90;  // 729,000 values: slices of 262,144
+    std::vector<float> a(size_t(n) * n * n), b(a.size());
+    discretize_pruned(cpu, n, a);
+    gpu::discretize(*small, gpu, n, b);
+    size_t bad = 0;
+    for (size_t i = 0; i < a.size(); ++i)
+        bad += std::fabs(a[i] - b[i]) <= 1e-6f * (1 + std::fabs(a[i])) ? 0 : 1;
+    EXPECT_EQ(bad, 0u);
+
+    o.resolution = 256;
+    try {
+        gpu::prune(*small, sc, o);
+        ADD_FAILURE() << "256^3 cells cannot fit 1 MiB buffers, yet pruning succeeded";
+    } catch (const gpu::GpuError& e) {
+        EXPECT_NE(std::string(e.what()).find("lets a shader address"), std::string::npos)
+            << e.what();
+    }
+    // The device is still usable after the refused step.
+    o.resolution = 16;
+    expect_same_stats(cpu.stats(), gpu::prune(*small, sc, o).stats(), "after the error");
+}
+
 TEST(GpuCli, StatsOnVulkanEqualCpu) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const CliResult cpu = run_cli("stats builtin:demo --grid 32 --json");

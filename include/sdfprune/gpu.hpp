@@ -33,6 +33,8 @@ class DeviceGrid;
 bool built_with_vulkan();
 
 // One Vulkan device (the first with a compute queue; SDFPRUNE_VULKAN_DEVICE=N picks another).
+// SDFPRUNE_VULKAN_MAX_BUFFER=BYTES makes it act as if a shader could address no more than
+// BYTES of one buffer (the tests use it to exercise how work is split to fit a small device).
 class Device {
   public:
     Device();  // throws GpuError when there is no device

@@ -20,15 +20,17 @@ struct TraceParams {
     uint width, height, shading, shadows;
 };
 struct Pixel {
-    vec4 color;   // linear rgb; w: 1 if the primary ray hit
-    uvec4 count;  // node evaluations, tracing steps
+    vec4 color;  // linear rgb; w: 1 if the primary ray hit
+    uint evals;  // node evaluations
+    uint steps;  // tracing steps
+    uint pad0, pad1;
 };
 
 layout(std430, binding = 6) readonly buffer TraceParamBlock { TraceParams prm; };
-layout(std430, binding = 7) writeonly buffer Pixels { Pixel pixels[]; };
+layout(std430, binding = 7) writeonly buffer Pixels { Pixel pixels[]; };  // from index base
 
 // One slice of the image per dispatch: pixels [first, first + count), one per thread.
-layout(push_constant) uniform Push { uint first, count, stack_threads; } pc;
+layout(push_constant) uniform Push { uint first, count, stack_threads, base; } pc;
 
 
 bool ray_box(vec3 o, vec3 inv_dir, vec3 lo, vec3 hi, out float t0, out float t1) {
@@ -156,6 +158,7 @@ void main() {
             out_color = vec4(c, 1.0);
         }
     }
-    pixels[index].color = out_color;
-    pixels[index].count = uvec4(g_evals, g_steps, 0u, 0u);
+    pixels[index - pc.base].color = out_color;
+    pixels[index - pc.base].evals = g_evals;
+    pixels[index - pc.base].steps = g_steps;
 }

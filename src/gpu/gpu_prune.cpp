@@ -11,20 +11,6 @@
 #include "device_grid.hpp"
 
 namespace sdfprune::gpu {
-namespace {
-
-// prune.comp: kStateWords, the words of a job's state at the start of its thread's scratch.
-constexpr uint64_t kPruneStateWords = 16;
-
-struct PrunePush {  // prune.comp: Push
-    vec4 origin, csize;
-    uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
-    uint32_t round, budget, refine, octant_start;
-};
-static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) <= 128);
-
-}  // namespace
-
 DeviceGrid::~DeviceGrid() {
     for (Buffer* b : {&nodes, &params, &extras, &pool, &cells, &levels}) ctx.destroy(*b);
 }
@@ -236,10 +222,10 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             const uint32_t nf = res[li + 1] / res[li];
             Buffer next = ctx.create_buffer(uint64_t(c.near_jobs) * sizeof(GpuBlock));
             *counter = GpuCounters{};
-            const uint32_t push[3] = {f, uint32_t(total), nf};
+            const ExpandPush push{f, uint32_t(total), nf};
             ctx.begin();
-            ctx.dispatch(KernelId::kExpand, {&blocks, &cells, &next, &counters}, push, sizeof(push),
-                         ctx.groups_for(total));
+            ctx.dispatch(KernelId::kExpand, {&blocks, &cells, &next, &counters}, &push,
+                         sizeof(push), ctx.groups_for(total));
             gpu_ms += ctx.submit();
             ctx.destroy(blocks);
             blocks = next;
@@ -286,7 +272,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                                : cell_total - g.level_info[li].offset;
         Buffer level = ctx.create_buffer(n * sizeof(PrunedCell));
         Buffer info = ctx.create_buffer(n * 8);
-        const uint32_t push = uint32_t(n);
+        const CellInfoPush push{uint32_t(n)};
         ctx.begin();
         ctx.copy(g.cells, level, n * sizeof(PrunedCell),
                  uint64_t(g.level_info[li].offset) * sizeof(PrunedCell));

@@ -12,27 +12,6 @@ namespace sdfprune::gpu {
 
 namespace {
 
-struct TraceParams {  // trace.comp: TraceParams
-    GpuGridParams grid;
-    vec4 eye, forward, right, up, light;
-    uint32_t width, height, shading, shadows;
-};
-struct DiscretizeParams {  // discretize.comp: DiscretizeParams
-    GpuGridParams grid;
-    vec4 sample_size;
-    uint32_t n, pad[3];
-};
-struct GpuPixel {  // trace.comp: Pixel
-    vec4 color;
-    uint32_t evals, steps, pad[2];
-};
-static_assert(sizeof(TraceParams) == 160 && sizeof(DiscretizeParams) == 96);
-static_assert(sizeof(GpuPixel) == 32);
-
-struct SlicePush {  // trace.comp and discretize.comp: Push
-    uint32_t first, count, stack_threads, base;
-};
-
 vec4 v4(vec3 v, float w) {
     return vec4(v.x, v.y, v.z, w);
 }
@@ -67,21 +46,28 @@ Image render(Device& device, const Grid& grid, const RenderOptions& opt, RenderS
     prm.shading = opt.shading == Shading::kNormals ? 1u : 0u;
     prm.shadows = opt.shadows ? 1u : 0u;
     Buffer params = upload_params(ctx, prm);
-    Buffer out = ctx.create_buffer(pixels * sizeof(GpuPixel));
     const uint32_t threads = ctx.threads_for(pixels, uint64_t(sc.max_stack) * 16);
     Buffer stack = ctx.create_buffer(uint64_t(threads) * sc.max_stack * 16);
-    ctx.begin();
-    for (uint64_t first = 0; first < pixels; first += threads) {
-        const SlicePush push{uint32_t(first), uint32_t(std::min<uint64_t>(threads, pixels - first)),
-                             threads, 0};
-        ctx.dispatch(
-            KernelId::kTrace,
-            {&g.nodes, &g.params, &g.extras, &g.pool, &g.cells, &g.levels, &params, &out, &stack},
-            &push, sizeof(push), ctx.groups_for(push.count));
-    }
-    const double gpu_ms = ctx.submit();
+    // The pixels come back in chunks that fit one storage buffer.
+    const uint64_t chunk = std::min<uint64_t>(pixels, ctx.max_buffer_bytes() / sizeof(GpuPixel));
+    Buffer out = ctx.create_buffer(chunk * sizeof(GpuPixel));
     std::vector<GpuPixel> host(pixels);
-    ctx.download(out, host.data(), pixels * sizeof(GpuPixel));
+    double gpu_ms = 0;
+    for (uint64_t base = 0; base < pixels; base += chunk) {
+        const uint64_t count = std::min(chunk, pixels - base);
+        ctx.begin();
+        for (uint64_t done = 0; done < count; done += threads) {
+            const SlicePush push{uint32_t(base + done),
+                                 uint32_t(std::min<uint64_t>(threads, count - done)), threads,
+                                 uint32_t(base)};
+            ctx.dispatch(KernelId::kTrace,
+                         {&g.nodes, &g.params, &g.extras, &g.pool, &g.cells, &g.levels, &params,
+                          &out, &stack},
+                         &push, sizeof(push), ctx.groups_for(push.count));
+        }
+        gpu_ms += ctx.submit();
+        ctx.download(out, host.data() + base, count * sizeof(GpuPixel));
+    }
     for (Buffer* b : {&params, &out, &stack}) ctx.destroy(*b);
     if (ctx.loop_limited()) {
         // Loop iterations of each pixel's invocation, bounded from above: tape words evaluated,
@@ -134,8 +120,9 @@ void discretize(Device& device, const Grid& grid, uint32_t n, std::span<float> o
     Buffer params = upload_params(ctx, prm);
     const uint32_t threads = ctx.threads_for(total, uint64_t(sc.max_stack) * 16);
     Buffer stack = ctx.create_buffer(uint64_t(threads) * sc.max_stack * 16);
-    // Values come back in slices of at most 64 Mi floats.
-    const uint64_t slice = std::min<uint64_t>(total, uint64_t(1) << 26);
+    // Values come back in slices of at most 64 Mi floats that fit one storage buffer.
+    const uint64_t slice =
+        std::min({total, uint64_t(1) << 26, ctx.max_buffer_bytes() / sizeof(float)});
     Buffer values = ctx.create_buffer(slice * 4);
     double ms = 0;
     for (uint64_t first = 0; first < total; first += slice) {

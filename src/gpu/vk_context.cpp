@@ -53,6 +53,25 @@ T vk_struct(VkStructureType type) {
     return s;
 }
 
+// Whether the instance (device null) or the device offers the extension.
+bool has_extension(VkPhysicalDevice device, const char* name) {
+    uint32_t n = 0;
+    std::vector<VkExtensionProperties> ext;
+    if (device) {
+        vkEnumerateDeviceExtensionProperties(device, nullptr, &n, nullptr);
+        ext.resize(n);
+        vkEnumerateDeviceExtensionProperties(device, nullptr, &n, ext.data());
+    } else {
+        vkEnumerateInstanceExtensionProperties(nullptr, &n, nullptr);
+        ext.resize(n);
+        vkEnumerateInstanceExtensionProperties(nullptr, &n, ext.data());
+    }
+    ext.resize(n);
+    return std::any_of(ext.begin(), ext.end(), [&](const VkExtensionProperties& e) {
+        return std::strcmp(e.extensionName, name) == 0;
+    });
+}
+
 }  // namespace
 
 void Context::check(VkResult r, const char* what) const {
@@ -68,6 +87,14 @@ Context::Context() {
     app.apiVersion = VK_API_VERSION_1_1;
     auto ici = vk_struct<VkInstanceCreateInfo>(VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO);
     ici.pApplicationInfo = &app;
+    // Drivers that implement Vulkan only in part (MoltenVK on Apple GPUs) are listed only to
+    // applications that ask for them.
+    const char* portability_enumeration = "VK_KHR_portability_enumeration";
+    if (has_extension(nullptr, portability_enumeration)) {
+        ici.enabledExtensionCount = 1;
+        ici.ppEnabledExtensionNames = &portability_enumeration;
+        ici.flags |= VK_INSTANCE_CREATE_ENUMERATE_PORTABILITY_BIT_KHR;
+    }
     if (vkCreateInstance(&ici, nullptr, &instance_) != VK_SUCCESS)
         throw GpuError(
             "no Vulkan device: the Vulkan loader found no driver (install "
@@ -123,6 +150,9 @@ Context::Context() {
     vkGetPhysicalDeviceProperties(physical_, &props);
     device_name_ = props.deviceName;
     max_range_ = props.limits.maxStorageBufferRange;
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_MAX_BUFFER"))  // a smaller device, for tests
+        max_range_ = std::min<uint64_t>(max_range_, std::strtoull(env, nullptr, 10));
+    max_range_ &= ~uint64_t(15);  // buffer sizes round up to 16
     max_groups_ = props.limits.maxComputeWorkGroupCount[0];
     loop_limited_ = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU &&
                     device_name_.find("llvmpipe") != std::string::npos;
@@ -137,6 +167,12 @@ Context::Context() {
     auto dci = vk_struct<VkDeviceCreateInfo>(VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO);
     dci.queueCreateInfoCount = 1;
     dci.pQueueCreateInfos = &qci;
+    // Such a driver must be told that the application knows (the Vulkan spec).
+    const char* portability_subset = "VK_KHR_portability_subset";
+    if (has_extension(physical_, portability_subset)) {
+        dci.enabledExtensionCount = 1;
+        dci.ppEnabledExtensionNames = &portability_subset;
+    }
     check(vkCreateDevice(physical_, &dci, nullptr, &device_), "vkCreateDevice");
     vkGetDeviceQueue(device_, queue_family_, 0, &queue_);
 
@@ -165,7 +201,9 @@ Context::Context() {
     vkGetPhysicalDeviceQueueFamilyProperties(physical_, &nq, nullptr);
     std::vector<VkQueueFamilyProperties> qf(nq);
     vkGetPhysicalDeviceQueueFamilyProperties(physical_, &nq, qf.data());
-    if (qf[queue_family_].timestampValidBits > 0) {
+    const uint32_t valid_bits = qf[queue_family_].timestampValidBits;
+    timestamp_mask_ = valid_bits >= 64 ? ~uint64_t(0) : (uint64_t(1) << valid_bits) - 1;
+    if (valid_bits > 0) {
         auto qpi = vk_struct<VkQueryPoolCreateInfo>(VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO);
         qpi.queryType = VK_QUERY_TYPE_TIMESTAMP;
         qpi.queryCount = 2;
@@ -348,6 +386,12 @@ void Context::dispatch(KernelId id, std::initializer_list<const Buffer*> buffers
     VkWriteDescriptorSet writes[kMaxBindings];
     uint32_t i = 0;
     for (const Buffer* b : buffers) {
+        if (b->size > max_range_) {
+            abandon();
+            throw GpuError("Vulkan: a buffer of " + std::to_string(b->size) +
+                           " bytes is more than " + device_name_ + " lets a shader address (" +
+                           std::to_string(max_range_) + " bytes); use --backend cpu");
+        }
         info[i] = {b->buffer, 0, VK_WHOLE_SIZE};
         writes[i] = vk_struct<VkWriteDescriptorSet>(VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET);
         writes[i].dstSet = set;
@@ -381,6 +425,14 @@ void Context::fill(const Buffer& dst, uint32_t value) {
     barrier();
 }
 
+void Context::abandon() {
+    vkEndCommandBuffer(cmd_);
+    vkResetCommandBuffer(cmd_, 0);
+    vkResetDescriptorPool(device_, descriptor_pool_, 0);
+    sets_used_ = 0;
+    recording_ = false;
+}
+
 double Context::submit() {
     if (!recording_) throw std::logic_error("Context::submit without begin");
     return carried_ms_ + submit_part();
@@ -405,7 +457,7 @@ double Context::submit_part() {
     if (vkGetQueryPoolResults(device_, timestamps_, 0, 2, sizeof(ticks), ticks, sizeof(uint64_t),
                               VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT) != VK_SUCCESS)
         return 0;
-    return double(ticks[1] - ticks[0]) * timestamp_ns_ * 1e-6;
+    return double((ticks[1] - ticks[0]) & timestamp_mask_) * timestamp_ns_ * 1e-6;
 }
 
 void Context::upload(const Buffer& dst, const void* data, uint64_t bytes, uint64_t dst_offset) {

@@ -86,6 +86,8 @@ class Context {
     };
     void barrier();
     void begin_part();
+    // Drops what was recorded since begin() (after an error while recording).
+    void abandon();
     double submit_part();
     void check(VkResult r, const char* what) const;
     uint32_t memory_type(uint32_t bits, bool host_visible) const;
@@ -100,7 +102,8 @@ class Context {
     VkFence fence_ = VK_NULL_HANDLE;
     VkDescriptorPool descriptor_pool_ = VK_NULL_HANDLE;
     VkQueryPool timestamps_ = VK_NULL_HANDLE;
-    double timestamp_ns_ = 1;  // nanoseconds per tick
+    double timestamp_ns_ = 1;                 // nanoseconds per tick
+    uint64_t timestamp_mask_ = ~uint64_t(0);  // the bits a timestamp holds
     std::vector<Kernel> kernels_;
     VkPhysicalDeviceMemoryProperties memory_{};
     std::string device_name_;

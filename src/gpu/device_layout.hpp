@@ -1,0 +1,86 @@
+// device_layout.hpp — the host's mirrors of every struct, buffer block and push-constant block
+// the kernels (shaders/gpu/*) share with it, in std430 / push-constant layout. The
+// static_asserts pin them on the C++ side; tests/gpu_layout_test.cpp reads the member offsets
+// and array strides glslc gave the GLSL side (SPIR-V reflection) and checks they match.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "sdfprune/prune.hpp"
+
+namespace sdfprune::gpu {
+
+using math::vec4;
+
+// The scene (scene.glsl). PrimitiveParams is sdf_math.h's, the same struct on both sides.
+struct GpuNode {  // Node
+    uint32_t kind, primitive;
+    float blend, lipschitz;
+};
+struct GpuPrimitiveExtra {  // PrimitiveExtra
+    vec4 bound0, bound1, color;
+};
+
+// The pruned grid (cells.glsl, grid.glsl). Cell is PrunedCell (prune.hpp).
+struct GpuBlock {  // Block
+    uint32_t x, y, z, tape;
+};
+struct GpuLevel {  // Level
+    uint32_t res, factor, offset, pad;
+};
+struct GpuGridParams {  // GridParams
+    vec4 aabb_min, aabb_max, cell_size, inv_cell;
+};
+
+// prune.comp: Counters (expand.comp sees the same buffer as uint[]: [5] is next_blocks).
+struct GpuCounters {
+    uint32_t pool_used, pool_capacity, overflow, max_len, near_jobs, next_blocks, max_depth;
+    uint32_t octant_used, octant_capacity, pad[3];
+};
+// prune.comp: kStateWords, the words of a job's state at the start of its thread's scratch.
+inline constexpr uint64_t kPruneStateWords = 16;
+struct PrunePush {  // prune.comp: Push
+    vec4 origin, csize;
+    uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
+    uint32_t round, budget, refine, octant_start;
+};
+struct ExpandPush {  // expand.comp: Push
+    uint32_t factor, cells_count, next_factor;
+};
+struct CellInfoPush {  // cell_info.comp: Push
+    uint32_t cells_count;
+};
+
+// trace.comp
+struct TraceParams {
+    GpuGridParams grid;
+    vec4 eye, forward, right, up, light;
+    uint32_t width, height, shading, shadows;
+};
+struct GpuPixel {  // Pixel
+    vec4 color;
+    uint32_t evals, steps, pad0, pad1;
+};
+// discretize.comp
+struct DiscretizeParams {
+    GpuGridParams grid;
+    vec4 sample_size;
+    uint32_t n, pad0, pad1, pad2;
+};
+// trace.comp and discretize.comp: Push. Items [first, first + count) of a slice, written from
+// index `base` of the output buffer.
+struct SlicePush {
+    uint32_t first, count, stack_threads, base;
+};
+
+static_assert(sizeof(GpuNode) == 16 && sizeof(GpuPrimitiveExtra) == 48);
+static_assert(sizeof(math::PrimitiveParams) == 96 && offsetof(math::PrimitiveParams, a) == 48);
+static_assert(sizeof(PrunedCell) == 16 && offsetof(PrunedCell, value) == 8);
+static_assert(sizeof(GpuBlock) == 16 && sizeof(GpuLevel) == 16 && sizeof(GpuGridParams) == 64);
+static_assert(sizeof(GpuCounters) == 48);
+static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) <= 128);
+static_assert(sizeof(TraceParams) == 160 && sizeof(DiscretizeParams) == 96);
+static_assert(sizeof(GpuPixel) == 32 && sizeof(SlicePush) == 16);
+
+}  // namespace sdfprune::gpu
