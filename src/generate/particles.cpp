@@ -13,9 +13,15 @@ namespace {
 
 constexpr uint32_t kAtomsPerRing = 1000;
 constexpr uint32_t kAtomsPerBasePair = 10;
-constexpr float kRise = 0.034f;            // along the axis per base pair (0.34 nm at 1 nm = 0.1)
+// Lengths at 1 nm = 0.23, which spaces the atoms as in the reference molecule.json (nearest
+// neighbour about 0.05 apart for atoms of radius 0.026–0.036, k = 0.026); at 1 nm = 0.1 they
+// would overlap far more than any real scene's and few operators could be pruned.
+constexpr float kRise = 0.078f;            // along the axis per base pair (0.34 nm)
 constexpr float kTwist = 2 * kPi / 10.5f;  // per base pair
-constexpr float kHelixRadius = 0.11f;
+constexpr float kHelixRadius = 0.25f;      // to the backbone (1.1 nm)
+constexpr float kPhosphateOut = 0.035f;    // phosphates beyond the sugars
+// Rings on a lattice this far apart: 2.5 radii of a full ring (kAtomsPerRing atoms).
+constexpr float kRingSpacing = 2.5f * kAtomsPerRing / kAtomsPerBasePair * kRise / (2 * kPi);
 constexpr float kMoleculeBlend = 0.026f;  // the reference molecule's k
 
 // Appends `atoms` atoms of a DNA ring (a closed double helix) placed by `place` (local ->
@@ -26,7 +32,7 @@ uint32_t dna_ring(Assembly& a, Rng& rng, uint32_t atoms, const Affine& place) {
     constexpr std::array<vec3, 4> kBases = {vec3{0.25f, 0.5f, 0.95f}, vec3{0.95f, 0.9f, 0.3f},
                                             vec3{0.3f, 0.8f, 0.4f}, vec3{0.7f, 0.4f, 0.9f}};
     const uint32_t pairs = (atoms + kAtomsPerBasePair - 1) / kAtomsPerBasePair;
-    const float ring_radius = std::max(float(pairs) * kRise / (2 * kPi), 0.15f);
+    const float ring_radius = std::max(float(pairs) * kRise / (2 * kPi), 1.5f * kHelixRadius);
     const float wobble = rng.uniform(0.0f, 0.08f) * ring_radius;  // gentle supercoiling
     const float phase = rng.uniform(0.0f, 2 * kPi);
     std::vector<uint32_t> chain_atoms;
@@ -50,12 +56,12 @@ uint32_t dna_ring(Assembly& a, Rng& rng, uint32_t atoms, const Affine& place) {
         const bool flip = rng.uniform() < 0.5f;
         const vec3 b1 = kBases[(at_pair ? 0 : 2) + (flip ? 1 : 0)];
         const vec3 b2 = kBases[(at_pair ? 0 : 2) + (flip ? 0 : 1)];
-        atom(at(phi, kHelixRadius + 0.015f, -kRise / 2), 0.036f, backbone1);
+        atom(at(phi, kHelixRadius + kPhosphateOut, -kRise / 2), 0.036f, backbone1);
         atom(s1, 0.032f, backbone1);
         for (float t : {0.17f, 0.33f, 0.48f}) atom(lerp(s1, s2, t), 0.026f, b1);
         for (float t : {0.52f, 0.67f, 0.83f}) atom(lerp(s1, s2, t), 0.026f, b2);
         atom(s2, 0.032f, backbone2);
-        atom(at(phi2, kHelixRadius + 0.015f, kRise / 2), 0.036f, backbone2);
+        atom(at(phi2, kHelixRadius + kPhosphateOut, kRise / 2), 0.036f, backbone2);
     }
     return a.chain(chain_atoms, math::kOpUnion, kMoleculeBlend);
 }
@@ -216,7 +222,7 @@ Scene molecule(uint64_t seed, uint32_t atoms) {
             const vec3 axis = uniform_vec3(rng, -1, 1) + vec3{0, 0, 1e-3f};
             place = Affine::rotation(axis, rng.uniform(0.0f, kPi));
             centre =
-                vec3{float(i % side), float(i / side % side), float(i / (side * side))} * 1.35f;
+                vec3{float(i % side), float(i / side % side), float(i / (side * side))} * kRingSpacing;
         }
         roots.push_back(dna_ring(a, rng, n, Affine::translation(centre).compose(place)));
         centres.push_back(centre);
