@@ -25,8 +25,8 @@ constexpr float kRingSpacing = 2.5f * kAtomsPerRing / kAtomsPerBasePair * kRise 
 constexpr float kMoleculeBlend = 0.026f;  // the reference molecule's k
 
 // Appends `atoms` atoms of a DNA ring (a closed double helix) placed by `place` (local ->
-// world), in chain order; returns the chain's root. Per base pair: on each strand a phosphate
-// and a sugar (the backbones), and a rung of six base atoms between the sugars.
+// world), chained in random order; returns the chain's root. Per base pair: on each strand a
+// phosphate and a sugar (the backbones), and a rung of six base atoms between the sugars.
 uint32_t dna_ring(Assembly& a, Rng& rng, uint32_t atoms, const Affine& place) {
     const vec3 backbone1{1.0f, 0.55f, 0.12f}, backbone2{0.9f, 0.2f, 0.25f};
     constexpr std::array<vec3, 4> kBases = {vec3{0.25f, 0.5f, 0.95f}, vec3{0.95f, 0.9f, 0.3f},
@@ -63,6 +63,11 @@ uint32_t dna_ring(Assembly& a, Rng& rng, uint32_t atoms, const Affine& place) {
         atom(s2, 0.032f, backbone2);
         atom(at(phi2, kHelixRadius + kPhosphateOut, kRise / 2), 0.036f, backbone2);
     }
+    // The chain in no spatial order, as in the reference (consecutive atoms there lie 0.8
+    // apart in a scene 2 across). Chained along the helix instead, the atoms would approach
+    // any cell gradually, and no operator could drop the chain before the nearest atom.
+    for (size_t i = chain_atoms.size(); i > 1; --i)
+        std::swap(chain_atoms[i - 1], chain_atoms[rng.next_u64() % i]);
     return a.chain(chain_atoms, math::kOpUnion, kMoleculeBlend);
 }
 
@@ -221,8 +226,8 @@ Scene molecule(uint64_t seed, uint32_t atoms) {
         if (rings > 1) {
             const vec3 axis = uniform_vec3(rng, -1, 1) + vec3{0, 0, 1e-3f};
             place = Affine::rotation(axis, rng.uniform(0.0f, kPi));
-            centre =
-                vec3{float(i % side), float(i / side % side), float(i / (side * side))} * kRingSpacing;
+            centre = vec3{float(i % side), float(i / side % side), float(i / (side * side))} *
+                     kRingSpacing;
         }
         roots.push_back(dna_ring(a, rng, n, Affine::translation(centre).compose(place)));
         centres.push_back(centre);
