@@ -92,7 +92,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     const auto grow = [&](Buffer& pool, uint64_t& cap, uint64_t need, uint64_t keep) {
         if (cap >= max_pool_words)
             throw GpuError("tape pool exceeds the device's largest storage buffer (" +
-                           std::to_string(ctx.max_buffer_bytes()) + " bytes)");
+                           std::to_string(ctx.max_buffer_bytes()) + " bytes); use --backend cpu");
         const uint64_t grown = std::min(std::max(cap * 2, need + need / 4), max_pool_words);
         Buffer bigger = ctx.create_buffer(grown * 4);
         if (keep > 0) {
