@@ -23,6 +23,38 @@ Buffer upload_params(Context& ctx, const Params& p) {
     return b;
 }
 
+// Runs `kernel` (trace.comp or discretize.comp) over items [0, total), one per thread, and
+// downloads its output (`item_bytes` per item) to `host`: in chunks of at most `max_chunk`
+// items whose output fits one storage buffer, each in dispatches of as many threads as the
+// per-thread stacks let share the scratch budget. Returns the GPU time.
+double run_in_chunks(Context& ctx, KernelId kernel, const DeviceGrid& g, const Buffer& params,
+                     uint64_t total, uint64_t item_bytes, uint64_t max_chunk, void* host) {
+    const uint64_t stack_bytes = uint64_t(g.scene->max_stack) * 16;
+    const uint32_t threads = ctx.threads_for(total, stack_bytes);
+    Buffer stack = ctx.create_buffer(threads * stack_bytes);
+    const uint64_t chunk = std::min({total, max_chunk, ctx.max_buffer_bytes() / item_bytes});
+    Buffer out = ctx.create_buffer(chunk * item_bytes);
+    double ms = 0;
+    for (uint64_t base = 0; base < total; base += chunk) {
+        const uint64_t count = std::min(chunk, total - base);
+        ctx.begin();
+        for (uint64_t done = 0; done < count; done += threads) {
+            const SlicePush push{uint32_t(base + done),
+                                 uint32_t(std::min<uint64_t>(threads, count - done)), threads,
+                                 uint32_t(base)};
+            ctx.dispatch(kernel,
+                         {&g.nodes, &g.params, &g.extras, &g.pool, &g.cells, &g.levels, &params,
+                          &out, &stack},
+                         &push, sizeof(push), ctx.groups_for(push.count));
+        }
+        ms += ctx.submit();
+        ctx.download(out, static_cast<char*>(host) + base * item_bytes, count * item_bytes);
+    }
+    ctx.destroy(out);
+    ctx.destroy(stack);
+    return ms;
+}
+
 }  // namespace
 
 Image render(Device& device, const Grid& grid, const RenderOptions& opt, RenderStats* stats) {
@@ -46,29 +78,10 @@ Image render(Device& device, const Grid& grid, const RenderOptions& opt, RenderS
     prm.shading = opt.shading == Shading::kNormals ? 1u : 0u;
     prm.shadows = opt.shadows ? 1u : 0u;
     Buffer params = upload_params(ctx, prm);
-    const uint32_t threads = ctx.threads_for(pixels, uint64_t(sc.max_stack) * 16);
-    Buffer stack = ctx.create_buffer(uint64_t(threads) * sc.max_stack * 16);
-    // The pixels come back in chunks that fit one storage buffer.
-    const uint64_t chunk = std::min<uint64_t>(pixels, ctx.max_buffer_bytes() / sizeof(GpuPixel));
-    Buffer out = ctx.create_buffer(chunk * sizeof(GpuPixel));
     std::vector<GpuPixel> host(pixels);
-    double gpu_ms = 0;
-    for (uint64_t base = 0; base < pixels; base += chunk) {
-        const uint64_t count = std::min(chunk, pixels - base);
-        ctx.begin();
-        for (uint64_t done = 0; done < count; done += threads) {
-            const SlicePush push{uint32_t(base + done),
-                                 uint32_t(std::min<uint64_t>(threads, count - done)), threads,
-                                 uint32_t(base)};
-            ctx.dispatch(KernelId::kTrace,
-                         {&g.nodes, &g.params, &g.extras, &g.pool, &g.cells, &g.levels, &params,
-                          &out, &stack},
-                         &push, sizeof(push), ctx.groups_for(push.count));
-        }
-        gpu_ms += ctx.submit();
-        ctx.download(out, host.data() + base, count * sizeof(GpuPixel));
-    }
-    for (Buffer* b : {&params, &out, &stack}) ctx.destroy(*b);
+    const double gpu_ms = run_in_chunks(ctx, KernelId::kTrace, g, params, pixels, sizeof(GpuPixel),
+                                        pixels, host.data());
+    ctx.destroy(params);
     if (ctx.loop_limited()) {
         // Loop iterations of each pixel's invocation, bounded from above: tape words evaluated,
         // and per step the level walk and the few fixed loops.
@@ -118,29 +131,10 @@ void discretize(Device& device, const Grid& grid, uint32_t n, std::span<float> o
     prm.sample_size = v4(sample, 0);
     prm.n = n;
     Buffer params = upload_params(ctx, prm);
-    const uint32_t threads = ctx.threads_for(total, uint64_t(sc.max_stack) * 16);
-    Buffer stack = ctx.create_buffer(uint64_t(threads) * sc.max_stack * 16);
-    // Values come back in slices of at most 64 Mi floats that fit one storage buffer.
-    const uint64_t slice =
-        std::min({total, uint64_t(1) << 26, ctx.max_buffer_bytes() / sizeof(float)});
-    Buffer values = ctx.create_buffer(slice * 4);
-    double ms = 0;
-    for (uint64_t first = 0; first < total; first += slice) {
-        const uint64_t count = std::min(slice, total - first);
-        ctx.begin();
-        for (uint64_t done = 0; done < count; done += threads) {
-            const SlicePush push{uint32_t(first + done),
-                                 uint32_t(std::min<uint64_t>(threads, count - done)), threads,
-                                 uint32_t(first)};
-            ctx.dispatch(KernelId::kDiscretize,
-                         {&g.nodes, &g.params, &g.extras, &g.pool, &g.cells, &g.levels, &params,
-                          &values, &stack},
-                         &push, sizeof(push), ctx.groups_for(push.count));
-        }
-        ms += ctx.submit();
-        ctx.download(values, out.data() + first, count * 4);
-    }
-    for (Buffer* b : {&params, &stack, &values}) ctx.destroy(*b);
+    // At most 64 Mi values per chunk.
+    const double ms = run_in_chunks(ctx, KernelId::kDiscretize, g, params, total, sizeof(float),
+                                    uint64_t(1) << 26, out.data());
+    ctx.destroy(params);
     if (gpu_ms) *gpu_ms = ms;
 }
 
