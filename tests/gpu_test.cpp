@@ -207,6 +207,18 @@ TEST(Gpu, RenderMatchesCpu) {
     }
 }
 
+// Samples of an n³ discretization on which the backends differ beyond float rounding.
+size_t discretize_mismatches(const PrunedGrid& cpu, gpu::Device& dev, const gpu::Grid& gpu,
+                             uint32_t n) {
+    std::vector<float> a(size_t(n) * n * n), b(a.size());
+    discretize_pruned(cpu, n, a);
+    gpu::discretize(dev, gpu, n, b);
+    size_t bad = 0;
+    for (size_t i = 0; i < a.size(); ++i)
+        bad += std::fabs(a[i] - b[i]) <= 1e-6f * (1 + std::fabs(a[i])) ? 0 : 1;
+    return bad;
+}
+
 TEST(Gpu, DiscretizeMatchesCpu) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     RandomSceneSpec spec;
@@ -217,15 +229,8 @@ TEST(Gpu, DiscretizeMatchesCpu) {
     o.resolution = 32;
     const PrunedGrid cpu = prune(sc, o);
     const gpu::Grid gpu = gpu::prune(*dev, sc, o);
-    for (uint32_t n : {32u, 20u, 48u}) {
-        std::vector<float> a(size_t(n) * n * n), b(a.size());
-        discretize_pruned(cpu, n, a);
-        gpu::discretize(*dev, gpu, n, b);
-        size_t bad = 0;
-        for (size_t i = 0; i < a.size(); ++i)
-            bad += std::fabs(a[i] - b[i]) <= 1e-6f * (1 + std::fabs(a[i])) ? 0 : 1;
-        EXPECT_EQ(bad, 0u) << "n = " << n;
-    }
+    for (uint32_t n : {32u, 20u, 48u})
+        EXPECT_EQ(discretize_mismatches(cpu, *dev, gpu, n), 0u) << "n = " << n;
 }
 
 // A device whose shaders address at most 1 MiB of one buffer: images and grids come back in
@@ -263,14 +268,7 @@ TEST(Gpu, SmallBufferRangeSplitsTheWork) {
     EXPECT_NEAR(cs.steps_avg, gs.steps_avg, 0.01 * cs.steps_avg);
     EXPECT_GT(gs.hit_fraction, 0.0);
 
-    const uint32_t n = 90;  // 729,000 values: slices of 262,144
-    std::vector<float> a(size_t(n) * n * n), b(a.size());
-    discretize_pruned(cpu, n, a);
-    gpu::discretize(*small, gpu, n, b);
-    size_t bad = 0;
-    for (size_t i = 0; i < a.size(); ++i)
-        bad += std::fabs(a[i] - b[i]) <= 1e-6f * (1 + std::fabs(a[i])) ? 0 : 1;
-    EXPECT_EQ(bad, 0u);
+    EXPECT_EQ(discretize_mismatches(cpu, *small, gpu, 90), 0u);  // 729,000 values: 3 slices
 
     o.resolution = 256;
     try {
