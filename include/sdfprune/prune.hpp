@@ -251,6 +251,10 @@ struct CellScratch {
     std::vector<uint32_t> octant;    // the tape of the octant being split (prune.cpp)
     std::vector<uint32_t> combined;  // refine_cell: the sub-boxes' common decisions
     std::vector<uint32_t> refined;   // refine_cell's input tape (prune.cpp)
+    std::vector<vec3> sub_boxes;     // refine_cell: the sub-boxes' centres, in visiting order
+    // refine_cell: per tape entry, the values, ranges and decisions of a batch of sub-boxes
+    std::vector<float> lane_value, lane_lo, lane_hi;
+    std::vector<uint32_t> lane_decision;
     void reserve(size_t n);
 };
 

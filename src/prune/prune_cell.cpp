@@ -99,6 +99,93 @@ bool is_near_field(const Scene& sc, std::span<const uint32_t> tape, const CellBo
     return true;
 }
 
+namespace {
+
+// Sub-boxes evaluated together by refine_cell.
+constexpr uint32_t kLanes = 32;
+
+// evaluate_cell over `count` (<= kLanes) boxes of one size at once: the same arithmetic, box by
+// box, for every entry of the tape, so that each entry's operands are fetched once. Fills
+// s.left, s.right, and per entry e and box b s.lane_*[e · kLanes + b].
+void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const vec3* centres,
+                    uint32_t count, vec3 half, float radius, CellBounds bounds, CellScratch& s) {
+    const uint32_t n = uint32_t(tape.size());
+    s.reserve(n);
+    for (auto* v : {&s.lane_value, &s.lane_lo, &s.lane_hi})
+        if (v->size() < size_t(n) * kLanes) v->resize(size_t(n) * kLanes);
+    if (s.lane_decision.size() < size_t(n) * kLanes) s.lane_decision.resize(size_t(n) * kLanes);
+    const bool interval = bounds == CellBounds::kInterval;
+    float* value = s.lane_value.data();
+    float* lo = s.lane_lo.data();
+    float* hi = s.lane_hi.data();
+    uint32_t top = 0;
+    for (uint32_t i = 0; i < n; ++i) {
+        const uint32_t w = tape[i];
+        const uint32_t node = math::tape_node(w);
+        const uint32_t kind = sc.kind[node];
+        const float spread = sc.lipschitz[node] * radius;
+        float* v = value + size_t(i) * kLanes;
+        float* l = lo + size_t(i) * kLanes;
+        float* h = hi + size_t(i) * kLanes;
+        if (kind < math::kPrimitiveKindCount) {
+            const uint32_t p = sc.primitive[node];
+            const math::PrimitiveParams& prm = sc.params[p];
+            for (uint32_t b = 0; b < count; ++b) {
+                v[b] = math::eval_primitive(kind, prm, centres[b]);
+                l[b] = v[b] - spread;
+                h[b] = v[b] + spread;
+            }
+            const PrimitiveBound& pb = sc.bound[p];
+            if (interval && pb.scale > 0)
+                for (uint32_t b = 0; b < count; ++b) {
+                    const vec2 r = math::similarity_range(pb.centre, pb.scale, pb.f0, pb.rho,
+                                                          centres[b], half);
+                    l[b] = std::max(l[b], r.x);
+                    h[b] = std::min(h[b], r.y);
+                }
+        } else {
+            const uint32_t right = s.stack[--top];
+            const uint32_t left = s.stack[--top];
+            s.left[i] = left;
+            s.right[i] = right;
+            const float sgn = math::operator_s(kind), k = sc.blend[node];
+            const float *va = value + size_t(left) * kLanes, *la = lo + size_t(left) * kLanes,
+                        *ha = hi + size_t(left) * kLanes;
+            const float *vb = value + size_t(right) * kLanes, *lb = lo + size_t(right) * kLanes,
+                        *hb = hi + size_t(right) * kLanes;
+            uint32_t* d = s.lane_decision.data() + size_t(i) * kLanes;
+            for (uint32_t b = 0; b < count; ++b) {
+                d[b] = math::prune_decision(sgn, k, la[b], ha[b], lb[b], hb[b]);
+                v[b] = math::apply_operator(sgn, k, va[b], vb[b]);
+                if (d[b] == math::kLeftWins) {
+                    l[b] = la[b];
+                    h[b] = ha[b];
+                } else if (d[b] == math::kRightWins) {
+                    l[b] = lb[b];
+                    h[b] = hb[b];
+                } else if (interval) {
+                    const vec2 r2 = math::operator_range(sgn, k, la[b], ha[b], lb[b], hb[b]);
+                    l[b] = std::max(v[b] - spread, r2.x);
+                    h[b] = std::min(v[b] + spread, r2.y);
+                } else {
+                    l[b] = v[b] - spread;
+                    h[b] = v[b] + spread;
+                }
+            }
+        }
+        if (math::tape_negated(w))
+            for (uint32_t b = 0; b < count; ++b) {
+                const float old_lo = l[b];
+                v[b] = -v[b];
+                l[b] = -h[b];
+                h[b] = -old_lo;
+            }
+        s.stack[top++] = i;
+    }
+}
+
+}  // namespace
+
 bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box, uint32_t S,
                  CellBounds bounds, bool far_field, float far_field_c, CellScratch& s,
                  float& constant) {
@@ -108,46 +195,56 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
     const float clearance = (far_field_c - 1.0f) * L * box.radius;
     bool all_above = far_field, all_below = far_field;
     float lowest = INFINITY, highest = -INFINITY;
-    CellBox sub;
-    sub.half = box.half / float(S);
-    sub.radius = math::length(sub.half);
-    // Visits sub-box (i, j, k); returns false when the others cannot change the result.
+    const vec3 sub_half = box.half / float(S);
+    const float sub_radius = math::length(sub_half);
+    // The sub-boxes in visiting order: the middle and the corners first, where decisions and
+    // the far field fail soonest, then the rest. The order changes nothing but when the loop
+    // may stop.
+    const uint32_t mid = S / 2, last = S - 1;
+    const auto is_corner = [&](uint32_t i, uint32_t j, uint32_t k) {
+        return (i == 0 || i == last) && (j == 0 || j == last) && (k == 0 || k == last);
+    };
+    s.sub_boxes.clear();
+    if (!is_corner(mid, mid, mid)) s.sub_boxes.push_back(sub_box_centre(box, S, mid, mid, mid));
+    for (uint32_t c = 0; c < 8; ++c)
+        s.sub_boxes.push_back(
+            sub_box_centre(box, S, c & 1 ? last : 0, c & 2 ? last : 0, c & 4 ? last : 0));
+    const size_t first_batch = s.sub_boxes.size();
+    for (uint32_t b = 0; b < S * S * S; ++b) {
+        const uint32_t i = b % S, j = b / S % S, k = b / (S * S);
+        if (!is_corner(i, j, k) && !(i == mid && j == mid && k == mid))
+            s.sub_boxes.push_back(sub_box_centre(box, S, i, j, k));
+    }
     bool first = true;
-    const auto visit = [&](uint32_t i, uint32_t j, uint32_t k) {
-        sub.centre = sub_box_centre(box, S, i, j, k);
-        const float v = evaluate_cell(sc, tape, sub, bounds, s);
+    for (size_t at = 0; at < s.sub_boxes.size();) {
+        const uint32_t count = uint32_t(std::min<size_t>(
+            at < first_batch ? first_batch - at : kLanes, s.sub_boxes.size() - at));
+        evaluate_boxes(sc, tape, s.sub_boxes.data() + at, count, sub_half, sub_radius, bounds, s);
+        at += count;
         // Whether some operator is still decided the same way in every sub-box so far.
         bool any_decided = false;
         for (uint32_t e = 0; e < n; ++e) {
             if (sc.is_primitive(math::tape_node(tape[e]))) continue;
-            if (first)
-                s.combined[e] = s.decision[e];
-            else if (s.combined[e] != s.decision[e])
-                s.combined[e] = math::kKeepBoth;
-            any_decided = any_decided || s.combined[e] != math::kKeepBoth;
+            const uint32_t* d = s.lane_decision.data() + size_t(e) * kLanes;
+            uint32_t common = first ? d[0] : s.combined[e];
+            for (uint32_t b = 0; b < count; ++b)
+                if (d[b] != common) common = math::kKeepBoth;
+            s.combined[e] = common;
+            any_decided = any_decided || common != math::kKeepBoth;
         }
         first = false;
-        // The far-field test of is_near_field on this sub-box's root range, against the whole
+        // The far-field test of is_near_field on each sub-box's root range, against the whole
         // cell's clearance.
-        const vec2 range = math::far_field_range(v, s.lo[n - 1], s.hi[n - 1], L, sub.radius);
-        all_above = all_above && math::clears_above(range.x, clearance);
-        all_below = all_below && math::clears_below(range.y, clearance);
-        lowest = std::min(lowest, range.x);
-        highest = std::max(highest, range.y);
-        return any_decided || all_above || all_below;
-    };
-    // The middle and the corners first: where decisions and the far field fail soonest. The
-    // order changes nothing but when the loop may stop.
-    const uint32_t mid = S / 2, last = S - 1;
-    bool go = visit(mid, mid, mid);
-    for (uint32_t c = 0; c < 8 && go; ++c) {
-        const uint32_t i = c & 1 ? last : 0, j = c & 2 ? last : 0, k = c & 4 ? last : 0;
-        if (!(i == mid && j == mid && k == mid)) go = visit(i, j, k);
-    }
-    for (uint32_t b = 0; b < S * S * S && go; ++b) {
-        const uint32_t i = b % S, j = b / S % S, k = b / (S * S);
-        const bool corner = (i == 0 || i == last) && (j == 0 || j == last) && (k == 0 || k == last);
-        if (!corner && !(i == mid && j == mid && k == mid)) go = visit(i, j, k);
+        const size_t root = size_t(n - 1) * kLanes;
+        for (uint32_t b = 0; b < count; ++b) {
+            const vec2 range = math::far_field_range(s.lane_value[root + b], s.lane_lo[root + b],
+                                                     s.lane_hi[root + b], L, sub_radius);
+            all_above = all_above && math::clears_above(range.x, clearance);
+            all_below = all_below && math::clears_below(range.y, clearance);
+            lowest = std::min(lowest, range.x);
+            highest = std::max(highest, range.y);
+        }
+        if (!any_decided && !all_above && !all_below) break;
     }
     if (all_above || all_below) {
         constant = all_above ? lowest : highest;
