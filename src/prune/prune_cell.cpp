@@ -16,117 +16,36 @@ void CellScratch::reserve(size_t n) {
     negate.resize(n);
 }
 
-float evaluate_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box,
-                    CellBounds bounds, CellScratch& s) {
-    s.reserve(tape.size());
-    const bool interval = bounds == CellBounds::kInterval;
-    const float R = box.radius;
-    uint32_t top = 0;
-    for (uint32_t i = 0; i < tape.size(); ++i) {
-        const uint32_t w = tape[i];
-        const uint32_t n = math::tape_node(w);
-        const uint32_t kind = sc.kind[n];
-        const float spread = sc.lipschitz[n] * R;
-        float v, lo, hi;
-        if (kind < math::kPrimitiveKindCount) {
-            const uint32_t p = sc.primitive[n];
-            v = math::eval_primitive(kind, sc.params[p], box.centre);
-            lo = v - spread;
-            hi = v + spread;
-            const PrimitiveBound& b = sc.bound[p];
-            if (interval && b.scale > 0) {
-                const vec2 r =
-                    math::similarity_range(b.centre, b.scale, b.f0, b.rho, box.centre, box.half);
-                lo = std::max(lo, r.x);
-                hi = std::min(hi, r.y);
-            }
-        } else {
-            const uint32_t r = s.stack[--top];
-            const uint32_t l = s.stack[--top];
-            s.left[i] = l;
-            s.right[i] = r;
-            const float sgn = math::operator_s(kind), k = sc.blend[n];
-            const uint32_t d = math::prune_decision(sgn, k, s.lo[l], s.hi[l], s.lo[r], s.hi[r]);
-            s.decision[i] = d;
-            v = math::apply_operator(sgn, k, s.value[l], s.value[r]);
-            if (d == math::kLeftWins) {
-                lo = s.lo[l];
-                hi = s.hi[l];
-            } else if (d == math::kRightWins) {
-                lo = s.lo[r];
-                hi = s.hi[r];
-            } else if (interval) {
-                const vec2 r2 = math::operator_range(sgn, k, s.lo[l], s.hi[l], s.lo[r], s.hi[r]);
-                lo = std::max(v - spread, r2.x);
-                hi = std::min(v + spread, r2.y);
-            } else {
-                lo = v - spread;
-                hi = v + spread;
-            }
-        }
-        if (math::tape_negated(w)) {
-            v = -v;
-            std::swap(lo, hi);
-            lo = -lo;
-            hi = -hi;
-        }
-        s.value[i] = v;
-        s.lo[i] = lo;
-        s.hi[i] = hi;
-        s.stack[top++] = i;
-    }
-    return s.value[tape.size() - 1];
-}
-
-bool is_near_field(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box,
-                   float far_field_c, const CellScratch& s, float& constant) {
-    const uint32_t root = uint32_t(tape.size() - 1);
-    const float v = s.value[root];
-    const float L = sc.lipschitz[math::tape_node(tape[root])];
-    // The paper's test |f(c)| > C·L·R says: over the cell, |f| stays above (C − 1)·L·R, since
-    // the Lipschitz range is f(c) ± L·R. With tighter ranges (CellBounds::kInterval) the same
-    // guarantee is tested on the range itself, so far-field constants keep |c| >= (C − 1)·L·R.
-    const float clearance = (far_field_c - 1.0f) * L * box.radius;
-    const vec2 range = math::far_field_range(v, s.lo[root], s.hi[root], L, box.radius);
-    if (math::clears_above(range.x, clearance)) {
-        constant = range.x;
-        return false;
-    }
-    if (math::clears_below(range.y, clearance)) {
-        constant = range.y;
-        return false;
-    }
-    return true;
-}
-
 namespace {
 
 // Sub-boxes evaluated together by refine_cell.
 constexpr uint32_t kLanes = 32;
 
-// evaluate_cell over `count` (<= kLanes) boxes of one size at once: the same arithmetic, box by
-// box, for every entry of the tape, so that each entry's operands are fetched once. Fills
-// s.left, s.right, and per entry e and box b s.lane_*[e · kLanes + b].
+// Where evaluate_boxes writes: per tape entry e and box b, index e · stride + b.
+struct LaneArrays {
+    float *value, *lo, *hi;
+    uint32_t* decision;
+    uint32_t stride;
+};
+
+// Evaluates `tape` at the centres of `count` (<= stride) boxes of one size, bounds every entry
+// over each box and decides every operator in each: entry by entry, across the boxes, so that
+// an entry's operands are fetched once. Also fills s.left and s.right.
 void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const vec3* centres,
-                    uint32_t count, vec3 half, float radius, CellBounds bounds, CellScratch& s) {
+                    uint32_t count, vec3 half, float radius, CellBounds bounds, LaneArrays out,
+                    CellScratch& s) {
     const uint32_t n = uint32_t(tape.size());
-    s.reserve(n);
-    for (auto* v : {&s.lane_value, &s.lane_lo, &s.lane_hi})
-        if (v->size() < size_t(n) * kLanes) v->resize(size_t(n) * kLanes);
-    if (s.lane_decision.size() < size_t(n) * kLanes) s.lane_decision.resize(size_t(n) * kLanes);
     const bool interval = bounds == CellBounds::kInterval;
-    float* value = s.lane_value.data();
-    float* lo = s.lane_lo.data();
-    float* hi = s.lane_hi.data();
     uint32_t top = 0;
     for (uint32_t i = 0; i < n; ++i) {
         const uint32_t w = tape[i];
         const uint32_t node = math::tape_node(w);
         const uint32_t kind = sc.kind[node];
         const float spread = sc.lipschitz[node] * radius;
-        float* v = value + size_t(i) * kLanes;
-        float* l = lo + size_t(i) * kLanes;
-        float* h = hi + size_t(i) * kLanes;
+        const size_t at = size_t(i) * out.stride;
+        float* v = out.value + at;
+        float* l = out.lo + at;
+        float* h = out.hi + at;
         if (kind < math::kPrimitiveKindCount) {
             const uint32_t p = sc.primitive[node];
             const math::PrimitiveParams& prm = sc.params[p];
@@ -135,6 +54,7 @@ void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const vec3*
                 l[b] = v[b] - spread;
                 h[b] = v[b] + spread;
             }
+            // Tighter, where the primitive has a similarity bound: the exact range over the box.
             const PrimitiveBound& pb = sc.bound[p];
             if (interval && pb.scale > 0)
                 for (uint32_t b = 0; b < count; ++b) {
@@ -149,14 +69,16 @@ void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const vec3*
             s.left[i] = left;
             s.right[i] = right;
             const float sgn = math::operator_s(kind), k = sc.blend[node];
-            const float *va = value + size_t(left) * kLanes, *la = lo + size_t(left) * kLanes,
-                        *ha = hi + size_t(left) * kLanes;
-            const float *vb = value + size_t(right) * kLanes, *lb = lo + size_t(right) * kLanes,
-                        *hb = hi + size_t(right) * kLanes;
-            uint32_t* d = s.lane_decision.data() + size_t(i) * kLanes;
+            const size_t ia = size_t(left) * out.stride, ib = size_t(right) * out.stride;
+            const float *va = out.value + ia, *la = out.lo + ia, *ha = out.hi + ia;
+            const float *vb = out.value + ib, *lb = out.lo + ib, *hb = out.hi + ib;
+            uint32_t* d = out.decision + at;
             for (uint32_t b = 0; b < count; ++b) {
                 d[b] = math::prune_decision(sgn, k, la[b], ha[b], lb[b], hb[b]);
                 v[b] = math::apply_operator(sgn, k, va[b], vb[b]);
+                // A skipped operator's range is its winner's; else the tighter of the
+                // Lipschitz range and (with interval bounds) the operator's range over its
+                // operands' ranges.
                 if (d[b] == math::kLeftWins) {
                     l[b] = la[b];
                     h[b] = ha[b];
@@ -186,10 +108,43 @@ void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const vec3*
 
 }  // namespace
 
+float evaluate_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box,
+                    CellBounds bounds, CellScratch& s) {
+    s.reserve(tape.size());
+    evaluate_boxes(sc, tape, &box.centre, 1, box.half, box.radius, bounds,
+                   {s.value.data(), s.lo.data(), s.hi.data(), s.decision.data(), 1}, s);
+    return s.value[tape.size() - 1];
+}
+
+bool is_near_field(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box,
+                   float far_field_c, const CellScratch& s, float& constant) {
+    const uint32_t root = uint32_t(tape.size() - 1);
+    const float v = s.value[root];
+    const float L = sc.lipschitz[math::tape_node(tape[root])];
+    // The paper's test |f(c)| > C·L·R says: over the cell, |f| stays above (C − 1)·L·R, since
+    // the Lipschitz range is f(c) ± L·R. With tighter ranges (CellBounds::kInterval) the same
+    // guarantee is tested on the range itself, so far-field constants keep |c| >= (C − 1)·L·R.
+    const float clearance = (far_field_c - 1.0f) * L * box.radius;
+    const vec2 range = math::far_field_range(v, s.lo[root], s.hi[root], L, box.radius);
+    if (math::clears_above(range.x, clearance)) {
+        constant = range.x;
+        return false;
+    }
+    if (math::clears_below(range.y, clearance)) {
+        constant = range.y;
+        return false;
+    }
+    return true;
+}
+
 bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box, uint32_t S,
                  CellBounds bounds, bool far_field, float far_field_c, CellScratch& s,
                  float& constant) {
     const uint32_t n = uint32_t(tape.size());
+    s.reserve(n);
+    for (auto* v : {&s.lane_value, &s.lane_lo, &s.lane_hi})
+        if (v->size() < size_t(n) * kLanes) v->resize(size_t(n) * kLanes);
+    if (s.lane_decision.size() < size_t(n) * kLanes) s.lane_decision.resize(size_t(n) * kLanes);
     s.combined.assign(n, math::kKeepBoth);
     const float L = sc.lipschitz[math::tape_node(tape[n - 1])];
     const float clearance = (far_field_c - 1.0f) * L * box.radius;
@@ -219,7 +174,10 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
     for (size_t at = 0; at < s.sub_boxes.size();) {
         const uint32_t count = uint32_t(std::min<size_t>(
             at < first_batch ? first_batch - at : kLanes, s.sub_boxes.size() - at));
-        evaluate_boxes(sc, tape, s.sub_boxes.data() + at, count, sub_half, sub_radius, bounds, s);
+        evaluate_boxes(sc, tape, s.sub_boxes.data() + at, count, sub_half, sub_radius, bounds,
+                       {s.lane_value.data(), s.lane_lo.data(), s.lane_hi.data(),
+                        s.lane_decision.data(), kLanes},
+                       s);
         at += count;
         // Whether some operator is still decided the same way in every sub-box so far.
         bool any_decided = false;
