@@ -271,6 +271,7 @@ TEST(Gpu, SmallBufferRangeSplitsTheWork) {
     EXPECT_EQ(discretize_mismatches(cpu, *small, gpu, 90), 0u);  // 729,000 values: 3 slices
 
     o.resolution = 256;
+    const uint64_t held = small->memory_in_use();
     try {
         gpu::prune(*small, sc, o);
         ADD_FAILURE() << "256^3 cells cannot fit 1 MiB buffers, yet pruning succeeded";
@@ -278,6 +279,7 @@ TEST(Gpu, SmallBufferRangeSplitsTheWork) {
         EXPECT_NE(std::string(e.what()).find("lets a shader address"), std::string::npos)
             << e.what();
     }
+    EXPECT_EQ(small->memory_in_use(), held) << "buffers left behind by the refused pruning";
     // The device is still usable after the refused step.
     o.resolution = 16;
     expect_same_stats(cpu.stats(), gpu::prune(*small, sc, o).stats(), "after the error");

@@ -42,6 +42,8 @@ class Device {
     Device(Device&&) noexcept;
     Device& operator=(Device&&) noexcept;
     std::string name() const;
+    // Device memory held now by sdfprune's buffers on this device (grids included).
+    uint64_t memory_in_use() const;
     Context& context() { return *context_; }
 
   private:

@@ -17,6 +17,10 @@ std::string Device::name() const {
     return context_->device_name();
 }
 
+uint64_t Device::memory_in_use() const {
+    return context_->bytes_live();
+}
+
 Grid::Grid() = default;
 Grid::~Grid() = default;
 Grid::Grid(Grid&&) noexcept = default;

@@ -73,18 +73,20 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     ctx.upload(g.pool, head.data(), head.size() * 4);
     g.pool_words = uint32_t(head.size());
 
-    Buffer counters = ctx.create_buffer(sizeof(GpuCounters), true);
+    // Temporaries: what is left of them is freed on return, or when an error is thrown.
+    LocalBuffers local(ctx);
+    Buffer& counters = local.create(sizeof(GpuCounters), true);
     auto* counter = static_cast<GpuCounters*>(counters.mapped);
-    Buffer blocks = ctx.create_buffer(sizeof(GpuBlock));
+    Buffer& blocks = local.create(sizeof(GpuBlock));
     const GpuBlock root_block{0, 0, 0, 0};
     ctx.upload(blocks, &root_block, sizeof(root_block));
     uint64_t block_count = 1;
     uint32_t max_len = sc.size();       // longest tape of the current parents
     uint32_t max_depth = sc.max_stack;  // deepest evaluation stack of the current parents
-    Buffer scratch;
+    Buffer& scratch = local.slot();
     // The octants' tapes of the current level (prune.comp: OctantPool), reused level by level.
     uint64_t octant_capacity = 1 << 16;
-    Buffer octant_pool = ctx.create_buffer(octant_capacity * 4);
+    Buffer& octant_pool = local.create(octant_capacity * 4);
     double gpu_ms = 0;
 
     // Replaces `pool` by one of at least `need` words (at most the device's limit), keeping
@@ -94,7 +96,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             throw GpuError("tape pool exceeds the device's largest storage buffer (" +
                            std::to_string(ctx.max_buffer_bytes()) + " bytes); use --backend cpu");
         const uint64_t grown = std::min(std::max(cap * 2, need + need / 4), max_pool_words);
-        Buffer bigger = ctx.create_buffer(grown * 4);
+        Buffer& bigger = local.create(grown * 4);
         if (keep > 0) {
             ctx.begin();
             ctx.copy(pool, bigger, keep * 4);
@@ -102,6 +104,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         }
         ctx.destroy(pool);
         pool = bigger;
+        bigger = Buffer{};
         cap = grown;
         ++st.pool_grows;
     };
@@ -182,7 +185,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         return *counter;
     };
 
-    std::vector<Buffer> level_cells;
+    std::vector<Buffer*> level_cells;
     for (uint32_t li = 0; li < res.size(); ++li) {
         const bool finest = li + 1 == res.size();
         const uint32_t f = li == 0 ? res[0] : res[li] / res[li - 1];
@@ -190,12 +193,12 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         const uint64_t total = per_block * block_count;
         if (total > 0xfffffffeull) throw std::length_error("too many cells in one level");
         const vec3 csize = extent / float(res[li]);
-        Buffer cells = ctx.create_buffer(total * sizeof(PrunedCell));
+        Buffer& cells = local.create(total * sizeof(PrunedCell));
         // The same split as the CPU backend (prune.cpp): octants first where it applies.
         const bool split = opt.hierarchy && f >= 4 && f % 2 == 0 && 1024 % per_block == 0;
         GpuCounters c;
         if (split) {
-            Buffer octants = ctx.create_buffer(block_count * 8 * sizeof(PrunedCell));
+            Buffer& octants = local.create(block_count * 8 * sizeof(PrunedCell));
             octant_words = 0;
             c = run_step(1, f, block_count * 8, csize, octants, cells, false);
             max_len = std::max(c.max_len, 1u);
@@ -211,16 +214,17 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             // cell array.
             max_len = std::max(c.max_len, 1u);
             max_depth = std::max(c.max_depth, 1u);
-            Buffer refined = ctx.create_buffer(total * sizeof(PrunedCell));
+            Buffer& refined = local.create(total * sizeof(PrunedCell));
             run_step(3, f, total, csize, refined, cells, false);
             ctx.destroy(cells);
             cells = refined;
+            refined = Buffer{};
         }
         max_len = std::max(c.max_len, 1u);
         max_depth = std::max(c.max_depth, 1u);
         if (!finest) {
             const uint32_t nf = res[li + 1] / res[li];
-            Buffer next = ctx.create_buffer(uint64_t(c.near_jobs) * sizeof(GpuBlock));
+            Buffer& next = local.create(uint64_t(c.near_jobs) * sizeof(GpuBlock));
             *counter = GpuCounters{};
             const ExpandPush push{f, uint32_t(total), nf};
             ctx.begin();
@@ -229,10 +233,11 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             gpu_ms += ctx.submit();
             ctx.destroy(blocks);
             blocks = next;
+            next = Buffer{};
             block_count = c.near_jobs;
         }
         g.level_info.push_back({res[li], f, 0, 0});
-        level_cells.push_back(cells);
+        level_cells.push_back(&cells);
     }
     ctx.destroy(blocks);
     ctx.destroy(scratch);
@@ -242,17 +247,17 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     uint64_t cell_total = 0;
     for (size_t li = 0; li < level_cells.size(); ++li) {
         g.level_info[li].offset = uint32_t(cell_total);
-        cell_total += level_cells[li].size / sizeof(PrunedCell);
+        cell_total += level_cells[li]->size / sizeof(PrunedCell);
     }
     g.cells = ctx.create_buffer(cell_total * sizeof(PrunedCell));
     g.levels = ctx.create_buffer(g.level_info.size() * sizeof(GpuLevel));
     ctx.begin();
     for (size_t li = 0; li < level_cells.size(); ++li)
-        ctx.copy(level_cells[li], g.cells, level_cells[li].size, 0,
+        ctx.copy(*level_cells[li], g.cells, level_cells[li]->size, 0,
                  uint64_t(g.level_info[li].offset) * sizeof(PrunedCell));
     gpu_ms += ctx.submit();
     ctx.upload(g.levels, g.level_info.data(), g.level_info.size() * sizeof(GpuLevel));
-    for (Buffer& b : level_cells) ctx.destroy(b);
+    for (Buffer* b : level_cells) ctx.destroy(*b);
     st.prune_ms = gpu_ms;
     st.prune_peak_bytes = ctx.bytes_peak() - live_before;
     st.wall_ms =
@@ -270,8 +275,8 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         const uint64_t n = li + 1 < g.level_info.size()
                                ? g.level_info[li + 1].offset - g.level_info[li].offset
                                : cell_total - g.level_info[li].offset;
-        Buffer level = ctx.create_buffer(n * sizeof(PrunedCell));
-        Buffer info = ctx.create_buffer(n * 8);
+        Buffer& level = local.create(n * sizeof(PrunedCell));
+        Buffer& info = local.create(n * 8);
         const CellInfoPush push{uint32_t(n)};
         ctx.begin();
         ctx.copy(g.cells, level, n * sizeof(PrunedCell),
@@ -302,7 +307,6 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     }
     finish_prune_stats(st, prim_sum, prim_sq, tape_sum, far_finest);
     st.tape_bytes = uint64_t(g.pool_words) * 4 + cell_total * sizeof(PrunedCell);
-    ctx.destroy(counters);
     return grid;
 }
 

@@ -17,8 +17,8 @@ vec4 v4(vec3 v, float w) {
 }
 
 template <class Params>
-Buffer upload_params(Context& ctx, const Params& p) {
-    Buffer b = ctx.create_buffer(sizeof(p));
+Buffer& upload_params(Context& ctx, LocalBuffers& local, const Params& p) {
+    Buffer& b = local.create(sizeof(p));
     ctx.upload(b, &p, sizeof(p));
     return b;
 }
@@ -31,9 +31,10 @@ double run_in_chunks(Context& ctx, KernelId kernel, const DeviceGrid& g, const B
                      uint64_t total, uint64_t item_bytes, uint64_t max_chunk, void* host) {
     const uint64_t stack_bytes = uint64_t(g.scene->max_stack) * 16;
     const uint32_t threads = ctx.threads_for(total, stack_bytes);
-    Buffer stack = ctx.create_buffer(threads * stack_bytes);
+    LocalBuffers local(ctx);
+    Buffer& stack = local.create(threads * stack_bytes);
     const uint64_t chunk = std::min({total, max_chunk, ctx.max_buffer_bytes() / item_bytes});
-    Buffer out = ctx.create_buffer(chunk * item_bytes);
+    Buffer& out = local.create(chunk * item_bytes);
     double ms = 0;
     for (uint64_t base = 0; base < total; base += chunk) {
         const uint64_t count = std::min(chunk, total - base);
@@ -50,8 +51,6 @@ double run_in_chunks(Context& ctx, KernelId kernel, const DeviceGrid& g, const B
         ms += ctx.submit();
         ctx.download(out, static_cast<char*>(host) + base * item_bytes, count * item_bytes);
     }
-    ctx.destroy(out);
-    ctx.destroy(stack);
     return ms;
 }
 
@@ -77,11 +76,11 @@ Image render(Device& device, const Grid& grid, const RenderOptions& opt, RenderS
     prm.height = H;
     prm.shading = opt.shading == Shading::kNormals ? 1u : 0u;
     prm.shadows = opt.shadows ? 1u : 0u;
-    Buffer params = upload_params(ctx, prm);
+    LocalBuffers local(ctx);
+    const Buffer& params = upload_params(ctx, local, prm);
     std::vector<GpuPixel> host(pixels);
     const double gpu_ms = run_in_chunks(ctx, KernelId::kTrace, g, params, pixels, sizeof(GpuPixel),
                                         pixels, host.data());
-    ctx.destroy(params);
     if (ctx.loop_limited()) {
         // Loop iterations of each pixel's invocation, bounded from above: tape words evaluated,
         // and per step the level walk and the few fixed loops.
@@ -130,11 +129,11 @@ void discretize(Device& device, const Grid& grid, uint32_t n, std::span<float> o
     const vec3 sample = (sc.aabb.max - sc.aabb.min) / float(n);
     prm.sample_size = v4(sample, 0);
     prm.n = n;
-    Buffer params = upload_params(ctx, prm);
+    LocalBuffers local(ctx);
+    const Buffer& params = upload_params(ctx, local, prm);
     // At most 64 Mi values per chunk.
     const double ms = run_in_chunks(ctx, KernelId::kDiscretize, g, params, total, sizeof(float),
                                     uint64_t(1) << 26, out.data());
-    ctx.destroy(params);
     if (gpu_ms) *gpu_ms = ms;
 }
 

@@ -8,6 +8,7 @@
 #include <vulkan/vulkan.h>
 
 #include <cstdint>
+#include <deque>
 #include <string>
 #include <vector>
 
@@ -114,6 +115,30 @@ class Context {
     uint32_t sets_used_ = 0;
     double carried_ms_ = 0;  // GPU time of the parts already submitted
     bool recording_ = false;
+};
+
+// The buffers a function holds for a while: whatever is left of them is destroyed when it
+// returns or throws. Entries keep their addresses; a buffer destroyed early (Context::destroy)
+// or handed on (then set to Buffer{}) is skipped.
+class LocalBuffers {
+  public:
+    explicit LocalBuffers(Context& ctx) : ctx_(ctx) {}
+    ~LocalBuffers() {
+        for (Buffer& b : buffers_) ctx_.destroy(b);
+    }
+    LocalBuffers(const LocalBuffers&) = delete;
+    LocalBuffers& operator=(const LocalBuffers&) = delete;
+    Buffer& create(uint64_t bytes, bool host_visible = false) {
+        Buffer& b = slot();
+        b = ctx_.create_buffer(bytes, host_visible);
+        return b;
+    }
+    // An empty entry, for a buffer made later.
+    Buffer& slot() { return buffers_.emplace_back(); }
+
+  private:
+    Context& ctx_;
+    std::deque<Buffer> buffers_;
 };
 
 }  // namespace sdfprune::gpu
