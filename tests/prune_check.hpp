@@ -261,6 +261,20 @@ inline std::string str(vec3 p) {
     return os.str();
 }
 
+// Two prunings of one scene and grid found the same cells and tapes: equal Table 2 and tape
+// statistics (callers add what else must agree, or must differ, between their two).
+inline void expect_same_prune_stats(const PruneStats& a, const PruneStats& b,
+                                    const std::string& what) {
+    SCOPED_TRACE(what);
+    EXPECT_EQ(a.cells, b.cells);
+    EXPECT_EQ(a.near_field_cells, b.near_field_cells);
+    EXPECT_EQ(a.active_avg, b.active_avg);
+    EXPECT_EQ(a.active_std, b.active_std);
+    EXPECT_EQ(a.active_max, b.active_max);
+    EXPECT_EQ(a.tape_avg, b.tape_avg);
+    EXPECT_EQ(a.tape_max, b.tape_max);
+}
+
 // Whether a tape is well formed for the evaluator: valid nodes, never pops an empty stack, ends
 // with one value, needs at most scene.max_stack entries, and holds `primitives` primitives.
 inline bool tape_well_formed(const Scene& sc, std::span<const uint32_t> tape, uint32_t primitives,

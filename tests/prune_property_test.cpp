@@ -285,12 +285,7 @@ void expect_same_structure(const PrunedGrid& a, const PrunedGrid& b, const std::
         EXPECT_EQ(differ, 0u) << what << ": cells of level " << l << " differ";
     }
     const PruneStats &sa = a.stats(), &sb = b.stats();
-    EXPECT_EQ(sa.near_field_cells, sb.near_field_cells) << what;
-    EXPECT_EQ(sa.active_avg, sb.active_avg) << what;
-    EXPECT_EQ(sa.active_std, sb.active_std) << what;
-    EXPECT_EQ(sa.active_max, sb.active_max) << what;
-    EXPECT_EQ(sa.tape_avg, sb.tape_avg) << what;
-    EXPECT_EQ(sa.tape_max, sb.tape_max) << what;
+    test::expect_same_prune_stats(sa, sb, what);
     EXPECT_EQ(sa.cells_pruned, sb.cells_pruned) << what;
     EXPECT_EQ(sa.tape_words_visited, sb.tape_words_visited) << what;
     EXPECT_EQ(sa.tape_bytes, sb.tape_bytes) << what;
