@@ -1,5 +1,5 @@
 // cells.glsl — the pruned grid's cells and blocks as the kernels see them; layouts match
-// PrunedCell (prune.hpp) and src/gpu/device_scene.hpp.
+// PrunedCell (prune.hpp) and src/gpu/device_layout.hpp (checked by the GpuLayout tests).
 struct Cell {
     uint tape;      // kFarField or offset of [length, primitives, words...] in the pool
     uint children;  // near-field, not finest: first cell of its child block in the next level

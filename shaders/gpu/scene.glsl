@@ -1,6 +1,6 @@
 // scene.glsl — the scene and the tape pool as every kernel sees them (bindings 0–3), and the
-// tape evaluators. The layouts match src/gpu/device_scene.hpp (checked there with
-// static_asserts); the math is sdf_math.h, the same file the CPU backend compiles.
+// tape evaluators. The layouts match src/gpu/device_layout.hpp (checked by the GpuLayout
+// tests); the math is sdf_math.h, the same file the CPU backend compiles.
 #extension GL_GOOGLE_include_directive : require
 #include "../shared/sdf_math.h"
 
@@ -25,10 +25,6 @@ layout(std430, binding = 3) buffer Pool { uint pool[]; };
 #define kInfinity uintBitsToFloat(0x7f800000u)
 
 bool is_primitive(uint node) { return nodes[node].kind < kPrimitiveKindCount; }
-
-float eval_node_primitive(uint n, vec3 p) {
-    return eval_primitive(nodes[n].kind, params[nodes[n].primitive], p);
-}
 
 #ifdef SCENE_STACK_BINDING
 // Per-thread value stacks, slot j of thread t at ((j · stack_threads + t) · 4): the value, then

@@ -108,6 +108,8 @@ Context::Context() {
         VkPhysicalDevice device;
         uint32_t family;
         int rank;
+        uint32_t timestamp_bits;  // of the family's queues
+        VkPhysicalDeviceProperties props;
     };
     std::vector<Candidate> candidates;
     for (VkPhysicalDevice d : devices) {
@@ -123,7 +125,7 @@ Context::Context() {
                                                                                   : 2;
         for (uint32_t i = 0; i < nq; ++i)
             if (q[i].queueFlags & VK_QUEUE_COMPUTE_BIT) {
-                candidates.push_back({d, i, rank});
+                candidates.push_back({d, i, rank, q[i].timestampValidBits, p});
                 break;
             }
     }
@@ -146,8 +148,7 @@ Context::Context() {
     }
     physical_ = candidates[pick].device;
     queue_family_ = candidates[pick].family;
-    VkPhysicalDeviceProperties props;
-    vkGetPhysicalDeviceProperties(physical_, &props);
+    const VkPhysicalDeviceProperties& props = candidates[pick].props;
     device_name_ = props.deviceName;
     max_range_ = props.limits.maxStorageBufferRange;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_MAX_BUFFER"))  // a smaller device, for tests
@@ -197,11 +198,7 @@ Context::Context() {
     check(vkCreateDescriptorPool(device_, &dpi, nullptr, &descriptor_pool_),
           "vkCreateDescriptorPool");
 
-    uint32_t nq = 0;
-    vkGetPhysicalDeviceQueueFamilyProperties(physical_, &nq, nullptr);
-    std::vector<VkQueueFamilyProperties> qf(nq);
-    vkGetPhysicalDeviceQueueFamilyProperties(physical_, &nq, qf.data());
-    const uint32_t valid_bits = qf[queue_family_].timestampValidBits;
+    const uint32_t valid_bits = candidates[pick].timestamp_bits;
     timestamp_mask_ = valid_bits >= 64 ? ~uint64_t(0) : (uint64_t(1) << valid_bits) - 1;
     if (valid_bits > 0) {
         auto qpi = vk_struct<VkQueryPoolCreateInfo>(VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO);
