@@ -255,7 +255,6 @@ struct CellScratch {
     // refine_cell: per tape entry, the values, ranges and decisions of a batch of sub-boxes
     std::vector<float> lane_value, lane_lo, lane_hi;
     std::vector<uint32_t> lane_decision;
-    std::vector<vec3> local;  // evaluate_cell, refine_cell: points in a primitive's frame
     void reserve(size_t n);
 };
 

@@ -36,6 +36,7 @@ void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const vec3*
                     CellScratch& s) {
     const uint32_t n = uint32_t(tape.size());
     const bool interval = bounds == CellBounds::kInterval;
+    vec3 q[kLanes];  // the centres in a primitive's frame
     uint32_t top = 0;
     for (uint32_t i = 0; i < n; ++i) {
         const uint32_t w = tape[i];
@@ -50,7 +51,6 @@ void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const vec3*
             const uint32_t p = sc.primitive[node];
             const math::PrimitiveParams& prm = sc.params[p];
             // eval_primitive, a loop per step: spheres (most primitives) then vectorize.
-            vec3* q = s.local.data();
             for (uint32_t b = 0; b < count; ++b) q[b] = math::to_local(prm, centres[b]);
             if (kind == math::kPrimSphere) {
                 for (uint32_t b = 0; b < count; ++b) v[b] = math::sd_sphere(q[b], prm.a.x);
@@ -119,7 +119,6 @@ void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const vec3*
 float evaluate_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box,
                     CellBounds bounds, CellScratch& s) {
     s.reserve(tape.size());
-    s.local.resize(kLanes);
     evaluate_boxes(sc, tape, &box.centre, 1, box.half, box.radius, bounds,
                    {s.value.data(), s.lo.data(), s.hi.data(), s.decision.data(), 1}, s);
     return s.value[tape.size() - 1];
@@ -154,7 +153,6 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
     for (auto* v : {&s.lane_value, &s.lane_lo, &s.lane_hi})
         if (v->size() < size_t(n) * kLanes) v->resize(size_t(n) * kLanes);
     if (s.lane_decision.size() < size_t(n) * kLanes) s.lane_decision.resize(size_t(n) * kLanes);
-    s.local.resize(kLanes);
     s.combined.assign(n, math::kKeepBoth);
     const float L = sc.lipschitz[math::tape_node(tape[n - 1])];
     const float clearance = (far_field_c - 1.0f) * L * box.radius;
