@@ -50,11 +50,7 @@ Prepared prepare(const std::string& scene_arg, const AppOptions& o) {
             "--backend vulkan runs the pruned method only (drop "
             "--method naive, or use --backend cpu)");
     if (!o.pruned()) return p;
-    PruneOptions po = o.prune;
-    if (o.lipschitz_bounds) {
-        po.bounds = CellBounds::kLipschitz;
-        po.refine = 1;
-    }
+    PruneOptions po = with_bounds_flag(o.prune, o.lipschitz_bounds);
     if (o.vulkan()) {
         p.device = std::make_unique<gpu::Device>();
         p.device_grid = std::make_unique<gpu::Grid>(gpu::prune(*p.device, *p.scene, po));

@@ -44,6 +44,14 @@ void add_prune_options(CLI::App* sub, PruneOptions& o, bool& lipschitz_bounds) {
         ->check(CLI::Range(0, 1024));
 }
 
+PruneOptions with_bounds_flag(PruneOptions options, bool lipschitz_bounds) {
+    if (lipschitz_bounds) {
+        options.bounds = CellBounds::kLipschitz;
+        options.refine = 1;
+    }
+    return options;
+}
+
 void add_stats(CLI::App& app, std::vector<Command>& commands) {
     struct Args {
         std::string scene;
@@ -68,11 +76,7 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
     commands.push_back(
         {sub, [args] {
              const Scene sc = load_scene_arg(args->scene);
-             PruneOptions o = args->prune;
-             if (args->lipschitz) {
-                 o.bounds = CellBounds::kLipschitz;
-                 o.refine = 1;
-             }
+             const PruneOptions o = with_bounds_flag(args->prune, args->lipschitz);
              if (!o.hierarchy && !args->json)
                  std::fprintf(stderr, "pruning the full tree in all %u³ cells (no hierarchy)...\n",
                               o.resolution);

@@ -31,6 +31,9 @@ std::vector<AddCommand> registered_commands();
 
 // The pruning flags shared by every subcommand that prunes (--grid, --no-farfield, ...).
 void add_prune_options(CLI::App* sub, PruneOptions& options, bool& lipschitz_bounds);
+// The options as given, with --lipschitz-bounds applied: the paper's centre ± L·R ranges and
+// no sub-box refinement.
+PruneOptions with_bounds_flag(PruneOptions options, bool lipschitz_bounds);
 // Adds --backend cpu|vulkan (stats, render, discretize).
 void add_backend_option(CLI::App* sub, std::string& backend);
 uint64_t peak_rss_bytes();
