@@ -183,7 +183,7 @@ bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, uint subs, out
         float v = uintBitsToFloat(scratch[sbase]);
         if (sb == 0u) scratch[base + 6u] = floatBitsToUint(v);
         float L = nodes[tape_node(tape_read(parent, 2u + len - 1u))].lipschitz;
-        float clearance = (pc.csize.w - 1.0) * L * R;
+        float clearance = far_field_clearance(pc.csize.w, L, R);
         vec2 range = far_field_range(v, uintBitsToFloat(scratch[sbase + 1u]),
                                      uintBitsToFloat(scratch[sbase + 2u]), L, sub_R);
         float lo = range.x, hi = range.y;

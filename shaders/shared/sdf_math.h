@@ -206,7 +206,18 @@ SDFPRUNE_FN vec2 far_field_range(float v, float lo, float hi, float L, float R) 
     float margin = kPruneMarginAbs + kPruneMarginRel * (abs(v) + L * R);
     return vec2(lo - margin, hi + margin);
 }
-// ... must clear the cell's `clearance` = (C − 1)·L·R_cell above zero or below it.
+// ... must clear the cell's clearance above zero or below it. The clearance of a cell of radius
+// R under far-field threshold C, for a root with Lipschitz bound L, is (C − 1)·max(L, 1)·R. It
+// makes two promises about every point p of a far-field cell:
+//   |f(p)| >= (C − 1)·R          (a point with |f| < (C − 1)·R is always in a near-field cell);
+//   dist(p, surface) >= (C − 1)·R  (since |f(p)| <= L·dist(p, surface)).
+// The paper's test (L = 1) is |f(c)| > C·R. For L > 1 the first promise alone would let the
+// surface come within (C − 1)·R/L; for L < 1 (a primitive enlarged by its transform) the second
+// alone, (C − 1)·L·R, let cells whose |f| was as small as (C − 1)·L·R become far-field, and the
+// pruned grid returned a constant where users expect the exact value (issue 12).
+SDFPRUNE_FN float far_field_clearance(float far_field_c, float L, float R) {
+    return (far_field_c - 1.0f) * max(L, 1.0f) * R;
+}
 SDFPRUNE_FN bool clears_above(float lo, float clearance) { return lo > clearance && lo > 0.0f; }
 SDFPRUNE_FN bool clears_below(float hi, float clearance) { return hi < -clearance && hi < 0.0f; }
 

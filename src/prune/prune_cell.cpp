@@ -129,10 +129,11 @@ bool is_near_field(const Scene& sc, std::span<const uint32_t> tape, const CellBo
     const uint32_t root = uint32_t(tape.size() - 1);
     const float v = s.value[root];
     const float L = sc.lipschitz[math::tape_node(tape[root])];
-    // The paper's test |f(c)| > C·L·R says: over the cell, |f| stays above (C − 1)·L·R, since
-    // the Lipschitz range is f(c) ± L·R. With tighter ranges (CellBounds::kInterval) the same
-    // guarantee is tested on the range itself, so far-field constants keep |c| >= (C − 1)·L·R.
-    const float clearance = (far_field_c - 1.0f) * L * box.radius;
+    // The paper's test |f(c)| > C·R says: over the cell, |f| stays above (C − 1)·R, since the
+    // Lipschitz range is f(c) ± R. Here the same guarantee is tested on the range itself (the
+    // Lipschitz range or, with CellBounds::kInterval, a tighter one), against the clearance of
+    // far_field_clearance, so far-field constants keep |c| >= (C − 1)·max(L, 1)·R.
+    const float clearance = math::far_field_clearance(far_field_c, L, box.radius);
     const vec2 range = math::far_field_range(v, s.lo[root], s.hi[root], L, box.radius);
     if (math::clears_above(range.x, clearance)) {
         constant = range.x;
@@ -155,7 +156,7 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
     if (s.lane_decision.size() < size_t(n) * kLanes) s.lane_decision.resize(size_t(n) * kLanes);
     s.combined.assign(n, math::kKeepBoth);
     const float L = sc.lipschitz[math::tape_node(tape[n - 1])];
-    const float clearance = (far_field_c - 1.0f) * L * box.radius;
+    const float clearance = math::far_field_clearance(far_field_c, L, box.radius);
     bool all_above = far_field, all_below = far_field;
     float lowest = INFINITY, highest = -INFINITY;
     const vec3 sub_half = box.half / float(S);
