@@ -4,10 +4,11 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <thread>
+
+#include "sdfprune/eval.hpp"  // with_threads
 
 namespace sdfprune {
 
@@ -38,12 +39,7 @@ bool parallel_chunks(uint64_t count, const ParallelOptions& o,
                               }
                           });
     };
-    if (o.threads > 0) {
-        tbb::task_arena arena(o.threads);
-        arena.execute(run);
-    } else {
-        run();
-    }
+    with_threads(o.threads, run);
     if (cancelled) return false;
     if (report) (*o.progress)(o.progress_hi);
     return true;

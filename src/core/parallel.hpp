@@ -3,7 +3,9 @@
 // every chunk. prune, trace, discretize and mesh all run their work through it.
 #pragma once
 
+#include <algorithm>
 #include <atomic>
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 
@@ -41,10 +43,24 @@ ParallelOptions parallel_options(const Options& o, double lo = 0, double hi = 1)
 bool parallel_chunks(uint64_t count, const ParallelOptions& o,
                      const std::function<void(uint64_t)>& fn);
 
+// The exception type of loops with no cancel flag (ParallelOptions::cancel null): never thrown.
+struct NotCancellable {};
+
 // parallel_chunks, throwing Cancelled() when cancelled.
 template <class Cancelled, class F>
 void parallel_for(uint64_t count, const ParallelOptions& o, const F& fn) {
     if (!parallel_chunks(count, o, std::function<void(uint64_t)>(std::cref(fn)))) throw Cancelled();
+}
+
+// Batch point queries: fn(begin, end) over chunks of 256 of [0, count), no progress or cancel.
+template <class F>
+void parallel_points(size_t count, int threads, const F& fn) {
+    constexpr size_t kChunk = 256;
+    ParallelOptions o;
+    o.threads = threads;
+    parallel_for<NotCancellable>((count + kChunk - 1) / kChunk, o, [&](uint64_t c) {
+        fn(size_t(c) * kChunk, std::min(count, size_t(c + 1) * kChunk));
+    });
 }
 
 }  // namespace sdfprune

@@ -7,7 +7,6 @@
 // are freed. Finest tapes go to the pool wave by wave; coarse tapes are dropped once they have
 // served as parents (PruneOptions::coarse_tapes keeps them).
 #include <tbb/enumerable_thread_specific.h>
-#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -25,10 +24,10 @@
 #include <malloc.h>
 #endif
 
+#include "../core/parallel.hpp"
 #include "prune_level.hpp"
 #include "sdfprune/eval.hpp"
 #include "sdfprune/prune.hpp"
-#include "../core/parallel.hpp"
 
 namespace sdfprune {
 
@@ -462,13 +461,9 @@ float PrunedGrid::eval(vec3 p, float* stack) const {
 
 void PrunedGrid::eval_points(std::span<const vec3> points, std::span<float> out) const {
     if (out.size() != points.size()) throw std::invalid_argument("eval_points: size mismatch");
-    with_threads(options_.threads, [&] {
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 256),
-                          [&](const tbb::blocked_range<size_t>& r) {
-                              std::vector<float> stack(scene_->max_stack);
-                              for (size_t i = r.begin(); i != r.end(); ++i)
-                                  out[i] = eval(points[i], stack.data());
-                          });
+    parallel_points(points.size(), options_.threads, [&](size_t begin, size_t end) {
+        std::vector<float> stack(scene_->max_stack);
+        for (size_t i = begin; i != end; ++i) out[i] = eval(points[i], stack.data());
     });
 }
 
