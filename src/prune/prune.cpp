@@ -88,9 +88,7 @@ void PrunedGrid::Pool::shrink_to_fit() {
 
 namespace {
 
-// Cells pruned per parallel task: fixed, so chunk boundaries (and the output) never depend on
-// the number of threads.
-constexpr uint32_t kChunkCells = 1024;
+constexpr uint32_t kChunkCells = kPruneChunkCells;
 
 // Freed bytes worth handing back to the system (return_freed_memory).
 constexpr uint64_t kReturnBytes = 64u << 20;

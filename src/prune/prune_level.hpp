@@ -11,6 +11,10 @@
 
 namespace sdfprune {
 
+// Cells per chunk of prune()'s parallel loop: fixed, so chunk boundaries (and the output) never
+// depend on the number of threads.
+constexpr uint32_t kPruneChunkCells = 1024;
+
 // The level being made: where its cells are and how they are pruned.
 struct LevelGeometry {
     vec3 origin;          // min corner of the grid (the scene's AABB)
