@@ -38,12 +38,50 @@ class StepPruner {
     // Prunes `cell` (box `box`) from `parent`, leaving far-field cells without a tape.
     void prune_cell(PrunedCell& cell, std::span<const uint32_t> parent, const CellBox& box) {
         CellScratch& s = s_;
-        LevelChunk& out = out_;
-        cell.value = evaluate_cell(sc_, parent, box, opt_.bounds, s);
-        out.words_visited += parent.size();
-        ++out.pruned;
+        const float value = evaluate_cell(sc_, parent, box, opt_.bounds, s);
         float constant = 0;
-        if (opt_.far_field && !is_near_field(sc_, parent, box, opt_.far_field_c, s, constant)) {
+        const bool far =
+            opt_.far_field && !is_near_field(sc_, parent, box, opt_.far_field_c, s, constant);
+        uint32_t prims = 0;
+        s.cell_tapes[0].clear();
+        if (!far) prims = compact_tape(sc_, parent, s, s.cell_tapes[0]);
+        store_cell(cell, box, parent.size(), value, far, constant, s.cell_tapes[0], prims);
+    }
+
+    // Prunes `count` <= kSiblingLanes cells of this level from one `parent` in one pass over
+    // it: the same results as prune_cell on each, in the same order.
+    void prune_siblings(PrunedCell* const* cells, const CellBox* boxes, uint32_t count,
+                        std::span<const uint32_t> parent) {
+        CellScratch& s = s_;
+        vec3 centres[kSiblingLanes];
+        for (uint32_t c = 0; c < count; ++c) centres[c] = boxes[c].centre;
+        evaluate_siblings(sc_, parent, centres, count, proto_.half, proto_.radius, opt_.bounds, s);
+        float constant[kSiblingLanes];
+        bool far[kSiblingLanes];
+        uint32_t prims[kSiblingLanes];
+        // Every lane's compaction before any refinement: refine_cell reuses the entry links.
+        for (uint32_t c = 0; c < count; ++c) {
+            constant[c] = 0;
+            far[c] = opt_.far_field && !sibling_is_near_field(sc_, parent, c, proto_.radius,
+                                                              opt_.far_field_c, s, constant[c]);
+            s.cell_tapes[c].clear();
+            prims[c] = far[c] ? 0 : compact_sibling_tape(sc_, parent, c, s, s.cell_tapes[c]);
+        }
+        for (uint32_t c = 0; c < count; ++c)
+            store_cell(*cells[c], boxes[c], parent.size(), sibling_value(s, parent, c), far[c],
+                       constant[c], s.cell_tapes[c], prims[c]);
+    }
+
+    // Stores a cell pruned from a parent tape of `parent_size` words: its centre value, its
+    // far-field test, and its compacted tape, which the finest level refines first.
+    void store_cell(PrunedCell& cell, const CellBox& box, size_t parent_size, float value, bool far,
+                    float constant, std::span<const uint32_t> compacted, uint32_t prims) {
+        CellScratch& s = s_;
+        LevelChunk& out = out_;
+        cell.value = value;
+        out.words_visited += parent_size;
+        ++out.pruned;
+        if (far) {
             cell.tape = PrunedCell::kFarField;
             cell.bound = constant;
             return;
@@ -51,10 +89,9 @@ class StepPruner {
         const size_t at = out.words.size();
         out.words.push_back(0);
         out.words.push_back(0);
-        uint32_t prims = compact_tape(sc_, parent, s, out.words);
-        if (geo_.finest && opt_.refine > 1 && out.words.size() - at - 2 <= math::kRefineMaxTape) {
+        if (geo_.finest && opt_.refine > 1 && compacted.size() <= math::kRefineMaxTape) {
             // Decided again over the cell's sub-boxes, from the tape just made.
-            s.refined.assign(out.words.begin() + at + 2, out.words.end());
+            s.refined.assign(compacted.begin(), compacted.end());
             float refined_constant = 0;
             if (!refine_cell(sc_, s.refined, box, opt_.refine, opt_.bounds, opt_.far_field,
                              opt_.far_field_c, s, refined_constant)) {
@@ -63,8 +100,9 @@ class StepPruner {
                 cell.bound = refined_constant;
                 return;
             }
-            out.words.resize(at + 2);
             prims = compact_tape(sc_, s.refined, s, out.words);
+        } else {
+            out.words.insert(out.words.end(), compacted.begin(), compacted.end());
         }
         const uint32_t len = uint32_t(out.words.size() - at - 2);
         out.words[at] = len;
@@ -90,52 +128,67 @@ class StepPruner {
 
     // Block `b`'s f³ cells in two steps: its 8 octants are pruned first (not stored), then each
     // cell from its octant's tape. Shorter parent tapes for the cells, same guarantees: a tape
-    // valid in an octant is valid in every cell inside it.
+    // valid in an octant is valid in every cell inside it. The octants are pruned together, and
+    // so are the cells of an octant, kSiblingLanes at a time.
     void prune_split_block(const ParentBlock& b, std::span<PrunedCell> cells) {
         CellScratch& s = s_;
         const uint32_t f = geo_.factor, hf = f / 2;
         const std::span<const uint32_t> parent = b.tape();
         const float lipschitz = sc_.lipschitz[sc_.root()];
+        const vec3 ohalf = proto_.half * float(hf);
+        const float oradius = proto_.radius * float(hf);
+        vec3 ocentre[8];
         for (uint32_t o = 0; o < 8; ++o) {
             const uint32_t ox = (o & 1) * hf, oy = ((o >> 1) & 1) * hf, oz = ((o >> 2) & 1) * hf;
-            CellBox obox;
-            obox.half = proto_.half * float(hf);
-            obox.radius = proto_.radius * float(hf);
-            obox.centre = geo_.origin + vec3(float(b.x + ox) + 0.5f * float(hf),
-                                             float(b.y + oy) + 0.5f * float(hf),
-                                             float(b.z + oz) + 0.5f * float(hf)) *
-                                            geo_.cell_size;
-            const float ov = evaluate_cell(sc_, parent, obox, opt_.bounds, s);
-            out_.words_visited += parent.size();
-            float oconst = 0;
-            const bool far =
-                opt_.far_field && !is_near_field(sc_, parent, obox, opt_.far_field_c, s, oconst);
-            std::span<const uint32_t> otape = parent;
-            if (!far) {
-                s.octant.clear();
-                compact_tape(sc_, parent, s, s.octant);
-                if (s.octant.size() < parent.size()) otape = s.octant;
-            }
+            ocentre[o] = geo_.origin + vec3(float(b.x + ox) + 0.5f * float(hf),
+                                            float(b.y + oy) + 0.5f * float(hf),
+                                            float(b.z + oz) + 0.5f * float(hf)) *
+                                           geo_.cell_size;
+        }
+        evaluate_siblings(sc_, parent, ocentre, 8, ohalf, oradius, opt_.bounds, s);
+        out_.words_visited += 8 * parent.size();
+        float ov[8], oconst[8];
+        bool ofar[8];
+        for (uint32_t o = 0; o < 8; ++o) {
+            ov[o] = sibling_value(s, parent, o);
+            oconst[o] = 0;
+            ofar[o] = opt_.far_field && !sibling_is_near_field(sc_, parent, o, oradius,
+                                                               opt_.far_field_c, s, oconst[o]);
+            s.octants[o].clear();
+            if (!ofar[o]) compact_sibling_tape(sc_, parent, o, s, s.octants[o]);
+        }
+        for (uint32_t o = 0; o < 8; ++o) {
+            const uint32_t ox = (o & 1) * hf, oy = ((o >> 1) & 1) * hf, oz = ((o >> 2) & 1) * hf;
+            const std::span<const uint32_t> otape = s.octants[o].size() < parent.size()
+                                                        ? std::span<const uint32_t>(s.octants[o])
+                                                        : parent;
+            PrunedCell* group[kSiblingLanes];
+            CellBox boxes[kSiblingLanes];
+            uint32_t count = 0;
             for (uint32_t lz = oz; lz < oz + hf; ++lz)
                 for (uint32_t ly = oy; ly < oy + hf; ++ly)
                     for (uint32_t lx = ox; lx < ox + hf; ++lx) {
                         PrunedCell& cell = cells[(lz * f + ly) * f + lx];
                         const CellBox box = cell_box(b.x + lx, b.y + ly, b.z + lz);
-                        if (!far) {
-                            // otape may be s.octant: the cell's pruning uses the other
-                            // scratch arrays only.
-                            prune_cell(cell, otape, box);
+                        if (!ofar[o]) {
+                            group[count] = &cell;
+                            boxes[count] = box;
+                            if (++count == kSiblingLanes) {
+                                prune_siblings(group, boxes, count, otape);
+                                count = 0;
+                            }
                             continue;
                         }
                         // A far octant makes far cells: its constant holds in each; the
                         // centre value is a conservative stand-in (same sign, never larger in
                         // magnitude) moved from the octant centre.
-                        const float reach = lipschitz * math::length(box.centre - obox.centre);
+                        const float reach = lipschitz * math::length(box.centre - ocentre[o]);
                         cell.tape = PrunedCell::kFarField;
-                        cell.bound = oconst;
-                        cell.value =
-                            ov > 0 ? std::max(ov - reach, oconst) : std::min(ov + reach, oconst);
+                        cell.bound = oconst[o];
+                        cell.value = ov[o] > 0 ? std::max(ov[o] - reach, oconst[o])
+                                               : std::min(ov[o] + reach, oconst[o]);
                     }
+            if (count > 0) prune_siblings(group, boxes, count, otape);
         }
     }
 
