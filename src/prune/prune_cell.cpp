@@ -35,6 +35,35 @@ struct LaneArrays {
     uint32_t stride;
 };
 
+// One operator over `count` boxes, from its operands' values and ranges: the decision, the
+// value, and the range (a skipped operator's range is its winner's; else the tighter of the
+// Lipschitz range and, with interval bounds, the operator's range over its operands' ranges).
+// Computed for every box and then selected, without branches, so the loop vectorizes.
+template <bool kInterval>
+void decide_boxes(uint32_t count, float sgn, float k, float spread, const float* __restrict va,
+                  const float* __restrict la, const float* __restrict ha,
+                  const float* __restrict vb, const float* __restrict lb,
+                  const float* __restrict hb, uint32_t* __restrict d, float* __restrict v,
+                  float* __restrict l, float* __restrict h) {
+    for (uint32_t b = 0; b < count; ++b) {
+        const float a_lo = la[b], a_hi = ha[b], b_lo = lb[b], b_hi = hb[b];
+        const uint32_t dec = math::prune_decision(sgn, k, a_lo, a_hi, b_lo, b_hi);
+        const float val = math::apply_operator(sgn, k, va[b], vb[b]);
+        float lo = val - spread, hi = val + spread;
+        if constexpr (kInterval) {
+            const vec2 r2 = math::operator_range(sgn, k, a_lo, a_hi, b_lo, b_hi);
+            lo = std::max(lo, r2.x);
+            hi = std::min(hi, r2.y);
+        }
+        const bool left_wins = dec == math::kLeftWins;
+        const bool right_wins = dec == math::kRightWins;
+        d[b] = dec;
+        v[b] = val;
+        l[b] = left_wins ? a_lo : right_wins ? b_lo : lo;
+        h[b] = left_wins ? a_hi : right_wins ? b_hi : hi;
+    }
+}
+
 // Evaluates `tape` at the centres of `count` (<= stride) boxes of one size, bounds every entry
 // over each box and decides every operator in each: entry by entry, across the boxes, so that
 // an entry's operands are fetched once. Also fills s.left and s.right.
@@ -59,11 +88,16 @@ void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const vec3*
             const uint32_t p = sc.primitive[node];
             const math::PrimitiveParams prm = sc.params[p];
             const PrimitiveBound pb = sc.bound[p];
-            // eval_primitive, a loop per step: spheres (most primitives) then vectorize.
+            // eval_primitive, a loop per step: spheres and boxes (most primitives) vectorize.
             for (uint32_t b = 0; b < count; ++b) q[b] = math::to_local(prm, centres[b]);
             if (kind == math::kPrimSphere) {
                 const float radius_p = prm.a.x;
                 for (uint32_t b = 0; b < count; ++b) v[b] = math::sd_sphere(q[b], radius_p);
+            } else if (kind == math::kPrimBox) {
+                const vec3 hs(prm.a.x, prm.a.y, prm.a.z);
+                const float top = prm.c.x, bottom = prm.c.y;
+                for (uint32_t b = 0; b < count; ++b)
+                    v[b] = math::sd_box(q[b], hs, prm.b, top, bottom);
             } else {
                 for (uint32_t b = 0; b < count; ++b)
                     v[b] = math::eval_primitive_local(kind, prm, q[b]);
@@ -97,23 +131,10 @@ void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const vec3*
             const float* __restrict lb = out.lo + ib;
             const float* __restrict hb = out.hi + ib;
             uint32_t* __restrict d = out.decision + at;
-            // A skipped operator's range is its winner's; else the tighter of the Lipschitz
-            // range and (with interval bounds) the operator's range over its operands' ranges.
-            // Computed for every box and then selected, so the loop has no branches.
-            for (uint32_t b = 0; b < count; ++b) {
-                const uint32_t dec = math::prune_decision(sgn, k, la[b], ha[b], lb[b], hb[b]);
-                const float val = math::apply_operator(sgn, k, va[b], vb[b]);
-                float lo = val - spread, hi = val + spread;
-                if (interval) {
-                    const vec2 r2 = math::operator_range(sgn, k, la[b], ha[b], lb[b], hb[b]);
-                    lo = std::max(lo, r2.x);
-                    hi = std::min(hi, r2.y);
-                }
-                d[b] = dec;
-                v[b] = val;
-                l[b] = dec == math::kLeftWins ? la[b] : dec == math::kRightWins ? lb[b] : lo;
-                h[b] = dec == math::kLeftWins ? ha[b] : dec == math::kRightWins ? hb[b] : hi;
-            }
+            if (interval)
+                decide_boxes<true>(count, sgn, k, spread, va, la, ha, vb, lb, hb, d, v, l, h);
+            else
+                decide_boxes<false>(count, sgn, k, spread, va, la, ha, vb, lb, hb, d, v, l, h);
         }
         if (math::tape_negated(w))
             for (uint32_t b = 0; b < count; ++b) {
