@@ -255,7 +255,14 @@ struct CellScratch {
     // refine_cell: per tape entry, the values, ranges and decisions of a batch of sub-boxes
     std::vector<float> lane_value, lane_lo, lane_hi;
     std::vector<uint32_t> lane_decision;
+    // evaluate_siblings: the same per tape entry for up to kSiblingLanes sibling cells
+    std::vector<float> sib_value, sib_lo, sib_hi;
+    std::vector<uint32_t> sib_decision;
+    // Per octant of a split block, and per sibling cell: its compacted tape (prune_level.cpp).
+    std::vector<uint32_t> octants[8];
+    std::vector<uint32_t> cell_tapes[8];
     void reserve(size_t n);
+    void reserve_siblings(size_t n);
 };
 
 // Stage 1: evaluates `tape` at the cell centre, bounds every entry over the cell and decides
@@ -267,6 +274,30 @@ float evaluate_cell(const Scene& scene, std::span<const uint32_t> tape, const Ce
 // far-field constant (sign of f, |c| <= |f| over the cell).
 bool is_near_field(const Scene& scene, std::span<const uint32_t> tape, const CellBox& box,
                    float far_field_c, const CellScratch& s, float& constant);
+
+// Stages 1–3 for up to kSiblingLanes cells of one size at once (a block's octants, an octant's
+// cells): one pass over the tape evaluates entry by entry across the cells, so each entry's
+// operands are fetched once and the arithmetic runs in vector lanes. Each lane's results are
+// those of evaluate_cell, is_near_field and compact_tape for that cell, bit for bit.
+constexpr uint32_t kSiblingLanes = 8;
+
+// Stage 1 for the boxes centred at centres[0, count) with half sizes `half`.
+// `radius` is the boxes' half-diagonal as the caller computes it (the Lipschitz spread).
+void evaluate_siblings(const Scene& scene, std::span<const uint32_t> tape, const vec3* centres,
+                       uint32_t count, vec3 half, float radius, CellBounds bounds, CellScratch& s);
+
+// The root's value at lane `lane`'s centre, after evaluate_siblings.
+inline float sibling_value(const CellScratch& s, std::span<const uint32_t> tape, uint32_t lane) {
+    return s.sib_value[(tape.size() - 1) * kSiblingLanes + lane];
+}
+
+// Stage 2 for lane `lane` (boxes of half-diagonal `radius`).
+bool sibling_is_near_field(const Scene& scene, std::span<const uint32_t> tape, uint32_t lane,
+                           float radius, float far_field_c, const CellScratch& s, float& constant);
+
+// Stage 3 for lane `lane`.
+uint32_t compact_sibling_tape(const Scene& scene, std::span<const uint32_t> tape, uint32_t lane,
+                              CellScratch& s, std::vector<uint32_t>& out);
 
 // Stage 1b, for finest cells with PruneOptions::refine = S > 1, on the tape stage 3 made for the
 // cell: decides every operator over each of the cell's S³ sub-boxes and keeps a decision only

@@ -132,10 +132,10 @@ SDFPRUNE_FN float eval_primitive(uint kind, PrimitiveParams prm, vec3 p) {
 
 // ---- operators -------------------------------------------------------------------------------
 // The quadratic blending kernel phi(x, k) = max(k - x, 0)^2 / (4k); 0 when k = 0.
+// Written as selects, without branches, so that loops over boxes vectorize.
 SDFPRUNE_FN float blend_kernel(float x, float k) {
-    if (k <= 0.0f) return 0.0f;
     float m = max(k - x, 0.0f);
-    return m * m / (4.0f * k);
+    return k > 0.0f ? m * m / (4.0f * k) : 0.0f;
 }
 
 // s = +1: union; s = -1: intersection (a difference is an intersection whose right operand
@@ -171,9 +171,9 @@ SDFPRUNE_FN uint prune_decision(float s, float k, float a_lo, float a_hi, float 
     float ub_hi = s > 0.0f ? b_hi : -b_lo;
     float margin = kPruneMarginAbs +
                    kPruneMarginRel * (abs(a_lo) + abs(a_hi) + abs(b_lo) + abs(b_hi) + k);
-    if (ua_hi + k + margin < ub_lo) return kLeftWins;
-    if (ub_hi + k + margin < ua_lo) return kRightWins;
-    return kKeepBoth;
+    // Selects rather than branches (loops over boxes vectorize); at most one test holds.
+    uint right_wins = ub_hi + k + margin < ua_lo ? kRightWins : kKeepBoth;
+    return ua_hi + k + margin < ub_lo ? kLeftWins : right_wins;
 }
 
 // Sub-box refinement of finest cells (PruneOptions::refine) is for short tapes only: its cost

@@ -6,19 +6,18 @@
 #include "sdfprune/discretize.hpp"
 
 #include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
+#include <tbb/parallel_for.h>  // the walk's nested loop over a block
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <stdexcept>
-#include <thread>
 #include <vector>
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
 
+#include "../core/parallel.hpp"
 #include "sdfprune/eval.hpp"
 
 namespace sdfprune {
@@ -31,51 +30,30 @@ void check_size(std::span<float> out, uint32_t n) {
         throw std::invalid_argument("discretize: output must hold n³ values");
 }
 
-// Reports progress from the calling thread only (ProgressFn's contract), as units finish.
-class ProgressCounter {
-  public:
-    ProgressCounter(const ProgressFn& fn, uint64_t total)
-        : fn_(fn),
-          total_(double(std::max<uint64_t>(total, 1))),
-          caller_(std::this_thread::get_id()) {}
-    void add(uint64_t units) {
-        const uint64_t done = done_.fetch_add(units, std::memory_order_relaxed) + units;
-        if (fn_ && std::this_thread::get_id() == caller_) fn_(double(done) / total_);
-    }
-    void finish() {
-        if (fn_) fn_(1.0);
-    }
+ParallelOptions loop_options(int threads, const ProgressFn& progress) {
+    ParallelOptions p;
+    p.threads = threads;
+    p.progress = &progress;
+    return p;
+}
 
-  private:
-    const ProgressFn& fn_;
-    double total_;
-    std::thread::id caller_;
-    std::atomic<uint64_t> done_{0};
-};
-
-// Evaluates `value(x, y, z, stack)` at every cell of an n³ grid, in parallel over rows.
+// Evaluates `value(x, y, z, stack)` at every cell of an n³ grid, in parallel over chunks of rows.
 template <class Value>
 void for_each_cell(uint32_t n, uint32_t max_stack, int threads, std::span<float> out,
                    const ProgressFn& progress, const Value& value) {
     const uint64_t N = n, rows = N * N;
-    ProgressCounter counter(progress, rows);
-    // About 64k values per task: small enough for balance and progress, large enough that
-    // the per-task stack allocation does not matter.
-    const size_t grain = size_t(std::max<uint64_t>(1, 65536 / N));
-    with_threads(threads, [&] {
-        tbb::parallel_for(tbb::blocked_range<uint64_t>(0, rows, grain),
-                          [&](const tbb::blocked_range<uint64_t>& r) {
-                              std::vector<float> stack(max_stack);
-                              for (uint64_t row = r.begin(); row != r.end(); ++row) {
-                                  const uint32_t y = uint32_t(row % N), z = uint32_t(row / N);
-                                  float* o = out.data() + row * N;
-                                  for (uint32_t x = 0; x < n; ++x)
-                                      o[x] = value(x, y, z, stack.data());
-                              }
-                              counter.add(r.size());
-                          });
-    });
-    counter.finish();
+    // About 64k values per chunk: small enough for balance and progress, large enough that
+    // the per-chunk stack allocation does not matter.
+    const uint64_t grain = std::max<uint64_t>(1, 65536 / N);
+    parallel_for<NotCancellable>(
+        (rows + grain - 1) / grain, loop_options(threads, progress), [&](uint64_t chunk) {
+            std::vector<float> stack(max_stack);
+            for (uint64_t row = chunk * grain; row < std::min(rows, (chunk + 1) * grain); ++row) {
+                const uint32_t y = uint32_t(row % N), z = uint32_t(row / N);
+                float* o = out.data() + row * N;
+                for (uint32_t x = 0; x < n; ++x) o[x] = value(x, y, z, stack.data());
+            }
+        });
 }
 
 // The walk of discretize_pruned.
@@ -228,19 +206,15 @@ void discretize_pruned(const PrunedGrid& grid, std::span<float> out, const Progr
     const PrunedWalk walk(grid, out);
     const uint32_t r0 = grid.level_resolution(0);
     const uint32_t cells0 = r0 * r0 * r0;
-    // Level 0 in z-major order; the walk is fast enough (tens of ms at 256³) that progress is
-    // reported per level-0 cell.
-    ProgressCounter counter(progress, cells0);
-    with_threads(grid.options().threads, [&] {
-        tbb::parallel_for(
-            tbb::blocked_range<uint32_t>(0, cells0, 1), [&](const tbb::blocked_range<uint32_t>& r) {
-                std::vector<float> stack(grid.scene().max_stack);
-                for (uint32_t i = r.begin(); i != r.end(); ++i)
-                    walk.visit(0, i, i % r0, (i / r0) % r0, i / (r0 * r0), stack.data());
-                counter.add(r.size());
-            });
-    });
-    counter.finish();
+    // Level 0 in z-major order, one chunk per cell; the walk is fast enough (tens of ms at
+    // 256³) that progress per level-0 cell is enough.
+    parallel_for<NotCancellable>(
+        cells0, loop_options(grid.options().threads, progress), [&](uint64_t i) {
+            // Not thread_local: visit's nested loop may run another level-0 cell on this thread.
+            std::vector<float> stack(grid.scene().max_stack);
+            const uint32_t c = uint32_t(i);
+            walk.visit(0, c, c % r0, (c / r0) % r0, c / (r0 * r0), stack.data());
+        });
 }
 
 void discretize_pruned(const PrunedGrid& grid, uint32_t n, std::span<float> out,

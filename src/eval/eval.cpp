@@ -2,8 +2,8 @@
 // the post-order words with a value stack, the primitive and operator math from sdf_math.h.
 #include "sdfprune/eval.hpp"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
+#include "../core/parallel.hpp"
+
 #include <tbb/task_arena.h>
 
 #include <stdexcept>
@@ -76,13 +76,10 @@ void with_threads(int threads, const std::function<void()>& fn) {
 void eval_points(const Scene& sc, std::span<const vec3> points, std::span<float> out,
                  const EvalOptions& options) {
     if (out.size() != points.size()) throw std::invalid_argument("eval_points: size mismatch");
-    with_threads(options.threads, [&] {
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 256),
-                          [&](const tbb::blocked_range<size_t>& r) {
-                              std::vector<float> stack(sc.max_stack);
-                              for (size_t i = r.begin(); i != r.end(); ++i)
-                                  out[i] = eval_tape(sc, sc.full_tape, points[i], stack.data());
-                          });
+    parallel_points(points.size(), options.threads, [&](size_t begin, size_t end) {
+        std::vector<float> stack(sc.max_stack);
+        for (size_t i = begin; i != end; ++i)
+            out[i] = eval_tape(sc, sc.full_tape, points[i], stack.data());
     });
 }
 

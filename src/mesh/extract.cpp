@@ -13,8 +13,6 @@
 //   4. vertices: one per sign-changing Kuhn edge used by a candidate cube, numbered in
 //      (brick, corner, direction) order, so both methods and any thread count agree;
 //   5. triangles from the 6 tetrahedra of every candidate cube, in (brick, cube, tet) order.
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <array>
@@ -22,8 +20,8 @@
 #include <bit>
 #include <chrono>
 #include <memory>
-#include <thread>
 
+#include "../core/parallel.hpp"
 #include "sdfprune/eval.hpp"
 #include "sdfprune/mesh.hpp"
 
@@ -130,14 +128,16 @@ constexpr uint32_t kBrickCorners = kB * kB * kB;
 constexpr uint64_t kCol0 = 0x0101010101010101ull;  // x = 0 in every row of an xy layer word
 
 // Local index offset of cube corner k (x + 2y + 4z) from the cube's lowest corner, same brick.
-constexpr uint32_t kCornerOffset[8] = {0, 1, kB, kB + 1, kB * kB, kB * kB + 1, kB * kB + kB,
-                                       kB * kB + kB + 1};
+constexpr uint32_t kCornerOffset[8] = {0,      1,          kB,          kB + 1,
+                                       kB* kB, kB* kB + 1, kB* kB + kB, kB* kB + kB + 1};
 
 // Local index of a corner inside its brick: x + 8y + 64z; one uint64 word per z layer.
 constexpr uint32_t local_index(uint32_t x, uint32_t y, uint32_t z) {
     return (x & 7u) | (y & 7u) << 3 | (z & 7u) << 6;
 }
-constexpr bool bit(const uint64_t* words, uint32_t l) { return (words[l >> 6] >> (l & 63)) & 1u; }
+constexpr bool bit(const uint64_t* words, uint32_t l) {
+    return (words[l >> 6] >> (l & 63)) & 1u;
+}
 // Bits set in a 7-bit edge mask (std::popcount may be a library call without -mpopcnt).
 constexpr uint32_t popcount7(uint32_t m) {
     return (m & 1) + (m >> 1 & 1) + (m >> 2 & 1) + (m >> 3 & 1) + (m >> 4 & 1) + (m >> 5 & 1) +
@@ -160,9 +160,8 @@ struct Brick {
 };
 
 class CornerBricks {
-public:
-    CornerBricks(uint32_t n, bool with_tapes)
-        : n_(n), nb_((n + kB) / kB), with_tapes_(with_tapes) {
+  public:
+    CornerBricks(uint32_t n, bool with_tapes) : n_(n), nb_((n + kB) / kB), with_tapes_(with_tapes) {
         slot_of_.assign(size_t(nb_) * nb_ * nb_, kNone);
     }
 
@@ -258,7 +257,7 @@ public:
                bricks_.size() * (sizeof(Brick) + (with_tapes_ ? kBrickCorners * 4 : 0));
     }
 
-private:
+  private:
     size_t brick_index(uint32_t bx, uint32_t by, uint32_t bz) const {
         return (size_t(bz) * nb_ + by) * nb_ + bx;
     }
@@ -303,27 +302,12 @@ private:
     std::vector<Brick*> order_;                   // in brick order
 };
 
-// Runs fn(i) for i in [0, count) in parallel; checks the cancel flag and reports progress in
-// [lo, hi] from the calling thread.
+// Runs fn(i) for i in [0, count) in parallel (one chunk per brick or triangle chunk); checks the
+// cancel flag and reports progress in [lo, hi] from the calling thread.
 template <class F>
 void parallel_stage(uint32_t count, const MeshOptions& o, double lo, double hi, const F& fn) {
-    std::atomic<bool> cancelled{false};
-    std::atomic<uint32_t> done{0};
-    const std::thread::id caller = std::this_thread::get_id();
-    tbb::parallel_for(tbb::blocked_range<uint32_t>(0, count, 1),
-                      [&](const tbb::blocked_range<uint32_t>& r) {
-                          if (cancelled.load(std::memory_order_relaxed)) return;
-                          if (o.cancel && o.cancel->load(std::memory_order_relaxed)) {
-                              cancelled = true;
-                              return;
-                          }
-                          for (uint32_t i = r.begin(); i != r.end(); ++i) fn(i);
-                          const uint32_t d = done += uint32_t(r.size());
-                          if (o.progress && std::this_thread::get_id() == caller)
-                              o.progress(lo + (hi - lo) * double(d) / double(count));
-                      });
-    if (cancelled) throw MeshCancelled();
-    if (o.progress) o.progress(hi);
+    parallel_for<MeshCancelled>(count, parallel_options(o, lo, hi),
+                                [&](uint64_t i) { fn(uint32_t(i)); });
 }
 
 // Visits the grid's cells: near(ix, iy, iz, cell) for every near-field cell of the finest
@@ -338,9 +322,9 @@ void for_each_cell(const PrunedGrid& g, const Near& near, const Far& far) {
     while (!stack.empty()) {
         const Block b = stack.back();
         stack.pop_back();
-        const uint32_t f = b.level == 0 ? g.level_resolution(0)
-                                        : g.level_resolution(b.level) /
-                                              g.level_resolution(b.level - 1);
+        const uint32_t f = b.level == 0
+                               ? g.level_resolution(0)
+                               : g.level_resolution(b.level) / g.level_resolution(b.level - 1);
         const std::span<const PrunedCell> cells = g.level_cells(b.level);
         const bool finest = b.level + 1 == g.level_count();
         const uint32_t nf =
@@ -354,8 +338,8 @@ void for_each_cell(const PrunedGrid& g, const Near& near, const Far& far) {
                     else if (finest)
                         near(b.x + x, b.y + y, b.z + z, c);
                     else
-                        stack.push_back({b.level + 1, c.children, (b.x + x) * nf,
-                                         (b.y + y) * nf, (b.z + z) * nf});
+                        stack.push_back({b.level + 1, c.children, (b.x + x) * nf, (b.y + y) * nf,
+                                         (b.z + z) * nf});
                 }
     }
 }
@@ -529,7 +513,7 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
     constexpr uint32_t kChunkBricks = 8;  // bricks per triangle chunk: fixed, for determinism
     std::atomic<uint64_t> cubes{0}, evaluated{0};
 
-    with_threads(o.threads, [&] {
+    {
         // Stages 2 and 3: needed corners, each evaluated once.
         parallel_stage(count, o, 0.0, 0.85, [&](uint32_t i) {
             Brick& b = bricks[i];
@@ -551,8 +535,7 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
                         }
                         if (!src.tape.empty()) tape = src.tape;
                     }
-                    b.value[l] =
-                        cap(x, y, z, eval_tape(sc, tape, corner(x, y, z), stack.data()));
+                    b.value[l] = cap(x, y, z, eval_tape(sc, tape, corner(x, y, z), stack.data()));
                     ++done;
                 }
             }
@@ -589,9 +572,9 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
                         const uint32_t free = ~d & 7u;
                         bool used = false;
                         for (uint32_t s = 0;; s = (s - free) & free) {
-                            used = bricks.candidate(int64_t(x) - (s & 1),
-                                                    int64_t(y) - ((s >> 1) & 1),
-                                                    int64_t(z) - (s >> 2));
+                            used =
+                                bricks.candidate(int64_t(x) - (s & 1), int64_t(y) - ((s >> 1) & 1),
+                                                 int64_t(z) - (s >> 2));
                             if (used || s == free) break;
                         }
                         if (used) mask |= uint8_t(1u << (d - 1));
@@ -628,8 +611,8 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
                         if (!(b.vmask[l] >> (d - 1) & 1)) continue;
                         const uint32_t vx = x + (d & 1), vy = y + ((d >> 1) & 1), vz = z + (d >> 2);
                         const float fv = bricks.find(vx, vy, vz)->value[local_index(vx, vy, vz)];
-                        const float t = std::clamp(fu / (fu - fv), kMinEdgeFraction,
-                                                   1.0f - kMinEdgeFraction);
+                        const float t =
+                            std::clamp(fu / (fu - fv), kMinEdgeFraction, 1.0f - kMinEdgeFraction);
                         const vec3 pv = corner(vx, vy, vz);
                         mesh.vertices[id++] = pu + (pv - pu) * t;
                     }
@@ -657,7 +640,7 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
             }
             cubes += visited;
         });
-    });
+    }
 
     size_t tri_words = 0;
     for (const auto& c : tri_chunks) tri_words += c.size();

@@ -7,7 +7,6 @@
 // are freed. Finest tapes go to the pool wave by wave; coarse tapes are dropped once they have
 // served as parents (PruneOptions::coarse_tapes keeps them).
 #include <tbb/enumerable_thread_specific.h>
-#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -25,6 +24,8 @@
 #include <malloc.h>
 #endif
 
+#include "../core/parallel.hpp"
+#include "prune_level.hpp"
 #include "sdfprune/eval.hpp"
 #include "sdfprune/prune.hpp"
 
@@ -87,49 +88,13 @@ void PrunedGrid::Pool::shrink_to_fit() {
 
 namespace {
 
-// Cells pruned per parallel task: fixed, so chunk boundaries (and the output) never depend on
-// the number of threads.
-constexpr uint32_t kChunkCells = 1024;
+constexpr uint32_t kChunkCells = kPruneChunkCells;
 
 // Freed bytes worth handing back to the system (return_freed_memory).
 constexpr uint64_t kReturnBytes = 64u << 20;
 
-// One chunk's output: its cells' tapes as [length, primitives, words...] (the cells hold offsets
-// into this buffer until it is placed in the pool), and statistics.
-struct ChunkOut {
-    std::vector<uint32_t> words;
-    // Finest level only: statistics of the chunk's near-field cells.
-    uint64_t near = 0, tape_sum = 0, prim_sum = 0, prim_sq_sum = 0;
-    uint32_t tape_max = 0, prim_max = 0;
-    uint64_t words_visited = 0, pruned = 0;
-};
-
-// Adds a chunk's counts to the sums in `st` (in chunk order, whatever the thread count).
-void add_chunk_stats(const ChunkOut& o, PruneStats& st) {
-    st.near_field_cells += o.near;
-    st.tape_avg += double(o.tape_sum);
-    st.tape_max = std::max(st.tape_max, o.tape_max);
-    st.active_avg += double(o.prim_sum);
-    st.active_std += double(o.prim_sq_sum);
-    st.active_max = std::max(st.active_max, o.prim_max);
-    st.cells_pruned += o.pruned;
-    st.tape_words_visited += o.words_visited;
-}
-
 uint64_t bytes_of(const auto& v) {
     return uint64_t(v.capacity()) * sizeof(v[0]);
-}
-
-// The words of the tape whose header ([length, primitives]) is at `header`.
-std::span<const uint32_t> tape_words(const uint32_t* header) {
-    return {header + 2, header[0]};
-}
-
-// FNV-1a over a tape's header and words: finds identical tapes within a chunk.
-uint64_t tape_hash(std::span<const uint32_t> tape) {
-    uint64_t h = 0xcbf29ce484222325ull;
-    for (const uint32_t w : tape) h = (h ^ w) * 0x100000001b3ull;
-    return h;
 }
 
 // Hands memory freed to the C library back to the system. glibc keeps freed blocks below its
@@ -141,8 +106,42 @@ void return_freed_memory() {
 #endif
 }
 
+// The buffers of one level's pruning as it runs: the parents (the previous level's chunk
+// buffers), which are freed as soon as no block left refers to them, and the byte counts of the
+// peak-memory statistic.
+struct LevelBuffers {
+    std::vector<std::vector<uint32_t>> parents;
+    // first_block[c]: the first block whose parent is in parents[c] (blocks are in parent order).
+    std::vector<uint32_t> first_block;
+    uint32_t released = 0;  // parents[0, released) are freed
+    uint64_t parent_bytes = 0, done_cells_bytes = 0, peak = 0;
+    uint64_t unreturned = 0;  // bytes freed since the last return_freed_memory()
+
+    // Frees the parents of blocks before `block` (all of them when block = number of blocks).
+    void release_before(uint64_t block, uint64_t blocks) {
+        const uint32_t needed =
+            block < blocks
+                ? uint32_t(std::upper_bound(first_block.begin(), first_block.end(), block) -
+                           first_block.begin() - 1)
+                : uint32_t(parents.size());
+        for (; released < needed; ++released) {
+            parent_bytes -= bytes_of(parents[released]);
+            unreturned += bytes_of(parents[released]);
+            std::vector<uint32_t>().swap(parents[released]);
+        }
+        if (unreturned >= kReturnBytes) {
+            return_freed_memory();
+            unreturned = 0;
+        }
+    }
+};
+
 }  // namespace
 
+// The driver of the hierarchy: for each level, the level step (prune_level.hpp) over fixed
+// chunks of its blocks' cells in parallel waves; then the chunks' tapes are placed (finest: in
+// the pool; coarse: kept as the next level's parents) and the near-field cells become the next
+// level's blocks.
 PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     const auto t0 = std::chrono::steady_clock::now();
     if (!(opt.far_field_c >= 1.0f)) throw std::invalid_argument("far-field C must be >= 1");
@@ -167,22 +166,17 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     st.grid = N;
     st.cells = uint64_t(N) * N * N;
     st.levels = res;
-    uint64_t peak = 0;
 
     // Far-field cells above the finest level count for all the finest cells they cover.
     uint64_t far_finest = 0;
     // The previous level's tapes, one buffer per chunk, and the current level's blocks: one per
-    // near-field parent, with its origin (in this level's cells), its parent's chunk and tape.
-    struct Block {
-        uint32_t x, y, z;
-        uint32_t chunk;
-        const uint32_t* tape;  // header in parents[chunk]
-    };
-    std::vector<std::vector<uint32_t>> parents;
-    parents.push_back(std::move(root));
-    std::vector<Block> blocks{{0, 0, 0, 0, parents[0].data()}};
-    uint64_t parent_bytes = bytes_of(parents[0]), done_cells_bytes = 0;
-    uint64_t unreturned = 0;  // bytes freed since the last return_freed_memory()
+    // near-field parent, with its origin (in this level's cells) and its parent's tape.
+    LevelBuffers buf;
+    buf.parents.push_back(std::move(root));
+    buf.first_block = {0};
+    std::vector<ParentBlock> blocks{{0, 0, 0, sc.size(), buf.parents[0].data() + 2}};
+    buf.parent_bytes = bytes_of(buf.parents[0]);
+    const int workers = opt.threads > 0 ? opt.threads : tbb::this_task_arena::max_concurrency();
 
     for (uint32_t li = 0; li < res.size(); ++li) {
         const bool finest = li + 1 == res.size();
@@ -194,168 +188,9 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
         const uint64_t total = per_block * blocks.size();
         if (total > 0xfffffffeull) throw std::length_error("too many cells in one level");
         level.cells.resize(total);
-        const vec3 csize = extent / float(level.res);
-        CellBox proto;
-        proto.half = csize * 0.5f;
-        proto.radius = math::length(proto.half);
-
+        const LevelGeometry geo = level_geometry(sc, opt, level.res, f, finest, kChunkCells);
         const uint32_t chunks = uint32_t((total + kChunkCells - 1) / kChunkCells);
-        // Split blocks into octants first when the factor allows and chunks hold whole blocks.
-        const bool split = opt.hierarchy && f >= 4 && f % 2 == 0 && kChunkCells % per_block == 0;
-        std::vector<ChunkOut> outs(chunks);
-        std::atomic<bool> cancelled{false};
-        std::atomic<uint32_t> chunks_done{0};
-        const std::thread::id caller = std::this_thread::get_id();
-        // Progress is reported by the calling thread, which takes part in the parallel loop.
-        const auto report = [&] {
-            const uint32_t done = ++chunks_done;
-            if (opt.progress && std::this_thread::get_id() == caller)
-                opt.progress((double(li) + double(done) / chunks) / double(res.size()));
-        };
-        const auto prune_chunk = [&](uint32_t c) {
-            struct OnExit {
-                const decltype(report)& f;
-                ~OnExit() { f(); }
-            } on_exit{report};
-            if (cancelled.load(std::memory_order_relaxed)) return;
-            if (opt.cancel && opt.cancel->load(std::memory_order_relaxed)) {
-                cancelled = true;
-                return;
-            }
-            CellScratch& s = scratch.local();
-            ChunkOut& out = outs[c];
-            const uint64_t begin = uint64_t(c) * kChunkCells;
-            const uint64_t end = std::min(total, begin + kChunkCells);
-            const vec3 origin = sc.aabb.min;
-            // The chunk's tapes by hash: a tape equal to one already stored is not stored again.
-            std::unordered_map<uint64_t, uint32_t> stored;
-
-            // Prunes cell i from `parent`, leaving far-field cells without a tape.
-            const auto prune_cell = [&](uint64_t i, std::span<const uint32_t> parent,
-                                        const CellBox& box) {
-                PrunedCell& cell = level.cells[i];
-                cell.value = evaluate_cell(sc, parent, box, opt.bounds, s);
-                out.words_visited += parent.size();
-                ++out.pruned;
-                float constant = 0;
-                if (opt.far_field &&
-                    !is_near_field(sc, parent, box, opt.far_field_c, s, constant)) {
-                    cell.tape = PrunedCell::kFarField;
-                    cell.bound = constant;
-                    return;
-                }
-                const size_t at = out.words.size();
-                out.words.push_back(0);
-                out.words.push_back(0);
-                uint32_t prims = compact_tape(sc, parent, s, out.words);
-                if (finest && opt.refine > 1 && out.words.size() - at - 2 <= math::kRefineMaxTape) {
-                    // Decided again over the cell's sub-boxes, from the tape just made.
-                    s.refined.assign(out.words.begin() + at + 2, out.words.end());
-                    float refined_constant = 0;
-                    if (!refine_cell(sc, s.refined, box, opt.refine, opt.bounds, opt.far_field,
-                                     opt.far_field_c, s, refined_constant)) {
-                        out.words.resize(at);
-                        cell.tape = PrunedCell::kFarField;
-                        cell.bound = refined_constant;
-                        return;
-                    }
-                    out.words.resize(at + 2);
-                    prims = compact_tape(sc, s.refined, s, out.words);
-                }
-                const uint32_t len = uint32_t(out.words.size() - at - 2);
-                out.words[at] = len;
-                out.words[at + 1] = prims;
-                const std::span<const uint32_t> tape(out.words.data() + at, len + 2);
-                const auto [it, fresh] = stored.try_emplace(tape_hash(tape), uint32_t(at));
-                if (!fresh && out.words[it->second] == len &&
-                    std::equal(tape.begin(), tape.end(), out.words.begin() + it->second)) {
-                    out.words.resize(at);
-                    cell.tape = it->second;
-                } else {
-                    cell.tape = uint32_t(at);
-                }
-                if (finest) {
-                    ++out.near;
-                    out.tape_sum += len;
-                    out.tape_max = std::max(out.tape_max, len);
-                    out.prim_sum += prims;
-                    out.prim_sq_sum += uint64_t(prims) * prims;
-                    out.prim_max = std::max(out.prim_max, prims);
-                }
-            };
-            const auto cell_box = [&](uint32_t x, uint32_t y, uint32_t z) {
-                CellBox box = proto;
-                box.centre =
-                    origin + vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * csize;
-                return box;
-            };
-
-            if (!split) {
-                for (uint64_t i = begin; i < end; ++i) {
-                    const Block& b = blocks[i / per_block];
-                    const uint32_t local = uint32_t(i % per_block);
-                    prune_cell(
-                        i, tape_words(b.tape),
-                        cell_box(b.x + local % f, b.y + (local / f) % f, b.z + local / (f * f)));
-                }
-            } else {
-                // Each block in two steps: its 8 octants are pruned first (not stored), then
-                // each cell from its octant's tape. Shorter parent tapes for the cells, same
-                // guarantees: a tape valid in an octant is valid in every cell inside it.
-                const uint32_t hf = f / 2;
-                for (uint64_t bi = begin / per_block; bi < end / per_block; ++bi) {
-                    const Block& b = blocks[bi];
-                    const std::span<const uint32_t> parent = tape_words(b.tape);
-                    for (uint32_t o = 0; o < 8; ++o) {
-                        const uint32_t ox = (o & 1) * hf, oy = ((o >> 1) & 1) * hf,
-                                       oz = ((o >> 2) & 1) * hf;
-                        CellBox obox;
-                        obox.half = proto.half * float(hf);
-                        obox.radius = proto.radius * float(hf);
-                        obox.centre = origin + vec3(float(b.x + ox) + 0.5f * float(hf),
-                                                    float(b.y + oy) + 0.5f * float(hf),
-                                                    float(b.z + oz) + 0.5f * float(hf)) *
-                                                   csize;
-                        const float ov = evaluate_cell(sc, parent, obox, opt.bounds, s);
-                        out.words_visited += parent.size();
-                        float oconst = 0;
-                        const bool far =
-                            opt.far_field &&
-                            !is_near_field(sc, parent, obox, opt.far_field_c, s, oconst);
-                        std::span<const uint32_t> otape = parent;
-                        if (!far) {
-                            s.octant.clear();
-                            compact_tape(sc, parent, s, s.octant);
-                            if (s.octant.size() < parent.size()) otape = s.octant;
-                        }
-                        for (uint32_t lz = oz; lz < oz + hf; ++lz)
-                            for (uint32_t ly = oy; ly < oy + hf; ++ly)
-                                for (uint32_t lx = ox; lx < ox + hf; ++lx) {
-                                    const uint64_t i = bi * per_block + (lz * f + ly) * f + lx;
-                                    const CellBox box = cell_box(b.x + lx, b.y + ly, b.z + lz);
-                                    if (!far) {
-                                        // otape may be s.octant: the cell's pruning uses the
-                                        // other scratch arrays only.
-                                        prune_cell(i, otape, box);
-                                        continue;
-                                    }
-                                    // A far octant makes far cells: its constant holds in each;
-                                    // the centre value is a conservative stand-in (same sign,
-                                    // never larger in magnitude) moved from the octant centre.
-                                    PrunedCell& cell = level.cells[i];
-                                    const float reach =
-                                        g.lipschitz_ * math::length(box.centre - obox.centre);
-                                    cell.tape = PrunedCell::kFarField;
-                                    cell.bound = oconst;
-                                    cell.value = ov > 0 ? std::max(ov - reach, oconst)
-                                                        : std::min(ov + reach, oconst);
-                                }
-                    }
-                }
-            }
-            // Coarse buffers live on as the next level's parents: no slack.
-            if (!finest) out.words.shrink_to_fit();
-        };
+        std::vector<LevelChunk> outs(chunks);
 
         // Moves chunk c's tapes into the pool (or, for coarse tapes not kept, points its
         // near-field cells to the full tree's tape).
@@ -373,51 +208,48 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
             }
         };
         uint64_t level_bytes = bytes_of(level.cells);  // this level's cells and kept buffers
-        uint32_t released = 0;                         // parents[0, released) are freed
-        with_threads(opt.threads, [&] {
-            // Waves of chunks: enough for load balance, few enough that parents are freed early
-            // and finest buffers are few. Output does not depend on the wave size.
-            const uint32_t wave =
-                16 * uint32_t(std::max(1, tbb::this_task_arena::max_concurrency()));
-            for (uint32_t w0 = 0; w0 < chunks; w0 += wave) {
-                const uint32_t w1 = std::min(chunks, w0 + wave);
-                tbb::parallel_for(w0, w1, prune_chunk);
-                if (cancelled) return;
-                uint64_t wave_bytes = 0;
-                for (uint32_t c = w0; c < w1; ++c) {
-                    wave_bytes += bytes_of(outs[c].words);
-                    add_chunk_stats(outs[c], st);
-                }
-                if (finest) {
-                    for (uint32_t c = w0; c < w1; ++c) place_chunk(c, true);
-                } else {
-                    level_bytes += wave_bytes;
-                    wave_bytes = 0;
-                }
-                peak = std::max(peak, pool_bytes() + parent_bytes + level_bytes + wave_bytes +
-                                          done_cells_bytes + bytes_of(blocks));
-                if (finest)
-                    for (uint32_t c = w0; c < w1; ++c) std::vector<uint32_t>().swap(outs[c].words);
-                // Free the parents that no block from the next wave on refers to.
-                const uint64_t next_cell = uint64_t(w1) * kChunkCells;
-                const uint32_t needed = next_cell < total ? blocks[next_cell / per_block].chunk
-                                                          : uint32_t(parents.size());
-                for (; released < needed; ++released) {
-                    parent_bytes -= bytes_of(parents[released]);
-                    unreturned += bytes_of(parents[released]);
-                    std::vector<uint32_t>().swap(parents[released]);
-                }
-                if (unreturned >= kReturnBytes) {
-                    return_freed_memory();
-                    unreturned = 0;
-                }
+        // Waves of chunks: enough for load balance, few enough that parents are freed early
+        // and finest buffers are few. Output does not depend on the wave size.
+        const uint32_t wave = 16 * uint32_t(std::max(1, workers));
+        for (uint32_t w0 = 0; w0 < chunks; w0 += wave) {
+            const uint32_t w1 = std::min(chunks, w0 + wave);
+            ParallelOptions po = parallel_options(opt);
+            po.progress_lo = (double(li) + double(w0) / chunks) / double(res.size());
+            po.progress_hi = (double(li) + double(w1) / chunks) / double(res.size());
+            parallel_for<PruneCancelled>(w1 - w0, po, [&](uint64_t k) {
+                const uint32_t c = uint32_t(w0 + k);
+                const uint64_t begin = uint64_t(c) * kChunkCells;
+                const uint64_t end = std::min(total, begin + kChunkCells);
+                LevelChunk& out = outs[c];
+                prune_level_step(sc, opt, geo, blocks, begin, end,
+                                 std::span(level.cells).subspan(begin, end - begin),
+                                 scratch.local(), out);
+                // Coarse buffers live on as the next level's parents: no slack.
+                if (!finest) out.words.shrink_to_fit();
+            });
+            uint64_t wave_bytes = 0;
+            for (uint32_t c = w0; c < w1; ++c) {
+                wave_bytes += bytes_of(outs[c].words);
+                add_chunk_stats(outs[c], st);
             }
-        });
-        if (cancelled) throw PruneCancelled();
+            if (finest) {
+                for (uint32_t c = w0; c < w1; ++c) place_chunk(c, true);
+            } else {
+                level_bytes += wave_bytes;
+                wave_bytes = 0;
+            }
+            buf.peak = std::max(buf.peak, pool_bytes() + buf.parent_bytes + level_bytes +
+                                              wave_bytes + buf.done_cells_bytes + bytes_of(blocks));
+            if (finest)
+                for (uint32_t c = w0; c < w1; ++c) std::vector<uint32_t>().swap(outs[c].words);
+            // Free the parents that no block from the next wave on refers to.
+            buf.release_before(uint64_t(w1) * kChunkCells / per_block, blocks.size());
+        }
 
         // Far-field cells of this level, and the next level's blocks: one per near-field cell.
         const uint64_t below = uint64_t(N / level.res);
-        std::vector<Block> next;
+        std::vector<ParentBlock> next;
+        std::vector<uint32_t> first_block(chunks + 1, 0);
         for (uint64_t i = 0; i < total; ++i) {
             PrunedCell& cell = level.cells[i];
             if (cell.tape == PrunedCell::kFarField) {
@@ -428,35 +260,41 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                 continue;
             }
             if (finest) continue;
-            const Block& b = blocks[i / per_block];
+            const ParentBlock& b = blocks[i / per_block];
             const uint32_t local = uint32_t(i % per_block);
             const uint32_t nf = res[li + 1] / res[li];
             const uint32_t c = uint32_t(i / kChunkCells);
             cell.children = uint32_t(next.size() * nf * nf * nf);
+            const uint32_t* header = outs[c].words.data() + cell.tape;
+            ++first_block[c + 1];
             next.push_back({(b.x + local % f) * nf, (b.y + (local / f) % f) * nf,
-                            (b.z + local / (f * f)) * nf, c, outs[c].words.data() + cell.tape});
+                            (b.z + local / (f * f)) * nf, header[0], header + 2});
         }
+        for (uint32_t c = 0; c < chunks; ++c) first_block[c + 1] += first_block[c];
+        first_block.pop_back();
         blocks.swap(next);
         if (!finest) {
             // This level's buffers become the parents; the cells' offsets into them go.
-            parents.clear();
-            parent_bytes = 0;
+            buf.parents.clear();
+            buf.parent_bytes = 0;
+            buf.released = 0;
+            buf.first_block.swap(first_block);
             for (uint32_t c = 0; c < chunks; ++c) {
                 place_chunk(c, opt.coarse_tapes);
-                parent_bytes += bytes_of(outs[c].words);
-                parents.push_back(std::move(outs[c].words));
+                buf.parent_bytes += bytes_of(outs[c].words);
+                buf.parents.push_back(std::move(outs[c].words));
             }
-            peak = std::max(peak, pool_bytes() + parent_bytes + bytes_of(level.cells) +
-                                      done_cells_bytes + bytes_of(blocks));
+            buf.peak = std::max(buf.peak, pool_bytes() + buf.parent_bytes + bytes_of(level.cells) +
+                                              buf.done_cells_bytes + bytes_of(blocks));
         }
-        done_cells_bytes += bytes_of(level.cells);
+        buf.done_cells_bytes += bytes_of(level.cells);
         const uint32_t scale = N / level.res;
         if (std::has_single_bit(scale) && std::has_single_bit(level.factor)) {
             level.pow2 = true;
             level.shift = uint32_t(std::countr_zero(scale));
             level.factor_bits = uint32_t(std::countr_zero(level.factor));
         }
-        g.level_size_.push_back(csize);
+        g.level_size_.push_back(geo.cell_size);
         g.levels_.push_back(std::move(level));
         if (opt.progress) opt.progress(double(li + 1) / double(res.size()));
     }
@@ -468,7 +306,7 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     finish_prune_stats(st, st.active_avg, st.active_std, st.tape_avg, far_finest);
     st.tape_bytes = pool_bytes();
     for (const PrunedGrid::Level& l : g.levels_) st.tape_bytes += bytes_of(l.cells);
-    st.prune_peak_bytes = std::max(peak, st.tape_bytes);
+    st.prune_peak_bytes = std::max(buf.peak, st.tape_bytes);
     for (const CellScratch& s : scratch)
         st.prune_peak_bytes += bytes_of(s.value) * 3 + bytes_of(s.left) * 4 + bytes_of(s.alive) * 2;
     st.prune_ms =
@@ -621,13 +459,9 @@ float PrunedGrid::eval(vec3 p, float* stack) const {
 
 void PrunedGrid::eval_points(std::span<const vec3> points, std::span<float> out) const {
     if (out.size() != points.size()) throw std::invalid_argument("eval_points: size mismatch");
-    with_threads(options_.threads, [&] {
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 256),
-                          [&](const tbb::blocked_range<size_t>& r) {
-                              std::vector<float> stack(scene_->max_stack);
-                              for (size_t i = r.begin(); i != r.end(); ++i)
-                                  out[i] = eval(points[i], stack.data());
-                          });
+    parallel_points(points.size(), options_.threads, [&](size_t begin, size_t end) {
+        std::vector<float> stack(scene_->max_stack);
+        for (size_t i = begin; i != end; ++i) out[i] = eval(points[i], stack.data());
     });
 }
 

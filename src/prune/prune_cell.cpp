@@ -16,6 +16,13 @@ void CellScratch::reserve(size_t n) {
     negate.resize(n);
 }
 
+void CellScratch::reserve_siblings(size_t n) {
+    const size_t want = n * kSiblingLanes;
+    if (sib_value.size() >= want) return;
+    for (auto* v : {&sib_value, &sib_lo, &sib_hi}) v->resize(want);
+    sib_decision.resize(want);
+}
+
 namespace {
 
 // Sub-boxes evaluated together by refine_cell.
@@ -27,6 +34,35 @@ struct LaneArrays {
     uint32_t* decision;
     uint32_t stride;
 };
+
+// One operator over `count` boxes, from its operands' values and ranges: the decision, the
+// value, and the range (a skipped operator's range is its winner's; else the tighter of the
+// Lipschitz range and, with interval bounds, the operator's range over its operands' ranges).
+// Computed for every box and then selected, without branches, so the loop vectorizes.
+template <bool kInterval>
+void decide_boxes(uint32_t count, float sgn, float k, float spread, const float* __restrict va,
+                  const float* __restrict la, const float* __restrict ha,
+                  const float* __restrict vb, const float* __restrict lb,
+                  const float* __restrict hb, uint32_t* __restrict d, float* __restrict v,
+                  float* __restrict l, float* __restrict h) {
+    for (uint32_t b = 0; b < count; ++b) {
+        const float a_lo = la[b], a_hi = ha[b], b_lo = lb[b], b_hi = hb[b];
+        const uint32_t dec = math::prune_decision(sgn, k, a_lo, a_hi, b_lo, b_hi);
+        const float val = math::apply_operator(sgn, k, va[b], vb[b]);
+        float lo = val - spread, hi = val + spread;
+        if constexpr (kInterval) {
+            const vec2 r2 = math::operator_range(sgn, k, a_lo, a_hi, b_lo, b_hi);
+            lo = std::max(lo, r2.x);
+            hi = std::min(hi, r2.y);
+        }
+        const bool left_wins = dec == math::kLeftWins;
+        const bool right_wins = dec == math::kRightWins;
+        d[b] = dec;
+        v[b] = val;
+        l[b] = left_wins ? a_lo : right_wins ? b_lo : lo;
+        h[b] = left_wins ? a_hi : right_wins ? b_hi : hi;
+    }
+}
 
 // Evaluates `tape` at the centres of `count` (<= stride) boxes of one size, bounds every entry
 // over each box and decides every operator in each: entry by entry, across the boxes, so that
@@ -44,33 +80,42 @@ void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const vec3*
         const uint32_t kind = sc.kind[node];
         const float spread = sc.lipschitz[node] * radius;
         const size_t at = size_t(i) * out.stride;
-        float* v = out.value + at;
-        float* l = out.lo + at;
-        float* h = out.hi + at;
+        float* __restrict v = out.value + at;
+        float* __restrict l = out.lo + at;
+        float* __restrict h = out.hi + at;
         if (kind < math::kPrimitiveKindCount) {
+            // Copies, so that the stores below cannot alias them and the loops vectorize.
             const uint32_t p = sc.primitive[node];
-            const math::PrimitiveParams& prm = sc.params[p];
-            // eval_primitive, a loop per step: spheres (most primitives) then vectorize.
+            const math::PrimitiveParams prm = sc.params[p];
+            const PrimitiveBound pb = sc.bound[p];
+            // eval_primitive, a loop per step: spheres and boxes (most primitives) vectorize.
             for (uint32_t b = 0; b < count; ++b) q[b] = math::to_local(prm, centres[b]);
             if (kind == math::kPrimSphere) {
-                for (uint32_t b = 0; b < count; ++b) v[b] = math::sd_sphere(q[b], prm.a.x);
+                const float radius_p = prm.a.x;
+                for (uint32_t b = 0; b < count; ++b) v[b] = math::sd_sphere(q[b], radius_p);
+            } else if (kind == math::kPrimBox) {
+                const vec3 hs(prm.a.x, prm.a.y, prm.a.z);
+                const float top = prm.c.x, bottom = prm.c.y;
+                for (uint32_t b = 0; b < count; ++b)
+                    v[b] = math::sd_box(q[b], hs, prm.b, top, bottom);
             } else {
                 for (uint32_t b = 0; b < count; ++b)
                     v[b] = math::eval_primitive_local(kind, prm, q[b]);
             }
-            for (uint32_t b = 0; b < count; ++b) {
-                l[b] = v[b] - spread;
-                h[b] = v[b] + spread;
-            }
             // Tighter, where the primitive has a similarity bound: the exact range over the box.
-            const PrimitiveBound& pb = sc.bound[p];
-            if (interval && pb.scale > 0)
+            if (interval && pb.scale > 0) {
                 for (uint32_t b = 0; b < count; ++b) {
                     const vec2 r = math::similarity_range(pb.centre, pb.scale, pb.f0, pb.rho,
                                                           centres[b], half);
-                    l[b] = std::max(l[b], r.x);
-                    h[b] = std::min(h[b], r.y);
+                    l[b] = std::max(v[b] - spread, r.x);
+                    h[b] = std::min(v[b] + spread, r.y);
                 }
+            } else {
+                for (uint32_t b = 0; b < count; ++b) {
+                    l[b] = v[b] - spread;
+                    h[b] = v[b] + spread;
+                }
+            }
         } else {
             const uint32_t right = s.stack[--top];
             const uint32_t left = s.stack[--top];
@@ -78,30 +123,18 @@ void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const vec3*
             s.right[i] = right;
             const float sgn = math::operator_s(kind), k = sc.blend[node];
             const size_t ia = size_t(left) * out.stride, ib = size_t(right) * out.stride;
-            const float *va = out.value + ia, *la = out.lo + ia, *ha = out.hi + ia;
-            const float *vb = out.value + ib, *lb = out.lo + ib, *hb = out.hi + ib;
-            uint32_t* d = out.decision + at;
-            for (uint32_t b = 0; b < count; ++b) {
-                d[b] = math::prune_decision(sgn, k, la[b], ha[b], lb[b], hb[b]);
-                v[b] = math::apply_operator(sgn, k, va[b], vb[b]);
-                // A skipped operator's range is its winner's; else the tighter of the
-                // Lipschitz range and (with interval bounds) the operator's range over its
-                // operands' ranges.
-                if (d[b] == math::kLeftWins) {
-                    l[b] = la[b];
-                    h[b] = ha[b];
-                } else if (d[b] == math::kRightWins) {
-                    l[b] = lb[b];
-                    h[b] = hb[b];
-                } else if (interval) {
-                    const vec2 r2 = math::operator_range(sgn, k, la[b], ha[b], lb[b], hb[b]);
-                    l[b] = std::max(v[b] - spread, r2.x);
-                    h[b] = std::min(v[b] + spread, r2.y);
-                } else {
-                    l[b] = v[b] - spread;
-                    h[b] = v[b] + spread;
-                }
-            }
+            // Rows of other entries than this one: no aliasing.
+            const float* __restrict va = out.value + ia;
+            const float* __restrict la = out.lo + ia;
+            const float* __restrict ha = out.hi + ia;
+            const float* __restrict vb = out.value + ib;
+            const float* __restrict lb = out.lo + ib;
+            const float* __restrict hb = out.hi + ib;
+            uint32_t* __restrict d = out.decision + at;
+            if (interval)
+                decide_boxes<true>(count, sgn, k, spread, va, la, ha, vb, lb, hb, d, v, l, h);
+            else
+                decide_boxes<false>(count, sgn, k, spread, va, la, ha, vb, lb, hb, d, v, l, h);
         }
         if (math::tape_negated(w))
             for (uint32_t b = 0; b < count; ++b) {
@@ -124,17 +157,17 @@ float evaluate_cell(const Scene& sc, std::span<const uint32_t> tape, const CellB
     return s.value[tape.size() - 1];
 }
 
-bool is_near_field(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box,
-                   float far_field_c, const CellScratch& s, float& constant) {
-    const uint32_t root = uint32_t(tape.size() - 1);
-    const float v = s.value[root];
-    const float L = sc.lipschitz[math::tape_node(tape[root])];
+namespace {
+
+// Stage 2 on one box's root: value v and range [lo, hi] over a box of radius R (is_near_field).
+bool root_is_near_field(float v, float lo, float hi, float L, float R, float far_field_c,
+                        float& constant) {
     // The paper's test |f(c)| > C·R says: over the cell, |f| stays above (C − 1)·R, since the
     // Lipschitz range is f(c) ± R. Here the same guarantee is tested on the range itself (the
     // Lipschitz range or, with CellBounds::kInterval, a tighter one), against the clearance of
     // far_field_clearance, so far-field constants keep |c| >= (C − 1)·max(L, 1)·R.
-    const float clearance = math::far_field_clearance(far_field_c, L, box.radius);
-    const vec2 range = math::far_field_range(v, s.lo[root], s.hi[root], L, box.radius);
+    const float clearance = math::far_field_clearance(far_field_c, L, R);
+    const vec2 range = math::far_field_range(v, lo, hi, L, R);
     if (math::clears_above(range.x, clearance)) {
         constant = range.x;
         return false;
@@ -144,6 +177,34 @@ bool is_near_field(const Scene& sc, std::span<const uint32_t> tape, const CellBo
         return false;
     }
     return true;
+}
+
+}  // namespace
+
+bool is_near_field(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box,
+                   float far_field_c, const CellScratch& s, float& constant) {
+    const uint32_t root = uint32_t(tape.size() - 1);
+    return root_is_near_field(s.value[root], s.lo[root], s.hi[root],
+                              sc.lipschitz[math::tape_node(tape[root])], box.radius, far_field_c,
+                              constant);
+}
+
+void evaluate_siblings(const Scene& sc, std::span<const uint32_t> tape, const vec3* centres,
+                       uint32_t count, vec3 half, float radius, CellBounds bounds, CellScratch& s) {
+    s.reserve(tape.size());
+    s.reserve_siblings(tape.size());
+    evaluate_boxes(sc, tape, centres, count, half, radius, bounds,
+                   {s.sib_value.data(), s.sib_lo.data(), s.sib_hi.data(), s.sib_decision.data(),
+                    kSiblingLanes},
+                   s);
+}
+
+bool sibling_is_near_field(const Scene& sc, std::span<const uint32_t> tape, uint32_t lane,
+                           float radius, float far_field_c, const CellScratch& s, float& constant) {
+    const size_t root = (tape.size() - 1) * kSiblingLanes + lane;
+    return root_is_near_field(s.sib_value[root], s.sib_lo[root], s.sib_hi[root],
+                              sc.lipschitz[math::tape_node(tape.back())], radius, far_field_c,
+                              constant);
 }
 
 bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box, uint32_t S,
@@ -221,8 +282,11 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
     return true;
 }
 
-uint32_t compact_tape(const Scene& sc, std::span<const uint32_t> tape, CellScratch& s,
-                      std::vector<uint32_t>& out) {
+namespace {
+
+// Stage 3 with the decision of entry e at decision[e · stride].
+uint32_t compact_with(const Scene& sc, std::span<const uint32_t> tape, const uint32_t* decision,
+                      size_t stride, CellScratch& s, std::vector<uint32_t>& out) {
     const uint32_t n = uint32_t(tape.size());
     std::fill_n(s.alive.begin(), n, uint8_t(0));
     s.alive[n - 1] = 1;
@@ -231,7 +295,7 @@ uint32_t compact_tape(const Scene& sc, std::span<const uint32_t> tape, CellScrat
     for (uint32_t i = n; i-- > 0;) {
         if (!s.alive[i] || sc.is_primitive(math::tape_node(tape[i]))) continue;
         const uint32_t l = s.left[i], r = s.right[i];
-        const uint32_t d = s.decision[i];
+        const uint32_t d = decision[i * stride];
         if (d == math::kKeepBoth) {
             s.alive[l] = s.alive[r] = 1;
             s.negate[l] = math::tape_negated(tape[l]);
@@ -252,6 +316,18 @@ uint32_t compact_tape(const Scene& sc, std::span<const uint32_t> tape, CellScrat
         out.push_back(math::tape_word(node, s.negate[i] != 0));
     }
     return prims;
+}
+
+}  // namespace
+
+uint32_t compact_tape(const Scene& sc, std::span<const uint32_t> tape, CellScratch& s,
+                      std::vector<uint32_t>& out) {
+    return compact_with(sc, tape, s.decision.data(), 1, s, out);
+}
+
+uint32_t compact_sibling_tape(const Scene& sc, std::span<const uint32_t> tape, uint32_t lane,
+                              CellScratch& s, std::vector<uint32_t>& out) {
+    return compact_with(sc, tape, s.sib_decision.data() + lane, kSiblingLanes, s, out);
 }
 
 }  // namespace sdfprune

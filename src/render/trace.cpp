@@ -3,16 +3,13 @@
 // level) jumps to the cell's exit — no surface can be inside it — or by the cell's constant if
 // that is longer; in a near-field cell it steps by the value of the cell's tape. Both fields
 // run the same loop, so their time ratio is the pruning's alone.
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <numbers>
-#include <thread>
 
+#include "../core/parallel.hpp"
 #include "render_internal.hpp"
 #include "sdfprune/eval.hpp"
 #include "sdfprune/render.hpp"
@@ -183,81 +180,74 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
     const float tan_half = frame.tan_half, aspect = frame.aspect, normal_h = frame.normal_h;
 
     std::atomic<uint64_t> total_steps{0}, total_evals{0}, hits{0};
-    std::atomic<uint32_t> tiles_done{0};
-    const std::thread::id caller = std::this_thread::get_id();
     // Square tiles rather than rows: neighbouring rays visit the same cells and tapes.
     constexpr uint32_t kTile = 16;
     const uint32_t tiles_x = (W + kTile - 1) / kTile, tiles_y = (H + kTile - 1) / kTile;
     const uint32_t tiles = tiles_x * tiles_y;
 
-    auto trace_tiles = [&](const tbb::blocked_range<uint32_t>& range) {
-        std::vector<float> stack(sc.max_stack);
-        std::vector<vec3> color_stack(sc.max_stack);
+    // One chunk per tile.
+    const auto trace_tile = [&](uint64_t chunk) {
+        const uint32_t tile = uint32_t(chunk);
+        thread_local std::vector<float> stack;
+        thread_local std::vector<vec3> color_stack;
+        stack.resize(sc.max_stack);
+        color_stack.resize(sc.max_stack);
         Counters sum;
         uint64_t tile_hits = 0;
-        for (uint32_t tile = range.begin(); tile != range.end(); ++tile) {
-            const uint32_t x0 = tile % tiles_x * kTile, y0 = tile / tiles_x * kTile;
-            for (uint32_t y = y0; y < std::min(H, y0 + kTile); ++y)
-                for (uint32_t x = x0; x < std::min(W, x0 + kTile); ++x) {
-                    Counters c;
-                    const float u =
-                        (2.0f * (float(x) + 0.5f) / float(W) - 1.0f) * tan_half * aspect;
-                    const float v = (1.0f - 2.0f * (float(y) + 0.5f) / float(H)) * tan_half;
-                    const vec3 dir = normalize(forward + right * u + up * v);
-                    const vec3 inv(1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z);
-                    float t0, t1;
-                    vec3 out = background(v / tan_half);
-                    if (ray_box(cam.eye, inv, ctx.aabb_lo, ctx.aabb_hi, t0, t1)) {
-                        const float t =
-                            march(field, ctx, cam.eye, dir, t0, t1, 1024, stack.data(), c);
-                        if (t >= 0) {
-                            ++tile_hits;
-                            const vec3 p = cam.eye + dir * t;
-                            const std::span<const uint32_t> tape = field.tape_at(p);
-                            // Tetrahedron-stencil gradient.
-                            const vec3 k[4] = {{1, -1, -1}, {-1, -1, 1}, {-1, 1, -1}, {1, 1, 1}};
-                            vec3 n(0.0f);
-                            for (const vec3& ki : k)
-                                n = n + ki * field.value(p + ki * normal_h, tape, stack.data(), c);
-                            const float len = math::length(n);
-                            n = len > 0 ? n / len : -dir;
-                            c.evals += tape.size();
-                            const vec3 albedo =
-                                eval_tape_color(sc, tape, p, stack.data(), color_stack.data());
-                            float lit = std::max(0.0f, math::dot(n, light));
-                            if (opt.shadows && lit > 0) {
-                                const vec3 so = p + n * (4.0f * normal_h);
-                                const vec3 sinv(1.0f / light.x, 1.0f / light.y, 1.0f / light.z);
-                                float s0, s1;
-                                if (ray_box(so, sinv, ctx.aabb_lo, ctx.aabb_hi, s0, s1) &&
-                                    march(field, ctx, so, light, s0 + normal_h, s1, 512,
-                                          stack.data(), c) >= 0)
-                                    lit = 0;
-                            }
-                            out = opt.shading == Shading::kNormals
-                                      ? n * 0.5f + 0.5f
-                                      : albedo * (0.22f + 0.78f * lit) +
-                                            vec3(0.06f) *
-                                                std::pow(std::max(0.0f, math::dot(n, -dir)), 8.0f);
+        const uint32_t x0 = tile % tiles_x * kTile, y0 = tile / tiles_x * kTile;
+        for (uint32_t y = y0; y < std::min(H, y0 + kTile); ++y)
+            for (uint32_t x = x0; x < std::min(W, x0 + kTile); ++x) {
+                Counters c;
+                const float u = (2.0f * (float(x) + 0.5f) / float(W) - 1.0f) * tan_half * aspect;
+                const float v = (1.0f - 2.0f * (float(y) + 0.5f) / float(H)) * tan_half;
+                const vec3 dir = normalize(forward + right * u + up * v);
+                const vec3 inv(1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z);
+                float t0, t1;
+                vec3 out = background(v / tan_half);
+                if (ray_box(cam.eye, inv, ctx.aabb_lo, ctx.aabb_hi, t0, t1)) {
+                    const float t = march(field, ctx, cam.eye, dir, t0, t1, 1024, stack.data(), c);
+                    if (t >= 0) {
+                        ++tile_hits;
+                        const vec3 p = cam.eye + dir * t;
+                        const std::span<const uint32_t> tape = field.tape_at(p);
+                        // Tetrahedron-stencil gradient.
+                        const vec3 k[4] = {{1, -1, -1}, {-1, -1, 1}, {-1, 1, -1}, {1, 1, 1}};
+                        vec3 n(0.0f);
+                        for (const vec3& ki : k)
+                            n = n + ki * field.value(p + ki * normal_h, tape, stack.data(), c);
+                        const float len = math::length(n);
+                        n = len > 0 ? n / len : -dir;
+                        c.evals += tape.size();
+                        const vec3 albedo =
+                            eval_tape_color(sc, tape, p, stack.data(), color_stack.data());
+                        float lit = std::max(0.0f, math::dot(n, light));
+                        if (opt.shadows && lit > 0) {
+                            const vec3 so = p + n * (4.0f * normal_h);
+                            const vec3 sinv(1.0f / light.x, 1.0f / light.y, 1.0f / light.z);
+                            float s0, s1;
+                            if (ray_box(so, sinv, ctx.aabb_lo, ctx.aabb_hi, s0, s1) &&
+                                march(field, ctx, so, light, s0 + normal_h, s1, 512, stack.data(),
+                                      c) >= 0)
+                                lit = 0;
                         }
+                        out = opt.shading == Shading::kNormals
+                                  ? n * 0.5f + 0.5f
+                                  : albedo * (0.22f + 0.78f * lit) +
+                                        vec3(0.06f) *
+                                            std::pow(std::max(0.0f, math::dot(n, -dir)), 8.0f);
                     }
-                    const size_t i = size_t(y) * W + x;
-                    color[i] = out;
-                    evals[i] = uint32_t(std::min<uint64_t>(c.evals, 0xffffffffu));
-                    sum.steps += c.steps;
-                    sum.evals += c.evals;
                 }
-            const uint32_t done = ++tiles_done;
-            if (opt.progress && std::this_thread::get_id() == caller)
-                opt.progress(double(done) / tiles);
-        }
+                const size_t i = size_t(y) * W + x;
+                color[i] = out;
+                evals[i] = uint32_t(std::min<uint64_t>(c.evals, 0xffffffffu));
+                sum.steps += c.steps;
+                sum.evals += c.evals;
+            }
         total_steps += sum.steps;
         total_evals += sum.evals;
         hits += tile_hits;
     };
-    with_threads(opt.threads, [&] {
-        tbb::parallel_for(tbb::blocked_range<uint32_t>(0, tiles, 1), trace_tiles);
-    });
+    parallel_for<NotCancellable>(tiles, parallel_options(opt), trace_tile);
 
     const double trace_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start)

@@ -1,0 +1,255 @@
+// prune_level.cpp — the level step of the hierarchy (DESIGN.md §3–5): each child cell of a
+// near-field parent evaluated at its centre (stage 1), culled to a constant if far from the
+// surface (§4, stage 2) or given the tape compacted from its parent's (stage 3), optionally
+// through the parent's octants first. The per-cell stages are in prune_cell.cpp.
+#include "prune_level.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+#include <unordered_map>
+
+namespace sdfprune {
+namespace {
+
+// FNV-1a over a tape's header and words: finds identical tapes within a call.
+uint64_t tape_hash(std::span<const uint32_t> tape) {
+    uint64_t h = 0xcbf29ce484222325ull;
+    for (const uint32_t w : tape) h = (h ^ w) * 0x100000001b3ull;
+    return h;
+}
+
+// One call's state: the cells of a range pruned into one LevelChunk.
+class StepPruner {
+  public:
+    StepPruner(const Scene& sc, const PruneOptions& opt, const LevelGeometry& geo, CellScratch& s,
+               LevelChunk& out)
+        : sc_(sc), opt_(opt), geo_(geo), s_(s), out_(out) {
+        proto_.half = geo.cell_size * 0.5f;
+        proto_.radius = math::length(proto_.half);
+    }
+
+    CellBox cell_box(uint32_t x, uint32_t y, uint32_t z) const {
+        CellBox box = proto_;
+        box.centre =
+            geo_.origin + vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * geo_.cell_size;
+        return box;
+    }
+
+    // Prunes `cell` (box `box`) from `parent`, leaving far-field cells without a tape.
+    void prune_cell(PrunedCell& cell, std::span<const uint32_t> parent, const CellBox& box) {
+        CellScratch& s = s_;
+        const float value = evaluate_cell(sc_, parent, box, opt_.bounds, s);
+        float constant = 0;
+        const bool far =
+            opt_.far_field && !is_near_field(sc_, parent, box, opt_.far_field_c, s, constant);
+        uint32_t prims = 0;
+        s.cell_tapes[0].clear();
+        if (!far) prims = compact_tape(sc_, parent, s, s.cell_tapes[0]);
+        store_cell(cell, box, parent.size(), value, far, constant, s.cell_tapes[0], prims);
+    }
+
+    // Prunes `count` <= kSiblingLanes cells of this level from one `parent` in one pass over
+    // it: the same results as prune_cell on each, in the same order.
+    void prune_siblings(PrunedCell* const* cells, const CellBox* boxes, uint32_t count,
+                        std::span<const uint32_t> parent) {
+        CellScratch& s = s_;
+        vec3 centres[kSiblingLanes];
+        for (uint32_t c = 0; c < count; ++c) centres[c] = boxes[c].centre;
+        evaluate_siblings(sc_, parent, centres, count, proto_.half, proto_.radius, opt_.bounds, s);
+        float constant[kSiblingLanes];
+        bool far[kSiblingLanes];
+        uint32_t prims[kSiblingLanes];
+        // Every lane's compaction before any refinement: refine_cell reuses the entry links.
+        for (uint32_t c = 0; c < count; ++c) {
+            constant[c] = 0;
+            far[c] = opt_.far_field && !sibling_is_near_field(sc_, parent, c, proto_.radius,
+                                                              opt_.far_field_c, s, constant[c]);
+            s.cell_tapes[c].clear();
+            prims[c] = far[c] ? 0 : compact_sibling_tape(sc_, parent, c, s, s.cell_tapes[c]);
+        }
+        for (uint32_t c = 0; c < count; ++c)
+            store_cell(*cells[c], boxes[c], parent.size(), sibling_value(s, parent, c), far[c],
+                       constant[c], s.cell_tapes[c], prims[c]);
+    }
+
+    // Stores a cell pruned from a parent tape of `parent_size` words: its centre value, its
+    // far-field test, and its compacted tape, which the finest level refines first.
+    void store_cell(PrunedCell& cell, const CellBox& box, size_t parent_size, float value, bool far,
+                    float constant, std::span<const uint32_t> compacted, uint32_t prims) {
+        CellScratch& s = s_;
+        LevelChunk& out = out_;
+        cell.value = value;
+        out.words_visited += parent_size;
+        ++out.pruned;
+        if (far) {
+            cell.tape = PrunedCell::kFarField;
+            cell.bound = constant;
+            return;
+        }
+        const size_t at = out.words.size();
+        out.words.push_back(0);
+        out.words.push_back(0);
+        if (geo_.finest && opt_.refine > 1 && compacted.size() <= math::kRefineMaxTape) {
+            // Decided again over the cell's sub-boxes, from the tape just made.
+            s.refined.assign(compacted.begin(), compacted.end());
+            float refined_constant = 0;
+            if (!refine_cell(sc_, s.refined, box, opt_.refine, opt_.bounds, opt_.far_field,
+                             opt_.far_field_c, s, refined_constant)) {
+                out.words.resize(at);
+                cell.tape = PrunedCell::kFarField;
+                cell.bound = refined_constant;
+                return;
+            }
+            prims = compact_tape(sc_, s.refined, s, out.words);
+        } else {
+            out.words.insert(out.words.end(), compacted.begin(), compacted.end());
+        }
+        const uint32_t len = uint32_t(out.words.size() - at - 2);
+        out.words[at] = len;
+        out.words[at + 1] = prims;
+        const std::span<const uint32_t> tape(out.words.data() + at, len + 2);
+        const auto [it, fresh] = stored_.try_emplace(tape_hash(tape), uint32_t(at));
+        if (!fresh && out.words[it->second] == len &&
+            std::equal(tape.begin(), tape.end(), out.words.begin() + it->second)) {
+            out.words.resize(at);
+            cell.tape = it->second;
+        } else {
+            cell.tape = uint32_t(at);
+        }
+        if (geo_.finest) {
+            ++out.near;
+            out.tape_sum += len;
+            out.tape_max = std::max(out.tape_max, len);
+            out.prim_sum += prims;
+            out.prim_sq_sum += uint64_t(prims) * prims;
+            out.prim_max = std::max(out.prim_max, prims);
+        }
+    }
+
+    // Block `b`'s f³ cells in two steps: its 8 octants are pruned first (not stored), then each
+    // cell from its octant's tape. Shorter parent tapes for the cells, same guarantees: a tape
+    // valid in an octant is valid in every cell inside it. The octants are pruned together, and
+    // so are the cells of an octant, kSiblingLanes at a time.
+    void prune_split_block(const ParentBlock& b, std::span<PrunedCell> cells) {
+        CellScratch& s = s_;
+        const uint32_t f = geo_.factor, hf = f / 2;
+        const std::span<const uint32_t> parent = b.tape();
+        const float lipschitz = sc_.lipschitz[sc_.root()];
+        const vec3 ohalf = proto_.half * float(hf);
+        const float oradius = proto_.radius * float(hf);
+        vec3 ocentre[8];
+        for (uint32_t o = 0; o < 8; ++o) {
+            const uint32_t ox = (o & 1) * hf, oy = ((o >> 1) & 1) * hf, oz = ((o >> 2) & 1) * hf;
+            ocentre[o] = geo_.origin + vec3(float(b.x + ox) + 0.5f * float(hf),
+                                            float(b.y + oy) + 0.5f * float(hf),
+                                            float(b.z + oz) + 0.5f * float(hf)) *
+                                           geo_.cell_size;
+        }
+        evaluate_siblings(sc_, parent, ocentre, 8, ohalf, oradius, opt_.bounds, s);
+        out_.words_visited += 8 * parent.size();
+        float ov[8], oconst[8];
+        bool ofar[8];
+        for (uint32_t o = 0; o < 8; ++o) {
+            ov[o] = sibling_value(s, parent, o);
+            oconst[o] = 0;
+            ofar[o] = opt_.far_field && !sibling_is_near_field(sc_, parent, o, oradius,
+                                                               opt_.far_field_c, s, oconst[o]);
+            s.octants[o].clear();
+            if (!ofar[o]) compact_sibling_tape(sc_, parent, o, s, s.octants[o]);
+        }
+        for (uint32_t o = 0; o < 8; ++o) {
+            const uint32_t ox = (o & 1) * hf, oy = ((o >> 1) & 1) * hf, oz = ((o >> 2) & 1) * hf;
+            const std::span<const uint32_t> otape = s.octants[o].size() < parent.size()
+                                                        ? std::span<const uint32_t>(s.octants[o])
+                                                        : parent;
+            PrunedCell* group[kSiblingLanes];
+            CellBox boxes[kSiblingLanes];
+            uint32_t count = 0;
+            for (uint32_t lz = oz; lz < oz + hf; ++lz)
+                for (uint32_t ly = oy; ly < oy + hf; ++ly)
+                    for (uint32_t lx = ox; lx < ox + hf; ++lx) {
+                        PrunedCell& cell = cells[(lz * f + ly) * f + lx];
+                        const CellBox box = cell_box(b.x + lx, b.y + ly, b.z + lz);
+                        if (!ofar[o]) {
+                            group[count] = &cell;
+                            boxes[count] = box;
+                            if (++count == kSiblingLanes) {
+                                prune_siblings(group, boxes, count, otape);
+                                count = 0;
+                            }
+                            continue;
+                        }
+                        // A far octant makes far cells: its constant holds in each; the
+                        // centre value is a conservative stand-in (same sign, never larger in
+                        // magnitude) moved from the octant centre.
+                        const float reach = lipschitz * math::length(box.centre - ocentre[o]);
+                        cell.tape = PrunedCell::kFarField;
+                        cell.bound = oconst[o];
+                        cell.value = ov[o] > 0 ? std::max(ov[o] - reach, oconst[o])
+                                               : std::min(ov[o] + reach, oconst[o]);
+                    }
+            if (count > 0) prune_siblings(group, boxes, count, otape);
+        }
+    }
+
+  private:
+    const Scene& sc_;
+    const PruneOptions& opt_;
+    const LevelGeometry& geo_;
+    CellScratch& s_;
+    LevelChunk& out_;
+    CellBox proto_;
+    // This call's tapes by hash: a tape equal to one already stored is not stored again.
+    std::unordered_map<uint64_t, uint32_t> stored_;
+};
+
+}  // namespace
+
+LevelGeometry level_geometry(const Scene& sc, const PruneOptions& opt, uint32_t res,
+                             uint32_t factor, bool finest, uint32_t chunk_cells) {
+    LevelGeometry geo;
+    geo.origin = sc.aabb.min;
+    geo.cell_size = (sc.aabb.max - sc.aabb.min) / float(res);
+    geo.factor = factor;
+    geo.finest = finest;
+    const uint64_t per_block = uint64_t(factor) * factor * factor;
+    geo.split = opt.hierarchy && factor >= 4 && factor % 2 == 0 && chunk_cells % per_block == 0;
+    return geo;
+}
+
+void add_chunk_stats(const LevelChunk& o, PruneStats& st) {
+    st.near_field_cells += o.near;
+    st.tape_avg += double(o.tape_sum);
+    st.tape_max = std::max(st.tape_max, o.tape_max);
+    st.active_avg += double(o.prim_sum);
+    st.active_std += double(o.prim_sq_sum);
+    st.active_max = std::max(st.active_max, o.prim_max);
+    st.cells_pruned += o.pruned;
+    st.tape_words_visited += o.words_visited;
+}
+
+void prune_level_step(const Scene& sc, const PruneOptions& opt, const LevelGeometry& geo,
+                      std::span<const ParentBlock> blocks, uint64_t begin, uint64_t end,
+                      std::span<PrunedCell> cells, CellScratch& s, LevelChunk& out) {
+    const uint32_t f = geo.factor;
+    const uint64_t per_block = uint64_t(f) * f * f;
+    if (end < begin || end > blocks.size() * per_block || cells.size() < end - begin)
+        throw std::invalid_argument("prune_level_step: range outside the blocks or the cells");
+    StepPruner step(sc, opt, geo, s, out);
+    if (!geo.split) {
+        for (uint64_t i = begin; i < end; ++i) {
+            const ParentBlock& b = blocks[i / per_block];
+            const uint32_t local = uint32_t(i % per_block);
+            step.prune_cell(
+                cells[i - begin], b.tape(),
+                step.cell_box(b.x + local % f, b.y + (local / f) % f, b.z + local / (f * f)));
+        }
+        return;
+    }
+    if (begin % per_block != 0 || end % per_block != 0)
+        throw std::invalid_argument("prune_level_step: a split level needs whole blocks");
+    for (uint64_t bi = begin / per_block; bi < end / per_block; ++bi)
+        step.prune_split_block(blocks[bi], cells.subspan(bi * per_block - begin, per_block));
+}
+
+}  // namespace sdfprune

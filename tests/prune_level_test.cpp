@@ -1,0 +1,126 @@
+// prune_level_test.cpp — the level step (src/prune/prune_level.hpp) on a subset of a level's
+// blocks makes the same cells as the full prune(); the hierarchy walk finds the same cells.
+#include <gtest/gtest.h>
+
+#include "prune_check.hpp"
+#include "sdfprune/io.hpp"
+#include "src/prune/prune_level.hpp"
+#include "test_util.hpp"
+
+namespace sdfprune {
+namespace {
+
+// Level `level`'s cells with their coordinates (in that level's cells), found through the
+// children links as documented in prune.hpp.
+struct CellAt {
+    uint32_t index, x, y, z;
+};
+std::vector<CellAt> cells_of_level(const PrunedGrid& g, uint32_t level) {
+    const uint32_t r0 = g.level_resolution(0);
+    std::vector<CellAt> cur;
+    for (uint32_t i = 0; i < r0 * r0 * r0; ++i)
+        cur.push_back({i, i % r0, (i / r0) % r0, i / (r0 * r0)});
+    for (uint32_t l = 0; l < level; ++l) {
+        const uint32_t f = g.level_resolution(l + 1) / g.level_resolution(l);
+        std::vector<CellAt> next;
+        for (const CellAt& c : cur) {
+            const PrunedCell& cell = g.level_cells(l)[c.index];
+            if (cell.tape == PrunedCell::kFarField) continue;
+            for (uint32_t k = 0; k < f * f * f; ++k)
+                next.push_back({cell.children + k, c.x * f + k % f, c.y * f + (k / f) % f,
+                                c.z * f + k / (f * f)});
+        }
+        cur.swap(next);
+    }
+    return cur;
+}
+
+// Re-prunes the children of every `stride`-th near-field cell of each level but the finest and
+// compares them with the grid's.
+void check_subset(const Scene& sc, PruneOptions o, uint32_t stride) {
+    o.coarse_tapes = true;  // the parents' own tapes, as prune() used them
+    const PrunedGrid g = prune(sc, o);
+    ASSERT_GE(g.level_count(), 2u);
+    CellScratch s;
+    uint64_t compared = 0;
+    for (uint32_t l = 0; l + 1 < g.level_count(); ++l) {
+        const uint32_t f = g.level_resolution(l + 1) / g.level_resolution(l);
+        const uint64_t per_block = uint64_t(f) * f * f;
+        std::vector<ParentBlock> blocks;
+        std::vector<uint32_t> first;  // the grid's first child of each block
+        uint32_t seen = 0;
+        for (const CellAt& c : cells_of_level(g, l)) {
+            const PrunedCell& cell = g.level_cells(l)[c.index];
+            if (cell.tape == PrunedCell::kFarField || seen++ % stride != 0) continue;
+            const std::span<const uint32_t> tape = g.tape_at(cell.tape);
+            blocks.push_back({c.x * f, c.y * f, c.z * f, uint32_t(tape.size()), tape.data()});
+            first.push_back(cell.children);
+        }
+        const bool finest = l + 2 == g.level_count();
+        const LevelGeometry geo =
+            level_geometry(sc, o, g.level_resolution(l + 1), f, finest, kPruneChunkCells);
+        std::vector<PrunedCell> cells(blocks.size() * per_block);
+        LevelChunk out;
+        prune_level_step(sc, o, geo, blocks, cells, s, out);
+        for (size_t b = 0; b < blocks.size(); ++b)
+            for (uint64_t k = 0; k < per_block; ++k) {
+                const PrunedCell& mine = cells[b * per_block + k];
+                const PrunedCell& theirs = g.level_cells(l + 1)[first[b] + k];
+                ASSERT_EQ(mine.tape == PrunedCell::kFarField, theirs.tape == PrunedCell::kFarField)
+                    << "level " << l + 1 << " block " << b << " cell " << k;
+                EXPECT_EQ(mine.value, theirs.value);
+                if (mine.tape == PrunedCell::kFarField) {
+                    EXPECT_EQ(mine.bound, theirs.bound);
+                    continue;
+                }
+                const std::span<const uint32_t> a(out.words.data() + mine.tape + 2,
+                                                  out.words[mine.tape]);
+                const std::span<const uint32_t> t = g.tape_at(theirs.tape);
+                ASSERT_TRUE(std::equal(a.begin(), a.end(), t.begin(), t.end()));
+                EXPECT_EQ(out.words[mine.tape + 1], g.tape_pool()[theirs.tape + 1]);
+                ++compared;
+            }
+    }
+    EXPECT_GT(compared, 0u);
+}
+
+TEST(PruneLevelStep, SubsetOfBlocksGivesTheFullPrunesCells) {
+    test::RandomSceneSpec spec;
+    spec.primitives = 40;
+    const Scene sc = test::random_scene(3000, spec);
+    PruneOptions o;
+    o.resolution = 64;  // split levels (factor 4)
+    check_subset(sc, o, 3);
+    o.resolution = 54;  // factor 3: no split
+    o.factor = 3;
+    check_subset(sc, o, 2);
+}
+
+TEST(PruneLevelStep, MoleculeSubset) {
+    SDFPRUNE_REQUIRE_SCENE(path, "molecule.json");
+    const Scene sc = load_scene(path);
+    PruneOptions o;
+    o.resolution = 64;
+    check_subset(sc, o, 5);
+}
+
+TEST(PruneLevelStep, SplitNeedsWholeBlocks) {
+    const Scene sc = test::random_scene(3, test::RandomSceneSpec{});
+    PruneOptions o;
+    const LevelGeometry geo = level_geometry(sc, o, 16, 4, false, kPruneChunkCells);
+    ASSERT_TRUE(geo.split);
+    const std::vector<ParentBlock> blocks{
+        {0, 0, 0, uint32_t(sc.full_tape.size()), sc.full_tape.data()}};
+    std::vector<PrunedCell> cells(64);
+    CellScratch s;
+    LevelChunk out;
+    EXPECT_THROW(prune_level_step(sc, o, geo, blocks, 0, 10, cells, s, out), std::invalid_argument);
+    EXPECT_THROW(prune_level_step(sc, o, geo, blocks, 0, 128, cells, s, out),
+                 std::invalid_argument);
+    prune_level_step(sc, o, geo, blocks, 0, 64, cells, s, out);
+    for (const PrunedCell& c : cells)
+        EXPECT_TRUE(c.tape == PrunedCell::kFarField || c.tape < out.words.size());
+}
+
+}  // namespace
+}  // namespace sdfprune
