@@ -53,7 +53,7 @@ void check_subset(const Scene& sc, PruneOptions o, uint32_t stride) {
             const PrunedCell& cell = g.level_cells(l)[c.index];
             if (cell.tape == PrunedCell::kFarField || seen++ % stride != 0) continue;
             const std::span<const uint32_t> tape = g.tape_at(cell.tape);
-            blocks.push_back({c.x * f, c.y * f, c.z * f, uint32_t(tape.size()), tape.data()});
+            blocks.push_back({{c.x * f, c.y * f, c.z * f}, uint32_t(tape.size()), tape.data()});
             first.push_back(cell.children);
         }
         const bool finest = l + 2 == g.level_count();
@@ -110,7 +110,7 @@ TEST(PruneLevelStep, SplitNeedsWholeBlocks) {
     const LevelGeometry geo = level_geometry(sc, o, 16, 4, false, kPruneChunkCells);
     ASSERT_TRUE(geo.split);
     const std::vector<ParentBlock> blocks{
-        {0, 0, 0, uint32_t(sc.full_tape.size()), sc.full_tape.data()}};
+        {{0, 0, 0}, uint32_t(sc.full_tape.size()), sc.full_tape.data()}};
     std::vector<PrunedCell> cells(64);
     CellScratch s;
     LevelChunk out;

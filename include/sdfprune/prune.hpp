@@ -121,6 +121,15 @@ using math::far_field_reach;
 float far_field_cell_constant(vec3 origin, vec3 cell_size, uint32_t scale, float lipschitz,
                               const PrunedCell& c, uint32_t ix, uint32_t iy, uint32_t iz);
 
+// Cell `local` (z-major: local = (z·f + y)·f + x) of a block f cells wide whose first cell is
+// at `origin`: its coordinates at the block's level.
+struct CellCoord {
+    uint32_t x = 0, y = 0, z = 0;
+};
+inline CellCoord block_cell(CellCoord origin, uint32_t f, uint32_t local) {
+    return {origin.x + local % f, origin.y + (local / f) % f, origin.z + local / (f * f)};
+}
+
 // What a finest cell holds.
 struct CellView {
     bool far_field = true;
@@ -166,6 +175,59 @@ class PrunedGrid {
     // `level`: the tighter of c.bound and the Lipschitz bound from c's centre value.
     float far_field_constant(uint32_t level, const PrunedCell& c, uint32_t ix, uint32_t iy,
                              uint32_t iz) const;
+
+    // ---- the walk down the hierarchy: every lookup and traversal goes through these ----
+    // A cell of the structure: level_cells(level)[index].
+    struct CellRef {
+        uint32_t level = 0, index = 0;
+    };
+    // From the block of level `level` starting at cell `first` (default: level 0) towards finest
+    // cell (ix, iy, iz): the first cell on the way that is far-field or at level `stop`. The
+    // starting block must contain the finest cell (a near-field cell's children do).
+    CellRef descend(uint32_t ix, uint32_t iy, uint32_t iz, uint32_t stop, uint32_t level = 0,
+                    uint32_t first = 0) const {
+        const uint32_t N = resolution();
+        for (;; ++level) {
+            const Level& l = levels_[level];
+            const uint32_t index = first + l.local_index(ix, iy, iz, N);
+            const PrunedCell& c = l.cells[index];
+            if (level >= stop || c.tape == PrunedCell::kFarField) return {level, index};
+            first = c.children;
+        }
+    }
+    // A block of level `level`: cells [first, first + f³) with f = level_factor(level) (level 0:
+    // the whole level), its first cell at `origin` in that level's cells.
+    struct Block {
+        uint32_t level = 0, first = 0;
+        CellCoord origin;
+    };
+    uint32_t level_factor(uint32_t level) const { return levels_[level].factor; }
+    // The block of children of cell `local` of block b (near-field, b.level not the finest).
+    Block child_block(const Block& b, uint32_t local) const {
+        const uint32_t f = levels_[b.level].factor, nf = levels_[b.level + 1].factor;
+        const CellCoord c = block_cell(b.origin, f, local);
+        return {b.level + 1,
+                levels_[b.level].cells[b.first + local].children,
+                {c.x * nf, c.y * nf, c.z * nf}};
+    }
+    // Every block of the hierarchy, each before its children, calling fn(block): the one
+    // traversal of the whole structure. Depth first, children blocks in reverse z-major order
+    // of their parents (a fixed order: callers may rely on it for deterministic output).
+    template <class F>
+    void for_each_block(const F& fn) const {
+        std::vector<Block> stack{Block{}};
+        while (!stack.empty()) {
+            const Block b = stack.back();
+            stack.pop_back();
+            fn(b);
+            if (b.level + 1 == levels_.size()) continue;
+            const uint32_t f = levels_[b.level].factor;
+            const PrunedCell* cells = levels_[b.level].cells.data() + b.first;
+            for (uint32_t local = 0; local < f * f * f; ++local)
+                if (cells[local].tape != PrunedCell::kFarField)
+                    stack.push_back(child_block(b, local));
+        }
+    }
 
     // Raw structure, for backends and tests. Level 0 holds level_resolution(0)³ cells in
     // z-major order (index (z·r + y)·r + x). Each near-field cell of level l < last has its

@@ -101,9 +101,9 @@ class StepPruner {
             CellBox obox;
             obox.half = proto_.half * float(hf);
             obox.radius = proto_.radius * float(hf);
-            obox.centre = geo_.origin + vec3(float(b.x + ox) + 0.5f * float(hf),
-                                             float(b.y + oy) + 0.5f * float(hf),
-                                             float(b.z + oz) + 0.5f * float(hf)) *
+            obox.centre = geo_.origin + vec3(float(b.origin.x + ox) + 0.5f * float(hf),
+                                             float(b.origin.y + oy) + 0.5f * float(hf),
+                                             float(b.origin.z + oz) + 0.5f * float(hf)) *
                                             geo_.cell_size;
             const float ov = evaluate_cell(sc_, parent, obox, opt_.bounds, s);
             out_.words_visited += parent.size();
@@ -120,7 +120,8 @@ class StepPruner {
                 for (uint32_t ly = oy; ly < oy + hf; ++ly)
                     for (uint32_t lx = ox; lx < ox + hf; ++lx) {
                         PrunedCell& cell = cells[(lz * f + ly) * f + lx];
-                        const CellBox box = cell_box(b.x + lx, b.y + ly, b.z + lz);
+                        const CellBox box =
+                            cell_box(b.origin.x + lx, b.origin.y + ly, b.origin.z + lz);
                         if (!far) {
                             // otape may be s.octant: the cell's pruning uses the other
                             // scratch arrays only.
@@ -186,10 +187,8 @@ void prune_level_step(const Scene& sc, const PruneOptions& opt, const LevelGeome
     if (!geo.split) {
         for (uint64_t i = begin; i < end; ++i) {
             const ParentBlock& b = blocks[i / per_block];
-            const uint32_t local = uint32_t(i % per_block);
-            step.prune_cell(
-                cells[i - begin], b.tape(),
-                step.cell_box(b.x + local % f, b.y + (local / f) % f, b.z + local / (f * f)));
+            const CellCoord at = block_cell(b.origin, f, uint32_t(i % per_block));
+            step.prune_cell(cells[i - begin], b.tape(), step.cell_box(at.x, at.y, at.z));
         }
         return;
     }
