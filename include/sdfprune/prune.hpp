@@ -104,7 +104,7 @@ struct PrunedCell {
     uint32_t tape = kFarField;
     uint32_t children = 0;  // near-field, not finest: first cell of its child block
     // The tree's value at the cell centre; for far-field cells made from a far-field octant
-    // (see prune.cpp) a same-sign value no larger in magnitude, which is all lookups need.
+    // (see prune_level.cpp) a same-sign value no larger in magnitude, which is all lookups need.
     float value = 0;
     float bound = 0;  // far-field: constant valid over the whole cell
 };
@@ -310,9 +310,9 @@ struct CellScratch {
     std::vector<float> value, lo, hi;
     std::vector<uint32_t> left, right, decision, stack;
     std::vector<uint8_t> alive, negate;
-    std::vector<uint32_t> octant;    // the tape of the octant being split (prune.cpp)
+    std::vector<uint32_t> octant;    // the tape of the octant being split (prune_level.cpp)
     std::vector<uint32_t> combined;  // refine_cell: the sub-boxes' common decisions
-    std::vector<uint32_t> refined;   // refine_cell's input tape (prune.cpp)
+    std::vector<uint32_t> refined;   // refine_cell's input tape (prune_level.cpp)
     std::vector<vec3> sub_boxes;     // refine_cell: the sub-boxes' centres, in visiting order
     // refine_cell: per tape entry, the values, ranges and decisions of a batch of sub-boxes
     std::vector<float> lane_value, lane_lo, lane_hi;

@@ -1,6 +1,8 @@
-// prune.cpp — the hierarchy (DESIGN.md §5): level by level, every child of a near-field cell
-// is pruned starting from its parent's tape, in parallel over fixed chunks of cells so that the
-// result does not depend on the thread count. Children of far-field cells are not stored.
+// prune.cpp — the hierarchy (DESIGN.md §5): level by level, the level step (prune_level.hpp)
+// prunes every child of a near-field cell from its parent's tape, in parallel over fixed chunks
+// of cells (parallel_for, src/core/parallel.hpp) so that the result does not depend on the
+// thread count. Children of far-field cells are not stored. Also the tape pool and the
+// statistics' totals; the grid's queries are in pruned_grid.cpp.
 //
 // Memory: a level's tapes stay in their chunks' buffers, which are the next level's parents; the
 // chunks are pruned in waves, and after each wave the parents' buffers no block left refers to
@@ -16,8 +18,6 @@
 #include <cstdlib>
 #include <cstring>
 #include <new>
-#include <thread>
-#include <unordered_map>
 #include <utility>
 
 #if defined(__GLIBC__)
@@ -136,6 +136,37 @@ struct LevelBuffers {
     }
 };
 
+// The blocks of the next level: one per near-field cell of `cells` (the level just pruned, whose
+// blocks are `blocks`, f wide), in cell order, their children nf wide (nf = 0: `cells` is the
+// finest level, no blocks), each with its tape in its chunk's buffer in `outs`. Sets the cells'
+// `children`; adds to far_finest the finest cells (`below`³ each) the far-field cells cover;
+// first_block[c] = the first block whose parent is in chunk c.
+std::vector<ParentBlock> link_children(std::span<PrunedCell> cells,
+                                       std::span<const ParentBlock> blocks, uint32_t f, uint32_t nf,
+                                       const std::vector<LevelChunk>& outs, uint64_t below,
+                                       uint64_t& far_finest, std::vector<uint32_t>& first_block) {
+    const uint64_t per_block = uint64_t(f) * f * f;
+    std::vector<ParentBlock> next;
+    first_block.assign(outs.size() + 1, 0);
+    for (uint64_t i = 0; i < cells.size(); ++i) {
+        PrunedCell& cell = cells[i];
+        if (cell.tape == PrunedCell::kFarField) {
+            far_finest += below * below * below;
+            continue;
+        }
+        if (nf == 0) continue;
+        const CellCoord at = block_cell(blocks[i / per_block].origin, f, uint32_t(i % per_block));
+        const uint32_t c = uint32_t(i / kChunkCells);
+        cell.children = uint32_t(next.size() * nf * nf * nf);
+        const uint32_t* header = outs[c].words.data() + cell.tape;
+        ++first_block[c + 1];
+        next.push_back({{at.x * nf, at.y * nf, at.z * nf}, header[0], header + 2});
+    }
+    for (size_t c = 0; c + 1 < first_block.size(); ++c) first_block[c + 1] += first_block[c];
+    first_block.pop_back();
+    return next;
+}
+
 }  // namespace
 
 // The driver of the hierarchy: for each level, the level step (prune_level.hpp) over fixed
@@ -247,30 +278,10 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
         }
 
         // Far-field cells of this level, and the next level's blocks: one per near-field cell.
-        const uint64_t below = uint64_t(N / level.res);
-        std::vector<ParentBlock> next;
-        std::vector<uint32_t> first_block(chunks + 1, 0);
-        for (uint64_t i = 0; i < total; ++i) {
-            PrunedCell& cell = level.cells[i];
-            if (cell.tape == PrunedCell::kFarField) {
-                if (!finest)
-                    far_finest += below * below * below;
-                else
-                    ++far_finest;
-                continue;
-            }
-            if (finest) continue;
-            const CellCoord at =
-                block_cell(blocks[i / per_block].origin, f, uint32_t(i % per_block));
-            const uint32_t nf = res[li + 1] / res[li];
-            const uint32_t c = uint32_t(i / kChunkCells);
-            cell.children = uint32_t(next.size() * nf * nf * nf);
-            const uint32_t* header = outs[c].words.data() + cell.tape;
-            ++first_block[c + 1];
-            next.push_back({{at.x * nf, at.y * nf, at.z * nf}, header[0], header + 2});
-        }
-        for (uint32_t c = 0; c < chunks; ++c) first_block[c + 1] += first_block[c];
-        first_block.pop_back();
+        std::vector<uint32_t> first_block;
+        std::vector<ParentBlock> next =
+            link_children(level.cells, blocks, f, finest ? 0 : res[li + 1] / res[li], outs,
+                          N / level.res, far_finest, first_block);
         blocks.swap(next);
         if (!finest) {
             // This level's buffers become the parents; the cells' offsets into them go.
