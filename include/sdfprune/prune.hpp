@@ -186,14 +186,18 @@ class PrunedGrid {
     // starting block must contain the finest cell (a near-field cell's children do).
     CellRef descend(uint32_t ix, uint32_t iy, uint32_t iz, uint32_t stop, uint32_t level = 0,
                     uint32_t first = 0) const {
-        const uint32_t N = resolution();
         for (;; ++level) {
-            const Level& l = levels_[level];
-            const uint32_t index = first + l.local_index(ix, iy, iz, N);
-            const PrunedCell& c = l.cells[index];
-            if (level >= stop || c.tape == PrunedCell::kFarField) return {level, index};
+            const CellRef at = block_cell_at(level, first, ix, iy, iz);
+            const PrunedCell& c = levels_[level].cells[at.index];
+            if (level >= stop || c.tape == PrunedCell::kFarField) return at;
             first = c.children;
         }
+    }
+    // One step of descend: the cell of the block of `level` starting at `first` that holds
+    // finest cell (ix, iy, iz).
+    CellRef block_cell_at(uint32_t level, uint32_t first, uint32_t ix, uint32_t iy,
+                          uint32_t iz) const {
+        return {level, first + levels_[level].local_index(ix, iy, iz, resolution())};
     }
     // A block of level `level`: cells [first, first + f³) with f = level_factor(level) (level 0:
     // the whole level), its first cell at `origin` in that level's cells.

@@ -87,19 +87,23 @@ void PrunedGrid::build_shortcut() {
 bool PrunedGrid::locate(vec3 p, Located& out) const {
     uint32_t ix, iy, iz;
     if (!cell_index(p, ix, iy, iz)) return false;
-    CellRef at;
     if (!shortcut_.empty()) {
-        // The walk from the shortcut's entry: at most one step, to the finest level.
+        // The shortcut holds descend's result down to the level above the finest: at most one
+        // step of it is left. Every level is pow2 here.
         const Level& s = levels_[shortcut_level_];
         const uint32_t sx = ix >> s.shift, sy = iy >> s.shift, sz = iz >> s.shift;
         const uint32_t entry = shortcut_[(size_t(sz) * s.res + sy) * s.res + sx];
-        at = {entry >> 27, entry & ((1u << 27) - 1)};
-        const PrunedCell& c = levels_[at.level].cells[at.index];
-        if (c.tape != PrunedCell::kFarField)
-            at = descend(ix, iy, iz, shortcut_level_ + 1, shortcut_level_ + 1, c.children);
-    } else {
-        at = descend(ix, iy, iz, level_count() - 1);
+        CellRef at{entry >> 27, entry & ((1u << 27) - 1)};
+        const PrunedCell* c = &levels_[at.level].cells[at.index];
+        if (c->tape != PrunedCell::kFarField) {
+            at = block_cell_at(shortcut_level_ + 1, c->children, ix, iy, iz);
+            c = &levels_[at.level].cells[at.index];
+        }
+        const uint32_t shift = levels_[at.level].shift;
+        out = {at.level, ix >> shift, iy >> shift, iz >> shift, c};
+        return true;
     }
+    const CellRef at = descend(ix, iy, iz, level_count() - 1);
     const Level& l = levels_[at.level];
     if (l.pow2) {
         out = {at.level, ix >> l.shift, iy >> l.shift, iz >> l.shift, &l.cells[at.index]};
