@@ -1,5 +1,6 @@
 // prune_level_test.cpp — the level step (src/prune/prune_level.hpp) on a subset of a level's
-// blocks makes the same cells as the full prune(); the hierarchy walk finds the same cells.
+// blocks makes the same cells as the full prune(); the hierarchy walk (PrunedGrid::descend,
+// for_each_block) finds the cells the children links lead to.
 #include <gtest/gtest.h>
 
 #include "prune_check.hpp"
@@ -53,7 +54,7 @@ void check_subset(const Scene& sc, PruneOptions o, uint32_t stride) {
             const PrunedCell& cell = g.level_cells(l)[c.index];
             if (cell.tape == PrunedCell::kFarField || seen++ % stride != 0) continue;
             const std::span<const uint32_t> tape = g.tape_at(cell.tape);
-            blocks.push_back({c.x * f, c.y * f, c.z * f, uint32_t(tape.size()), tape.data()});
+            blocks.push_back({{c.x * f, c.y * f, c.z * f}, uint32_t(tape.size()), tape.data()});
             first.push_back(cell.children);
         }
         const bool finest = l + 2 == g.level_count();
@@ -110,7 +111,7 @@ TEST(PruneLevelStep, SplitNeedsWholeBlocks) {
     const LevelGeometry geo = level_geometry(sc, o, 16, 4, false, kPruneChunkCells);
     ASSERT_TRUE(geo.split);
     const std::vector<ParentBlock> blocks{
-        {0, 0, 0, uint32_t(sc.full_tape.size()), sc.full_tape.data()}};
+        {{0, 0, 0}, uint32_t(sc.full_tape.size()), sc.full_tape.data()}};
     std::vector<PrunedCell> cells(64);
     CellScratch s;
     LevelChunk out;
@@ -120,6 +121,64 @@ TEST(PruneLevelStep, SplitNeedsWholeBlocks) {
     prune_level_step(sc, o, geo, blocks, 0, 64, cells, s, out);
     for (const PrunedCell& c : cells)
         EXPECT_TRUE(c.tape == PrunedCell::kFarField || c.tape < out.words.size());
+}
+
+// The walk (PrunedGrid::descend, for_each_block) against the children links followed by hand.
+TEST(PrunedGridWalk, DescendAndBlocksMatchTheLinks) {
+    test::RandomSceneSpec spec;
+    spec.primitives = 40;
+    const Scene sc = test::random_scene(3000, spec);
+    for (const uint32_t factor : {4u, 3u}) {
+        PruneOptions o;
+        o.factor = factor;
+        o.resolution = factor == 4 ? 64 : 54;
+        const PrunedGrid g = prune(sc, o);
+        const uint32_t N = g.resolution(), last = g.level_count() - 1;
+        // The deciding cell of every finest cell, by hand: far-field cells of every level fill
+        // their span, near-field finest cells themselves.
+        std::vector<uint64_t> deciding(uint64_t(N) * N * N, ~0ull);
+        uint64_t blocks_by_hand = 0;
+        for (uint32_t l = 0; l <= last; ++l) {
+            const uint32_t scale = N / g.level_resolution(l);
+            for (const CellAt& c : cells_of_level(g, l)) {
+                const PrunedCell& cell = g.level_cells(l)[c.index];
+                if (l < last && cell.tape != PrunedCell::kFarField) {
+                    ++blocks_by_hand;
+                    continue;
+                }
+                for (uint32_t z = c.z * scale; z < (c.z + 1) * scale; ++z)
+                    for (uint32_t y = c.y * scale; y < (c.y + 1) * scale; ++y)
+                        for (uint32_t x = c.x * scale; x < (c.x + 1) * scale; ++x)
+                            deciding[(uint64_t(z) * N + y) * N + x] = uint64_t(l) << 32 | c.index;
+            }
+        }
+        for (uint32_t z = 0; z < N; ++z)
+            for (uint32_t y = 0; y < N; ++y)
+                for (uint32_t x = 0; x < N; ++x) {
+                    const PrunedGrid::CellRef at = g.descend(x, y, z, last);
+                    ASSERT_EQ(uint64_t(at.level) << 32 | at.index,
+                              deciding[(uint64_t(z) * N + y) * N + x]);
+                }
+        // Every block once, its cells where the links say.
+        uint64_t blocks = 0, finest_covered = 0;
+        g.for_each_block([&](const PrunedGrid::Block& b) {
+            ++blocks;
+            const uint32_t f = g.level_factor(b.level);
+            const uint32_t scale = N / g.level_resolution(b.level);
+            for (uint32_t k = 0; k < f * f * f; ++k) {
+                const PrunedCell& c = g.level_cells(b.level)[b.first + k];
+                const CellCoord at = block_cell(b.origin, f, k);
+                const PrunedGrid::CellRef d =
+                    g.descend(at.x * scale, at.y * scale, at.z * scale, b.level);
+                EXPECT_EQ(d.level, b.level);
+                EXPECT_EQ(d.index, b.first + k);
+                if (c.tape == PrunedCell::kFarField || b.level == last)
+                    finest_covered += uint64_t(scale) * scale * scale;
+            }
+        });
+        EXPECT_EQ(blocks, blocks_by_hand + 1);  // level 0's block and one per near-field parent
+        EXPECT_EQ(finest_covered, uint64_t(N) * N * N);
+    }
 }
 
 }  // namespace

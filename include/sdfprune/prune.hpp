@@ -104,7 +104,7 @@ struct PrunedCell {
     uint32_t tape = kFarField;
     uint32_t children = 0;  // near-field, not finest: first cell of its child block
     // The tree's value at the cell centre; for far-field cells made from a far-field octant
-    // (see prune.cpp) a same-sign value no larger in magnitude, which is all lookups need.
+    // (see prune_level.cpp) a same-sign value no larger in magnitude, which is all lookups need.
     float value = 0;
     float bound = 0;  // far-field: constant valid over the whole cell
 };
@@ -120,6 +120,15 @@ using math::far_field_reach;
 // distance to the finest cell's far corner. PrunedGrid::far_field_constant; the GPU read-back.
 float far_field_cell_constant(vec3 origin, vec3 cell_size, uint32_t scale, float lipschitz,
                               const PrunedCell& c, uint32_t ix, uint32_t iy, uint32_t iz);
+
+// Cell `local` (z-major: local = (z·f + y)·f + x) of a block f cells wide whose first cell is
+// at `origin`: its coordinates at the block's level.
+struct CellCoord {
+    uint32_t x = 0, y = 0, z = 0;
+};
+inline CellCoord block_cell(CellCoord origin, uint32_t f, uint32_t local) {
+    return {origin.x + local % f, origin.y + (local / f) % f, origin.z + local / (f * f)};
+}
 
 // What a finest cell holds.
 struct CellView {
@@ -166,6 +175,63 @@ class PrunedGrid {
     // `level`: the tighter of c.bound and the Lipschitz bound from c's centre value.
     float far_field_constant(uint32_t level, const PrunedCell& c, uint32_t ix, uint32_t iy,
                              uint32_t iz) const;
+
+    // ---- the walk down the hierarchy: every lookup and traversal goes through these ----
+    // A cell of the structure: level_cells(level)[index].
+    struct CellRef {
+        uint32_t level = 0, index = 0;
+    };
+    // From the block of level `level` starting at cell `first` (default: level 0) towards finest
+    // cell (ix, iy, iz): the first cell on the way that is far-field or at level `stop`. The
+    // starting block must contain the finest cell (a near-field cell's children do).
+    CellRef descend(uint32_t ix, uint32_t iy, uint32_t iz, uint32_t stop, uint32_t level = 0,
+                    uint32_t first = 0) const {
+        for (;; ++level) {
+            const CellRef at = block_cell_at(level, first, ix, iy, iz);
+            const PrunedCell& c = levels_[level].cells[at.index];
+            if (level >= stop || c.tape == PrunedCell::kFarField) return at;
+            first = c.children;
+        }
+    }
+    // One step of descend: the cell of the block of `level` starting at `first` that holds
+    // finest cell (ix, iy, iz).
+    CellRef block_cell_at(uint32_t level, uint32_t first, uint32_t ix, uint32_t iy,
+                          uint32_t iz) const {
+        return {level, first + levels_[level].local_index(ix, iy, iz, resolution())};
+    }
+    // A block of level `level`: cells [first, first + f³) with f = level_factor(level) (level 0:
+    // the whole level), its first cell at `origin` in that level's cells.
+    struct Block {
+        uint32_t level = 0, first = 0;
+        CellCoord origin;
+    };
+    uint32_t level_factor(uint32_t level) const { return levels_[level].factor; }
+    // The block of children of cell `local` of block b (near-field, b.level not the finest).
+    Block child_block(const Block& b, uint32_t local) const {
+        const uint32_t f = levels_[b.level].factor, nf = levels_[b.level + 1].factor;
+        const CellCoord c = block_cell(b.origin, f, local);
+        return {b.level + 1,
+                levels_[b.level].cells[b.first + local].children,
+                {c.x * nf, c.y * nf, c.z * nf}};
+    }
+    // Every block of the hierarchy, each before its children, calling fn(block): the one
+    // traversal of the whole structure. Depth first, children blocks in reverse z-major order
+    // of their parents (a fixed order: callers may rely on it for deterministic output).
+    template <class F>
+    void for_each_block(const F& fn) const {
+        std::vector<Block> stack{Block{}};
+        while (!stack.empty()) {
+            const Block b = stack.back();
+            stack.pop_back();
+            fn(b);
+            if (b.level + 1 == levels_.size()) continue;
+            const uint32_t f = levels_[b.level].factor;
+            const PrunedCell* cells = levels_[b.level].cells.data() + b.first;
+            for (uint32_t local = 0; local < f * f * f; ++local)
+                if (cells[local].tape != PrunedCell::kFarField)
+                    stack.push_back(child_block(b, local));
+        }
+    }
 
     // Raw structure, for backends and tests. Level 0 holds level_resolution(0)³ cells in
     // z-major order (index (z·r + y)·r + x). Each near-field cell of level l < last has its
@@ -248,9 +314,9 @@ struct CellScratch {
     std::vector<float> value, lo, hi;
     std::vector<uint32_t> left, right, decision, stack;
     std::vector<uint8_t> alive, negate;
-    std::vector<uint32_t> octant;    // the tape of the octant being split (prune.cpp)
+    std::vector<uint32_t> octant;    // the tape of the octant being split (prune_level.cpp)
     std::vector<uint32_t> combined;  // refine_cell: the sub-boxes' common decisions
-    std::vector<uint32_t> refined;   // refine_cell's input tape (prune.cpp)
+    std::vector<uint32_t> refined;   // refine_cell's input tape (prune_level.cpp)
     std::vector<vec3> sub_boxes;     // refine_cell: the sub-boxes' centres, in visiting order
     // refine_cell: per tape entry, the values, ranges and decisions of a batch of sub-boxes
     std::vector<float> lane_value, lane_lo, lane_hi;

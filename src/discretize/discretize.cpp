@@ -72,39 +72,40 @@ class PrunedWalk {
         finest_reach_ = reach(math::length(d));
     }
 
-    // Cell `index` of level `level`, at (cx, cy, cz) in that level's cells.
-    void visit(uint32_t level, uint32_t index, uint32_t cx, uint32_t cy, uint32_t cz,
-               float* stack) const {
-        const PrunedCell& c = g_.level_cells(level)[index];
-        if (level + 1 == g_.level_count()) {
-            out_[(uint64_t(cz) * n_ + cy) * n_ + cx] = finest(c, cx, cy, cz, stack);
+    // Cell `local` of block b (PrunedGrid::Block: the walk's own steps, child_block).
+    void visit(const PrunedGrid::Block& b, uint32_t local, float* stack) const {
+        const PrunedCell& c = g_.level_cells(b.level)[b.first + local];
+        const CellCoord at = block_cell(b.origin, g_.level_factor(b.level), local);
+        if (b.level + 1 == g_.level_count()) {
+            out_[(uint64_t(at.z) * n_ + at.y) * n_ + at.x] = finest(c, at.x, at.y, at.z, stack);
             return;
         }
         if (c.tape == PrunedCell::kFarField) {
-            fill_far(c, cx, cy, cz, n_ / g_.level_resolution(level));
+            fill_far(c, at.x, at.y, at.z, n_ / g_.level_resolution(b.level));
             return;
         }
-        const uint32_t f = g_.level_resolution(level + 1) / g_.level_resolution(level);
-        if (level + 2 == g_.level_count()) {
+        const PrunedGrid::Block kids = g_.child_block(b, local);
+        const uint32_t f = g_.level_factor(kids.level);
+        if (kids.level + 1 == g_.level_count()) {
             // Children are finest cells: too little work each to spawn tasks or recurse.
-            const PrunedCell* kids = g_.level_cells(level + 1).data() + c.children;
+            const PrunedCell* cells = g_.level_cells(kids.level).data() + kids.first;
+            const CellCoord o0 = kids.origin;
             for (uint32_t lz = 0; lz < f; ++lz)
                 for (uint32_t ly = 0; ly < f; ++ly) {
-                    const uint32_t z = cz * f + lz, y = cy * f + ly, x0 = cx * f;
-                    float* o = out_ + (uint64_t(z) * n_ + y) * n_ + x0;
-                    const PrunedCell* row = kids + (lz * f + ly) * f;
+                    const uint32_t z = o0.z + lz, y = o0.y + ly;
+                    float* o = out_ + (uint64_t(z) * n_ + y) * n_ + o0.x;
+                    const PrunedCell* row = cells + (lz * f + ly) * f;
                     for (uint32_t lx = 0; lx < f; ++lx)
-                        o[lx] = finest(row[lx], x0 + lx, y, z, stack);
+                        o[lx] = finest(row[lx], o0.x + lx, y, z, stack);
                 }
             return;
         }
-        tbb::parallel_for(
-            tbb::blocked_range<uint32_t>(0, f * f * f), [&](const tbb::blocked_range<uint32_t>& r) {
-                std::vector<float> st(sc_.max_stack);
-                for (uint32_t local = r.begin(); local != r.end(); ++local)
-                    visit(level + 1, c.children + local, cx * f + local % f,
-                          cy * f + (local / f) % f, cz * f + local / (f * f), st.data());
-            });
+        tbb::parallel_for(tbb::blocked_range<uint32_t>(0, f * f * f),
+                          [&](const tbb::blocked_range<uint32_t>& r) {
+                              std::vector<float> st(sc_.max_stack);
+                              for (uint32_t k = r.begin(); k != r.end(); ++k)
+                                  visit(kids, k, st.data());
+                          });
     }
 
   private:
@@ -208,13 +209,13 @@ void discretize_pruned(const PrunedGrid& grid, std::span<float> out, const Progr
     const uint32_t cells0 = r0 * r0 * r0;
     // Level 0 in z-major order, one chunk per cell; the walk is fast enough (tens of ms at
     // 256³) that progress per level-0 cell is enough.
-    parallel_for<NotCancellable>(
-        cells0, loop_options(grid.options().threads, progress), [&](uint64_t i) {
-            // Not thread_local: visit's nested loop may run another level-0 cell on this thread.
-            std::vector<float> stack(grid.scene().max_stack);
-            const uint32_t c = uint32_t(i);
-            walk.visit(0, c, c % r0, (c / r0) % r0, c / (r0 * r0), stack.data());
-        });
+    parallel_for<NotCancellable>(cells0, loop_options(grid.options().threads, progress),
+                                 [&](uint64_t i) {
+                                     // Not thread_local: visit's nested loop may run another
+                                     // level-0 cell on this thread.
+                                     std::vector<float> stack(grid.scene().max_stack);
+                                     walk.visit(PrunedGrid::Block{}, uint32_t(i), stack.data());
+                                 });
 }
 
 void discretize_pruned(const PrunedGrid& grid, uint32_t n, std::span<float> out,

@@ -315,33 +315,19 @@ void parallel_stage(uint32_t count, const MeshOptions& o, double lo, double hi, 
 // far.
 template <class Near, class Far>
 void for_each_cell(const PrunedGrid& g, const Near& near, const Far& far) {
-    struct Block {
-        uint32_t level, first, x, y, z;  // first cell and origin (in that level's cells)
-    };
-    std::vector<Block> stack{{0, 0, 0, 0, 0}};
-    while (!stack.empty()) {
-        const Block b = stack.back();
-        stack.pop_back();
-        const uint32_t f = b.level == 0
-                               ? g.level_resolution(0)
-                               : g.level_resolution(b.level) / g.level_resolution(b.level - 1);
-        const std::span<const PrunedCell> cells = g.level_cells(b.level);
+    g.for_each_block([&](const PrunedGrid::Block& b) {
+        const uint32_t f = g.level_factor(b.level);
+        const PrunedCell* cells = g.level_cells(b.level).data() + b.first;
         const bool finest = b.level + 1 == g.level_count();
-        const uint32_t nf =
-            finest ? 1 : g.level_resolution(b.level + 1) / g.level_resolution(b.level);
-        for (uint32_t z = 0; z < f; ++z)
-            for (uint32_t y = 0; y < f; ++y)
-                for (uint32_t x = 0; x < f; ++x) {
-                    const PrunedCell& c = cells[b.first + (z * f + y) * f + x];
-                    if (c.tape == PrunedCell::kFarField)
-                        far(b.level, b.x + x, b.y + y, b.z + z, c);
-                    else if (finest)
-                        near(b.x + x, b.y + y, b.z + z, c);
-                    else
-                        stack.push_back({b.level + 1, c.children, (b.x + x) * nf, (b.y + y) * nf,
-                                         (b.z + z) * nf});
-                }
-    }
+        for (uint32_t local = 0; local < f * f * f; ++local) {
+            const PrunedCell& c = cells[local];
+            const CellCoord at = block_cell(b.origin, f, local);
+            if (c.tape == PrunedCell::kFarField)
+                far(b.level, at.x, at.y, at.z, c);
+            else if (finest)
+                near(at.x, at.y, at.z, c);
+        }
+    });
 }
 
 // The cubes (of n per axis) overlapping cells [j0, j1] (of g per axis) on one axis: [lo, hi].

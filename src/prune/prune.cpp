@@ -1,6 +1,8 @@
-// prune.cpp — the hierarchy (DESIGN.md §5): level by level, every child of a near-field cell
-// is pruned starting from its parent's tape, in parallel over fixed chunks of cells so that the
-// result does not depend on the thread count. Children of far-field cells are not stored.
+// prune.cpp — the hierarchy (DESIGN.md §5): level by level, the level step (prune_level.hpp)
+// prunes every child of a near-field cell from its parent's tape, in parallel over fixed chunks
+// of cells (parallel_for, src/core/parallel.hpp) so that the result does not depend on the
+// thread count. Children of far-field cells are not stored. Also the tape pool and the
+// statistics' totals; the grid's queries are in pruned_grid.cpp.
 //
 // Memory: a level's tapes stay in their chunks' buffers, which are the next level's parents; the
 // chunks are pruned in waves, and after each wave the parents' buffers no block left refers to
@@ -16,8 +18,6 @@
 #include <cstdlib>
 #include <cstring>
 #include <new>
-#include <thread>
-#include <unordered_map>
 #include <utility>
 
 #if defined(__GLIBC__)
@@ -136,6 +136,37 @@ struct LevelBuffers {
     }
 };
 
+// The blocks of the next level: one per near-field cell of `cells` (the level just pruned, whose
+// blocks are `blocks`, f wide), in cell order, their children nf wide (nf = 0: `cells` is the
+// finest level, no blocks), each with its tape in its chunk's buffer in `outs`. Sets the cells'
+// `children`; adds to far_finest the finest cells (`below`³ each) the far-field cells cover;
+// first_block[c] = the first block whose parent is in chunk c.
+std::vector<ParentBlock> link_children(std::span<PrunedCell> cells,
+                                       std::span<const ParentBlock> blocks, uint32_t f, uint32_t nf,
+                                       const std::vector<LevelChunk>& outs, uint64_t below,
+                                       uint64_t& far_finest, std::vector<uint32_t>& first_block) {
+    const uint64_t per_block = uint64_t(f) * f * f;
+    std::vector<ParentBlock> next;
+    first_block.assign(outs.size() + 1, 0);
+    for (uint64_t i = 0; i < cells.size(); ++i) {
+        PrunedCell& cell = cells[i];
+        if (cell.tape == PrunedCell::kFarField) {
+            far_finest += below * below * below;
+            continue;
+        }
+        if (nf == 0) continue;
+        const CellCoord at = block_cell(blocks[i / per_block].origin, f, uint32_t(i % per_block));
+        const uint32_t c = uint32_t(i / kChunkCells);
+        cell.children = uint32_t(next.size() * nf * nf * nf);
+        const uint32_t* header = outs[c].words.data() + cell.tape;
+        ++first_block[c + 1];
+        next.push_back({{at.x * nf, at.y * nf, at.z * nf}, header[0], header + 2});
+    }
+    for (size_t c = 0; c + 1 < first_block.size(); ++c) first_block[c + 1] += first_block[c];
+    first_block.pop_back();
+    return next;
+}
+
 }  // namespace
 
 // The driver of the hierarchy: for each level, the level step (prune_level.hpp) over fixed
@@ -174,7 +205,7 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     LevelBuffers buf;
     buf.parents.push_back(std::move(root));
     buf.first_block = {0};
-    std::vector<ParentBlock> blocks{{0, 0, 0, sc.size(), buf.parents[0].data() + 2}};
+    std::vector<ParentBlock> blocks{{{0, 0, 0}, sc.size(), buf.parents[0].data() + 2}};
     buf.parent_bytes = bytes_of(buf.parents[0]);
     const int workers = opt.threads > 0 ? opt.threads : tbb::this_task_arena::max_concurrency();
 
@@ -247,31 +278,10 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
         }
 
         // Far-field cells of this level, and the next level's blocks: one per near-field cell.
-        const uint64_t below = uint64_t(N / level.res);
-        std::vector<ParentBlock> next;
-        std::vector<uint32_t> first_block(chunks + 1, 0);
-        for (uint64_t i = 0; i < total; ++i) {
-            PrunedCell& cell = level.cells[i];
-            if (cell.tape == PrunedCell::kFarField) {
-                if (!finest)
-                    far_finest += below * below * below;
-                else
-                    ++far_finest;
-                continue;
-            }
-            if (finest) continue;
-            const ParentBlock& b = blocks[i / per_block];
-            const uint32_t local = uint32_t(i % per_block);
-            const uint32_t nf = res[li + 1] / res[li];
-            const uint32_t c = uint32_t(i / kChunkCells);
-            cell.children = uint32_t(next.size() * nf * nf * nf);
-            const uint32_t* header = outs[c].words.data() + cell.tape;
-            ++first_block[c + 1];
-            next.push_back({(b.x + local % f) * nf, (b.y + (local / f) % f) * nf,
-                            (b.z + local / (f * f)) * nf, header[0], header + 2});
-        }
-        for (uint32_t c = 0; c < chunks; ++c) first_block[c + 1] += first_block[c];
-        first_block.pop_back();
+        std::vector<uint32_t> first_block;
+        std::vector<ParentBlock> next =
+            link_children(level.cells, blocks, f, finest ? 0 : res[li + 1] / res[li], outs,
+                          N / level.res, far_finest, first_block);
         blocks.swap(next);
         if (!finest) {
             // This level's buffers become the parents; the cells' offsets into them go.
@@ -323,146 +333,6 @@ void finish_prune_stats(PruneStats& st, double prim_sum, double prim_sq_sum, dou
     const double mean_sq = (prim_sq_sum + double(far_finest)) / cells;
     st.active_std = std::sqrt(std::max(0.0, mean_sq - st.active_avg * st.active_avg));
     if (far_finest > 0) st.active_max = std::max(st.active_max, 1u);
-}
-
-bool PrunedGrid::cell_index(vec3 p, uint32_t& ix, uint32_t& iy, uint32_t& iz) const {
-    const uint32_t N = resolution();
-    const vec3 q = p - scene_->aabb.min;
-    uint32_t idx[3];
-    for (int a = 0; a < 3; ++a) {
-        // The closed box itself decides (q · 1/size can round past N on the max faces).
-        if (!(p[a] >= scene_->aabb.min[a]) || !(p[a] <= scene_->aabb.max[a])) return false;
-        idx[a] = std::min(uint32_t(q[a] * inv_cell_size_[a]), N - 1);
-    }
-    ix = idx[0];
-    iy = idx[1];
-    iz = idx[2];
-    return true;
-}
-
-vec3 PrunedGrid::cell_center(uint32_t ix, uint32_t iy, uint32_t iz) const {
-    return scene_->aabb.min +
-           vec3(float(ix) + 0.5f, float(iy) + 0.5f, float(iz) + 0.5f) * cell_size_;
-}
-
-float far_field_cell_constant(vec3 origin, vec3 cell_size, uint32_t scale, float lipschitz,
-                              const PrunedCell& c, uint32_t ix, uint32_t iy, uint32_t iz) {
-    // The Lipschitz bound from the coarse centre over the distance to this finest cell's far
-    // corner; tighter than the coarse cell's own constant for cells near its centre.
-    const vec3 coarse = origin + vec3(float(ix / scale) + 0.5f, float(iy / scale) + 0.5f,
-                                      float(iz / scale) + 0.5f) *
-                                     (cell_size * float(scale));
-    const vec3 centre =
-        origin + vec3(float(ix) + 0.5f, float(iy) + 0.5f, float(iz) + 0.5f) * cell_size;
-    const vec3 d = math::abs(centre - coarse) + cell_size * 0.5f;
-    return far_field_combine(c.value, c.bound, far_field_reach(lipschitz, math::length(d)));
-}
-
-float PrunedGrid::far_field_constant(uint32_t level, const PrunedCell& c, uint32_t ix, uint32_t iy,
-                                     uint32_t iz) const {
-    return far_field_cell_constant(scene_->aabb.min, cell_size_, resolution() / levels_[level].res,
-                                   lipschitz_, c, ix, iy, iz);
-}
-
-CellView PrunedGrid::cell(uint32_t ix, uint32_t iy, uint32_t iz) const {
-    const uint32_t N = resolution();
-    uint32_t block_start = 0;
-    for (uint32_t li = 0; li < levels_.size(); ++li) {
-        const Level& l = levels_[li];
-        const PrunedCell& c = l.cells[block_start + l.local_index(ix, iy, iz, N)];
-        CellView v;
-        if (c.tape == PrunedCell::kFarField) {
-            v.far_field = true;
-            v.constant = far_field_constant(li, c, ix, iy, iz);
-            return v;
-        }
-        if (li + 1 == levels_.size()) {
-            v.far_field = false;
-            v.tape = tape_at(c.tape);
-            v.primitives = pool_.data[c.tape + 1];
-            return v;
-        }
-        block_start = c.children;
-    }
-    return {};
-}
-
-void PrunedGrid::build_shortcut() {
-    constexpr uint32_t kMaxEntries = 1u << 21;
-    if (levels_.size() < 3 || !levels_.back().pow2) return;
-    const uint32_t S = uint32_t(levels_.size() - 2), r = levels_[S].res;
-    if (uint64_t(r) * r * r > kMaxEntries) return;
-    for (const Level& l : levels_)
-        if (l.cells.size() >= (1u << 27) || !l.pow2) return;
-    shortcut_level_ = S;
-    shortcut_.resize(size_t(r) * r * r);
-    const uint32_t N = resolution(), scale = N / r;
-    for (uint32_t z = 0; z < r; ++z)
-        for (uint32_t y = 0; y < r; ++y)
-            for (uint32_t x = 0; x < r; ++x) {
-                const uint32_t ix = x * scale, iy = y * scale, iz = z * scale;
-                uint32_t block_start = 0, li = 0;
-                for (;; ++li) {
-                    const uint32_t index = block_start + levels_[li].local_index(ix, iy, iz, N);
-                    const PrunedCell& c = levels_[li].cells[index];
-                    if (li == S || c.tape == PrunedCell::kFarField) {
-                        shortcut_[(size_t(z) * r + y) * r + x] = li << 27 | index;
-                        break;
-                    }
-                    block_start = c.children;
-                }
-            }
-}
-
-bool PrunedGrid::locate(vec3 p, Located& out) const {
-    uint32_t ix, iy, iz;
-    if (!cell_index(p, ix, iy, iz)) return false;
-    const uint32_t N = resolution();
-    if (!shortcut_.empty()) {
-        const Level& s = levels_[shortcut_level_];
-        const uint32_t sx = ix >> s.shift, sy = iy >> s.shift, sz = iz >> s.shift;
-        const uint32_t entry = shortcut_[(size_t(sz) * s.res + sy) * s.res + sx];
-        uint32_t li = entry >> 27;
-        const PrunedCell* c = &levels_[li].cells[entry & ((1u << 27) - 1)];
-        if (c->tape != PrunedCell::kFarField) {
-            li = shortcut_level_ + 1;
-            c = &levels_[li].cells[c->children + levels_[li].local_index(ix, iy, iz, N)];
-        }
-        const uint32_t shift = levels_[li].shift;
-        out = {li, ix >> shift, iy >> shift, iz >> shift, c};
-        return true;
-    }
-    uint32_t block_start = 0;
-    for (uint32_t li = 0; li < levels_.size(); ++li) {
-        const Level& l = levels_[li];
-        const PrunedCell& c = l.cells[block_start + l.local_index(ix, iy, iz, N)];
-        if (c.tape == PrunedCell::kFarField || li + 1 == levels_.size()) {
-            if (l.pow2) {
-                out = {li, ix >> l.shift, iy >> l.shift, iz >> l.shift, &c};
-            } else {
-                const uint32_t scale = N / l.res;
-                out = {li, ix / scale, iy / scale, iz / scale, &c};
-            }
-            return true;
-        }
-        block_start = c.children;
-    }
-    return false;
-}
-
-float PrunedGrid::eval(vec3 p, float* stack) const {
-    uint32_t x, y, z;
-    if (!cell_index(p, x, y, z)) return eval_tape(*scene_, scene_->full_tape, p, stack);
-    const CellView c = cell(x, y, z);
-    return c.far_field ? c.constant : eval_tape(*scene_, c.tape, p, stack);
-}
-
-void PrunedGrid::eval_points(std::span<const vec3> points, std::span<float> out) const {
-    if (out.size() != points.size()) throw std::invalid_argument("eval_points: size mismatch");
-    parallel_points(points.size(), options_.threads, [&](size_t begin, size_t end) {
-        std::vector<float> stack(scene_->max_stack);
-        for (size_t i = begin; i != end; ++i) out[i] = eval(points[i], stack.data());
-    });
 }
 
 }  // namespace sdfprune

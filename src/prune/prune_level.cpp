@@ -140,9 +140,9 @@ class StepPruner {
         vec3 ocentre[8];
         for (uint32_t o = 0; o < 8; ++o) {
             const uint32_t ox = (o & 1) * hf, oy = ((o >> 1) & 1) * hf, oz = ((o >> 2) & 1) * hf;
-            ocentre[o] = geo_.origin + vec3(float(b.x + ox) + 0.5f * float(hf),
-                                            float(b.y + oy) + 0.5f * float(hf),
-                                            float(b.z + oz) + 0.5f * float(hf)) *
+            ocentre[o] = geo_.origin + vec3(float(b.origin.x + ox) + 0.5f * float(hf),
+                                            float(b.origin.y + oy) + 0.5f * float(hf),
+                                            float(b.origin.z + oz) + 0.5f * float(hf)) *
                                            geo_.cell_size;
         }
         evaluate_siblings(sc_, parent, ocentre, 8, ohalf, oradius, opt_.bounds, s);
@@ -169,7 +169,8 @@ class StepPruner {
                 for (uint32_t ly = oy; ly < oy + hf; ++ly)
                     for (uint32_t lx = ox; lx < ox + hf; ++lx) {
                         PrunedCell& cell = cells[(lz * f + ly) * f + lx];
-                        const CellBox box = cell_box(b.x + lx, b.y + ly, b.z + lz);
+                        const CellBox box =
+                            cell_box(b.origin.x + lx, b.origin.y + ly, b.origin.z + lz);
                         if (!ofar[o]) {
                             group[count] = &cell;
                             boxes[count] = box;
@@ -239,10 +240,8 @@ void prune_level_step(const Scene& sc, const PruneOptions& opt, const LevelGeome
     if (!geo.split) {
         for (uint64_t i = begin; i < end; ++i) {
             const ParentBlock& b = blocks[i / per_block];
-            const uint32_t local = uint32_t(i % per_block);
-            step.prune_cell(
-                cells[i - begin], b.tape(),
-                step.cell_box(b.x + local % f, b.y + (local / f) % f, b.z + local / (f * f)));
+            const CellCoord at = block_cell(b.origin, f, uint32_t(i % per_block));
+            step.prune_cell(cells[i - begin], b.tape(), step.cell_box(at.x, at.y, at.z));
         }
         return;
     }

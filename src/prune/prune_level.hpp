@@ -35,7 +35,7 @@ LevelGeometry level_geometry(const Scene& scene, const PruneOptions& options, ui
 // tape (words without the [length, primitives] header), valid everywhere in the parent.
 // A block of a stored grid: origin = parent's coordinates · f; tape = PrunedGrid::tape_at().
 struct ParentBlock {
-    uint32_t x = 0, y = 0, z = 0;
+    CellCoord origin;
     uint32_t length = 0;              // words in the parent's tape
     const uint32_t* words = nullptr;  // the parent's tape; must outlive the step
     std::span<const uint32_t> tape() const { return {words, length}; }

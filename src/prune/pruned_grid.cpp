@@ -1,0 +1,132 @@
+// pruned_grid.cpp — the queries of a PrunedGrid (DESIGN.md §6): the finest cell holding a point,
+// the walk down the hierarchy to the cell deciding it (PrunedGrid::descend, the one descent every
+// lookup uses; for_each_block in prune.hpp is the one traversal of whole blocks), far-field
+// constants, and the pruned field's value at points.
+#include <algorithm>
+#include <stdexcept>
+#include <vector>
+
+#include "../core/parallel.hpp"
+#include "sdfprune/eval.hpp"
+#include "sdfprune/prune.hpp"
+
+namespace sdfprune {
+
+bool PrunedGrid::cell_index(vec3 p, uint32_t& ix, uint32_t& iy, uint32_t& iz) const {
+    const uint32_t N = resolution();
+    const vec3 q = p - scene_->aabb.min;
+    uint32_t idx[3];
+    for (int a = 0; a < 3; ++a) {
+        // The closed box itself decides (q · 1/size can round past N on the max faces).
+        if (!(p[a] >= scene_->aabb.min[a]) || !(p[a] <= scene_->aabb.max[a])) return false;
+        idx[a] = std::min(uint32_t(q[a] * inv_cell_size_[a]), N - 1);
+    }
+    ix = idx[0];
+    iy = idx[1];
+    iz = idx[2];
+    return true;
+}
+
+vec3 PrunedGrid::cell_center(uint32_t ix, uint32_t iy, uint32_t iz) const {
+    return scene_->aabb.min +
+           vec3(float(ix) + 0.5f, float(iy) + 0.5f, float(iz) + 0.5f) * cell_size_;
+}
+
+float far_field_cell_constant(vec3 origin, vec3 cell_size, uint32_t scale, float lipschitz,
+                              const PrunedCell& c, uint32_t ix, uint32_t iy, uint32_t iz) {
+    // The Lipschitz bound from the coarse centre over the distance to this finest cell's far
+    // corner; tighter than the coarse cell's own constant for cells near its centre.
+    const vec3 coarse = origin + vec3(float(ix / scale) + 0.5f, float(iy / scale) + 0.5f,
+                                      float(iz / scale) + 0.5f) *
+                                     (cell_size * float(scale));
+    const vec3 centre =
+        origin + vec3(float(ix) + 0.5f, float(iy) + 0.5f, float(iz) + 0.5f) * cell_size;
+    const vec3 d = math::abs(centre - coarse) + cell_size * 0.5f;
+    return far_field_combine(c.value, c.bound, far_field_reach(lipschitz, math::length(d)));
+}
+
+float PrunedGrid::far_field_constant(uint32_t level, const PrunedCell& c, uint32_t ix, uint32_t iy,
+                                     uint32_t iz) const {
+    return far_field_cell_constant(scene_->aabb.min, cell_size_, resolution() / levels_[level].res,
+                                   lipschitz_, c, ix, iy, iz);
+}
+
+CellView PrunedGrid::cell(uint32_t ix, uint32_t iy, uint32_t iz) const {
+    const CellRef at = descend(ix, iy, iz, level_count() - 1);
+    const PrunedCell& c = levels_[at.level].cells[at.index];
+    CellView v;
+    if (c.tape == PrunedCell::kFarField) {
+        v.far_field = true;
+        v.constant = far_field_constant(at.level, c, ix, iy, iz);
+        return v;
+    }
+    v.far_field = false;
+    v.tape = tape_at(c.tape);
+    v.primitives = pool_.data[c.tape + 1];
+    return v;
+}
+
+void PrunedGrid::build_shortcut() {
+    constexpr uint32_t kMaxEntries = 1u << 21;
+    if (levels_.size() < 3 || !levels_.back().pow2) return;
+    const uint32_t S = uint32_t(levels_.size() - 2), r = levels_[S].res;
+    if (uint64_t(r) * r * r > kMaxEntries) return;
+    for (const Level& l : levels_)
+        if (l.cells.size() >= (1u << 27) || !l.pow2) return;
+    shortcut_level_ = S;
+    shortcut_.resize(size_t(r) * r * r);
+    const uint32_t scale = resolution() / r;
+    for (uint32_t z = 0; z < r; ++z)
+        for (uint32_t y = 0; y < r; ++y)
+            for (uint32_t x = 0; x < r; ++x) {
+                const CellRef at = descend(x * scale, y * scale, z * scale, S);
+                shortcut_[(size_t(z) * r + y) * r + x] = at.level << 27 | at.index;
+            }
+}
+
+bool PrunedGrid::locate(vec3 p, Located& out) const {
+    uint32_t ix, iy, iz;
+    if (!cell_index(p, ix, iy, iz)) return false;
+    if (!shortcut_.empty()) {
+        // The shortcut holds descend's result down to the level above the finest: at most one
+        // step of it is left. Every level is pow2 here.
+        const Level& s = levels_[shortcut_level_];
+        const uint32_t sx = ix >> s.shift, sy = iy >> s.shift, sz = iz >> s.shift;
+        const uint32_t entry = shortcut_[(size_t(sz) * s.res + sy) * s.res + sx];
+        CellRef at{entry >> 27, entry & ((1u << 27) - 1)};
+        const PrunedCell* c = &levels_[at.level].cells[at.index];
+        if (c->tape != PrunedCell::kFarField) {
+            at = block_cell_at(shortcut_level_ + 1, c->children, ix, iy, iz);
+            c = &levels_[at.level].cells[at.index];
+        }
+        const uint32_t shift = levels_[at.level].shift;
+        out = {at.level, ix >> shift, iy >> shift, iz >> shift, c};
+        return true;
+    }
+    const CellRef at = descend(ix, iy, iz, level_count() - 1);
+    const Level& l = levels_[at.level];
+    if (l.pow2) {
+        out = {at.level, ix >> l.shift, iy >> l.shift, iz >> l.shift, &l.cells[at.index]};
+    } else {
+        const uint32_t scale = resolution() / l.res;
+        out = {at.level, ix / scale, iy / scale, iz / scale, &l.cells[at.index]};
+    }
+    return true;
+}
+
+float PrunedGrid::eval(vec3 p, float* stack) const {
+    uint32_t x, y, z;
+    if (!cell_index(p, x, y, z)) return eval_tape(*scene_, scene_->full_tape, p, stack);
+    const CellView c = cell(x, y, z);
+    return c.far_field ? c.constant : eval_tape(*scene_, c.tape, p, stack);
+}
+
+void PrunedGrid::eval_points(std::span<const vec3> points, std::span<float> out) const {
+    if (out.size() != points.size()) throw std::invalid_argument("eval_points: size mismatch");
+    parallel_points(points.size(), options_.threads, [&](size_t begin, size_t end) {
+        std::vector<float> stack(scene_->max_stack);
+        for (size_t i = begin; i != end; ++i) out[i] = eval(points[i], stack.data());
+    });
+}
+
+}  // namespace sdfprune
