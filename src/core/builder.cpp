@@ -18,6 +18,11 @@ SceneNodeDesc primitive_desc(uint32_t kind, const PrimitiveShape& shape) {
 }
 }  // namespace
 
+Shape SceneBuilder::primitive(uint32_t kind, const PrimitiveShape& shape) {
+    if (kind >= math::kPrimitiveKindCount) throw SceneError("unknown primitive");
+    return add({primitive_desc(kind, shape), {}});
+}
+
 Shape SceneBuilder::sphere(float radius) {
     PrimitiveShape s;
     s.radius = radius;
