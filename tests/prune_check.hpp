@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <span>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -100,13 +101,16 @@ inline Shape random_primitive(SceneBuilder& b, Rng& r, uint32_t kind) {
         case math::kPrimCapsule:
             return b.capsule(r.uniform(0.06f, 0.4f),
                              r.uniform() < 0.15f ? 0.0f : r.uniform(0.05f, 1.0f));
-        default: {
+        case math::kPrimTorus: {
             const float major = r.uniform(0.15f, 0.6f);
             // Mostly ring tori; sometimes a spindle torus (minor > major).
             const float minor =
                 r.uniform() < 0.15f ? major * r.uniform(1.0f, 1.5f) : major * r.uniform(0.1f, 0.8f);
             return b.torus(major, minor);
         }
+        default:
+            throw std::logic_error("random_primitive: no generator for kind " +
+                                   std::to_string(kind));
     }
 }
 
