@@ -50,6 +50,8 @@ public:
     Shape cone(float radius, float height);      // base (radius) at y = -height/2, apex at +height/2
     Shape capsule(float radius, float height);   // inner segment of length `height` along y
     Shape torus(float major_radius, float minor_radius);  // in the xz plane
+    // Cylinder along y, centred, both rims rounded by `rounding` <= min(radius, height / 2).
+    Shape rounded_cylinder(float radius, float height, float rounding);
     // Any kind of primitives.hpp's table with its fields in `shape` (checked when built).
     Shape primitive(uint32_t kind, const PrimitiveShape& shape);
 

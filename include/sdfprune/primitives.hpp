@@ -11,6 +11,7 @@
 // tests/primitive_range_test.cpp).
 #pragma once
 
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -109,6 +110,19 @@ inline constexpr PrimitiveKindInfo kPrimitiveTable[math::kPrimitiveKindCount] = 
          return vec3(r, s.minor_radius, r);
      },
      [](const PrimitiveShape& s) { return s.major_radius + s.minor_radius; }, nullptr},
+    {math::kPrimRoundedCylinder, "rounded_cylinder",
+     "cylinder along y of full `height` and `radius`, both rims rounded by `rounding`",
+     {table_detail::req("height", SDFPRUNE_AT(height), 1, table_detail::kPos, 0, 0.5f),
+      table_detail::req("radius", SDFPRUNE_AT(radius), 1, table_detail::kPos, 1),
+      table_detail::req("rounding", SDFPRUNE_AT(rounding), 1, table_detail::kNonNeg, 2)}, 3, true,
+     [](const PrimitiveShape& s) { return vec3(s.radius, s.height / 2, s.radius); },
+     [](const PrimitiveShape& s) { return std::sqrt(s.radius * s.radius + s.height * s.height / 4); },
+     [](const PrimitiveShape& s) {
+         // The distance is exact only while the rounded rims fit the cylinder.
+         if (s.rounding > s.radius || s.rounding > s.height / 2)
+             return std::string("rounding must be <= radius and <= height/2");
+         return std::string();
+     }},
 };
 // clang-format on
 #undef SDFPRUNE_AT

@@ -25,7 +25,8 @@ SDFPRUNE_CONST uint kPrimCylinder = 2u;
 SDFPRUNE_CONST uint kPrimCone = 3u;
 SDFPRUNE_CONST uint kPrimCapsule = 4u;
 SDFPRUNE_CONST uint kPrimTorus = 5u;
-SDFPRUNE_CONST uint kPrimitiveKindCount = 6u;
+SDFPRUNE_CONST uint kPrimRoundedCylinder = 6u;
+SDFPRUNE_CONST uint kPrimitiveKindCount = 7u;
 // Operator kinds, stored in the same field as the primitive kinds.
 SDFPRUNE_CONST uint kOpUnion = 16u;
 SDFPRUNE_CONST uint kOpIntersection = 17u;
@@ -57,6 +58,11 @@ SDFPRUNE_FN float tape_sign(uint word) { return tape_negated(word) ? -1.0f : 1.0
 //   cone     a.x base radius (at y = -h), a.y half height h
 //   capsule  a.x half length of the inner segment (y), a.y radius
 //   torus    a.x major radius (in xz), a.y minor radius
+//   rounded_cylinder  a.x half height (y), a.y radius, a.z rim rounding
+// (include/sdfprune/primitives.hpp maps each kind's scene-file fields to these slots.)
+// Every primitive below is an exact distance (1-Lipschitz, |f| = distance to the surface), so the
+// Lipschitz range f(c) ± L·R holds; each bounded one says why it lies in the ball of radius rho
+// that similarity_range uses (primitives.hpp gives rho and the local box).
 struct PrimitiveParams {
     vec4 row0;
     vec4 row1;
@@ -116,6 +122,14 @@ SDFPRUNE_FN float sd_torus(vec3 q, float major, float minor) {
     return length(vec2(length(vec2(q.x, q.z)) - major, q.y)) - minor;
 }
 
+// A cylinder (half height h, radius r, along y) with both rims rounded by `rounding` <= min(r, h):
+// the Minkowski sum of the convex cylinder (r − rounding, h − rounding) and a ball of radius
+// `rounding`, whose exact signed distance is the inner cylinder's minus `rounding` (sd_extrude of
+// the disc). Range: the shape lies in the cylinder (r, h), so in the ball of radius |(r, h)|.
+SDFPRUNE_FN float sd_rounded_cylinder(vec3 q, float half_height, float radius, float rounding) {
+    return sd_extrude(length(vec2(q.x, q.z)) - radius, q.y, half_height, rounding);
+}
+
 SDFPRUNE_FN float eval_primitive_local(uint kind, PrimitiveParams prm, vec3 q) {
     if (kind == kPrimSphere) return sd_sphere(q, prm.a.x);
     if (kind == kPrimBox)
@@ -123,7 +137,8 @@ SDFPRUNE_FN float eval_primitive_local(uint kind, PrimitiveParams prm, vec3 q) {
     if (kind == kPrimCylinder) return sd_cylinder(q, prm.a.x, prm.a.y);
     if (kind == kPrimCone) return sd_cone(q, prm.a.x, prm.a.y);
     if (kind == kPrimCapsule) return sd_capsule(q, prm.a.x, prm.a.y);
-    return sd_torus(q, prm.a.x, prm.a.y);
+    if (kind == kPrimTorus) return sd_torus(q, prm.a.x, prm.a.y);
+    return sd_rounded_cylinder(q, prm.a.x, prm.a.y, prm.a.z);
 }
 
 SDFPRUNE_FN float eval_primitive(uint kind, PrimitiveParams prm, vec3 p) {

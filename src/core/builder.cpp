@@ -66,6 +66,14 @@ Shape SceneBuilder::torus(float major_radius, float minor_radius) {
     return add({primitive_desc(math::kPrimTorus, s), {}});
 }
 
+Shape SceneBuilder::rounded_cylinder(float radius, float height, float rounding) {
+    PrimitiveShape s;
+    s.radius = radius;
+    s.height = height;
+    s.rounding = rounding;
+    return add({primitive_desc(math::kPrimRoundedCylinder, s), {}});
+}
+
 Shape SceneBuilder::combine(uint32_t kind, Shape a, Shape b, float k) {
     if (a.builder_ != this || b.builder_ != this)
         throw SceneError("shapes from another builder cannot be combined");
