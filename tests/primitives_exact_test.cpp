@@ -134,6 +134,56 @@ TEST(PrimitivesExact, RoundedCylinder) {
     }
 }
 
+// ---- capped cone ---------------------------------------------------------------------------
+
+// The trapezoid (0, -h), (r1, -h), (r2, h), (0, h): exact segment distances, sign by the
+// trapezoid's half-planes.
+double capped_cone_reference(vec3 p, double h, double r1, double r2) {
+    const P2 q{std::hypot(double(p.x), double(p.z)), p.y};
+    const double d =
+        std::min({dist_segment(q, {0, -h}, {r1, -h}), dist_segment(q, {r1, -h}, {r2, h}),
+                  dist_segment(q, {r2, h}, {0, h})});
+    const bool inside = std::fabs(q.y) <= h && q.x <= r1 + (r2 - r1) * (q.y + h) / (2 * h);
+    return inside ? -d : d;
+}
+
+TEST(PrimitivesExact, CappedCone) {
+    SceneBuilder b;
+    // Radius 1 at y = -1, 0.5 at y = +1: the side runs from (1, -1) to (0.5, 1) in the (rho, y)
+    // plane, along (-1, 4) / sqrt 17, outward normal (4, 1) / sqrt 17.
+    const double s17 = std::sqrt(17.0);
+    auto ref = [](vec3 p) { return capped_cone_reference(p, 1, 1, 0.5); };
+    check_shape(b, b.capped_cone(1.0f, 0.5f, 2.0f),
+                {{{0, 0, 0}, -std::min(1.0, 3.0 / s17)},  // side at 0.75: distance 3/sqrt 17
+                 {{0, 3, 0}, 2.0},
+                 {{0, -2, 0}, 1.0},
+                 {{0.25f, 1.5f, 0}, 0.5},
+                 {{0, -1.5f, 0.5f}, 0.5},
+                 {{2, -2, 0}, kSqrt2},                               // beyond the bottom rim
+                 {{1.5f, 2, 0}, kSqrt2},                             // beyond the top rim
+                 {{float(0.75 + 4 / s17), float(1 / s17), 0}, 1.0},  // off the side
+                 {{0, -0.9f, 0}, -0.1}},
+                ref, 1e-5, 2.0f);
+    // Pointed and flat extremes: a cone (top radius 0) matches `cone`, equal radii `cylinder`.
+    const Scene pointed = b.build(b.capped_cone(0.6f, 0.0f, 1.4f), kBox);
+    const Scene cone = b.build(b.cone(0.6f, 1.4f), kBox);
+    const Scene flat = b.build(b.capped_cone(0.6f, 0.6f, 1.4f), kBox);
+    const Scene cyl = b.build(b.cylinder(0.6f, 1.4f), kBox);
+    Rng r(5);
+    for (int i = 0; i < 1000; ++i) {
+        const vec3 p(r.uniform(-2, 2), r.uniform(-2, 2), r.uniform(-2, 2));
+        EXPECT_NEAR(eval_point(pointed, p), eval_point(cone, p), 2e-6);
+        EXPECT_NEAR(eval_point(flat, p), eval_point(cyl, p), 2e-6);
+    }
+    // An inverted cone (apex down) against the reference.
+    check_shape(
+        b, b.capped_cone(0.0f, 0.8f, 1.0f), {{{0, 2, 0}, 1.5}},
+        [](vec3 p) { return capped_cone_reference(p, 0.5, 0, 0.8); }, 1e-5, 1.5f);
+    PrimitiveShape bad;
+    bad.height = 1;
+    EXPECT_EQ(validate_primitive(math::kPrimCappedCone, bad), "radius or top_radius must be > 0");
+}
+
 // ---- parameters -----------------------------------------------------------------------------
 
 TEST(PrimitivesExact, InvalidParametersAreRefused) {

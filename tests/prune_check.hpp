@@ -117,6 +117,12 @@ inline Shape random_primitive(SceneBuilder& b, Rng& r, uint32_t kind) {
                                       : u < 0.25f ? 0.0f
                                                   : r.uniform(0, lim));
         }
+        case math::kPrimCappedCone: {
+            const float u = r.uniform();
+            const float r1 = u < 0.15f ? 0.0f : r.uniform(0.05f, 0.55f);
+            const float r2 = u > 0.85f ? 0.0f : r.uniform(0.05f, 0.55f);
+            return b.capped_cone(r1, r2, r.uniform(0.15f, 1.2f));
+        }
         default:
             throw std::logic_error("random_primitive: no generator for kind " +
                                    std::to_string(kind));

@@ -52,6 +52,9 @@ public:
     Shape torus(float major_radius, float minor_radius);  // in the xz plane
     // Cylinder along y, centred, both rims rounded by `rounding` <= min(radius, height / 2).
     Shape rounded_cylinder(float radius, float height, float rounding);
+    // Cone frustum along y, centred: `radius` at y = -height/2, `top_radius` at +height/2
+    // (either may be 0).
+    Shape capped_cone(float radius, float top_radius, float height);
     // Any kind of primitives.hpp's table with its fields in `shape` (checked when built).
     Shape primitive(uint32_t kind, const PrimitiveShape& shape);
 

@@ -73,6 +73,7 @@ struct PrimitiveShape {
     float major_radius = 0;  // torus, in the xz plane
     float minor_radius = 0;  // torus
     float rounding = 0;      // rounded_cylinder: rim radius
+    float top_radius = 0;    // capped_cone: radius at y = +height/2 (radius: at -height/2)
     bool operator==(const PrimitiveShape&) const = default;
 };
 

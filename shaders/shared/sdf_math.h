@@ -26,7 +26,8 @@ SDFPRUNE_CONST uint kPrimCone = 3u;
 SDFPRUNE_CONST uint kPrimCapsule = 4u;
 SDFPRUNE_CONST uint kPrimTorus = 5u;
 SDFPRUNE_CONST uint kPrimRoundedCylinder = 6u;
-SDFPRUNE_CONST uint kPrimitiveKindCount = 7u;
+SDFPRUNE_CONST uint kPrimCappedCone = 7u;
+SDFPRUNE_CONST uint kPrimitiveKindCount = 8u;
 // Operator kinds, stored in the same field as the primitive kinds.
 SDFPRUNE_CONST uint kOpUnion = 16u;
 SDFPRUNE_CONST uint kOpIntersection = 17u;
@@ -59,6 +60,7 @@ SDFPRUNE_FN float tape_sign(uint word) { return tape_negated(word) ? -1.0f : 1.0
 //   capsule  a.x half length of the inner segment (y), a.y radius
 //   torus    a.x major radius (in xz), a.y minor radius
 //   rounded_cylinder  a.x half height (y), a.y radius, a.z rim rounding
+//   capped_cone       a.x half height h (y), a.y radius at y = -h, a.z radius at y = +h
 // (include/sdfprune/primitives.hpp maps each kind's scene-file fields to these slots.)
 // Every primitive below is an exact distance (1-Lipschitz, |f| = distance to the surface), so the
 // Lipschitz range f(c) ± L·R holds; each bounded one says why it lies in the ball of radius rho
@@ -130,6 +132,21 @@ SDFPRUNE_FN float sd_rounded_cylinder(vec3 q, float half_height, float radius, f
     return sd_extrude(length(vec2(q.x, q.z)) - radius, q.y, half_height, rounding);
 }
 
+// A cone frustum along y: radius r1 at y = -h, r2 at y = +h (either may be 0, not both). In the
+// (rho, y) half-plane its profile is a convex trapezoid; the value is the distance to the nearer
+// of the cap segment on the point's side (ca) and the slanted side (cb), negative inside: the
+// exact signed distance. Range: the shape lies in the cylinder (max(r1, r2), h), so in the ball
+// of radius |(max(r1, r2), h)|.
+SDFPRUNE_FN float sd_capped_cone(vec3 q, float h, float r1, float r2) {
+    vec2 p = vec2(length(vec2(q.x, q.z)), q.y);
+    vec2 k1 = vec2(r2, h);
+    vec2 k2 = vec2(r2 - r1, 2.0f * h);
+    vec2 ca = vec2(p.x - min(p.x, p.y < 0.0f ? r1 : r2), abs(p.y) - h);
+    vec2 cb = p - k1 + k2 * clamp(dot(k1 - p, k2) / dot(k2, k2), 0.0f, 1.0f);
+    float s = (cb.x < 0.0f && ca.y < 0.0f) ? -1.0f : 1.0f;
+    return s * sqrt(min(dot(ca, ca), dot(cb, cb)));
+}
+
 SDFPRUNE_FN float eval_primitive_local(uint kind, PrimitiveParams prm, vec3 q) {
     if (kind == kPrimSphere) return sd_sphere(q, prm.a.x);
     if (kind == kPrimBox)
@@ -138,7 +155,8 @@ SDFPRUNE_FN float eval_primitive_local(uint kind, PrimitiveParams prm, vec3 q) {
     if (kind == kPrimCone) return sd_cone(q, prm.a.x, prm.a.y);
     if (kind == kPrimCapsule) return sd_capsule(q, prm.a.x, prm.a.y);
     if (kind == kPrimTorus) return sd_torus(q, prm.a.x, prm.a.y);
-    return sd_rounded_cylinder(q, prm.a.x, prm.a.y, prm.a.z);
+    if (kind == kPrimRoundedCylinder) return sd_rounded_cylinder(q, prm.a.x, prm.a.y, prm.a.z);
+    return sd_capped_cone(q, prm.a.x, prm.a.y, prm.a.z);
 }
 
 SDFPRUNE_FN float eval_primitive(uint kind, PrimitiveParams prm, vec3 p) {
