@@ -184,6 +184,50 @@ TEST(PrimitivesExact, CappedCone) {
     EXPECT_EQ(validate_primitive(math::kPrimCappedCone, bad), "radius or top_radius must be > 0");
 }
 
+// ---- hexagonal prism ---------------------------------------------------------------------
+
+// The hexagon's 6 sides as exact segment distances, inside by its 6 half-planes, extruded case
+// by case (not by the min/max formula of sd_extrude).
+double hex_prism_reference(vec3 p, double radius, double h) {
+    P2 v[6];
+    for (int i = 0; i < 6; ++i)
+        v[i] = {radius * std::cos(M_PI / 3 * i), radius * std::sin(M_PI / 3 * i)};
+    const P2 q{p.x, p.z};
+    double d = INFINITY;
+    bool inside = true;
+    for (int i = 0; i < 6; ++i) {
+        const P2 a = v[i], b = v[(i + 1) % 6];
+        d = std::min(d, dist_segment(q, a, b));
+        // Counter-clockwise vertices: inside is left of every side.
+        if ((b.x - a.x) * (q.y - a.y) - (b.y - a.y) * (q.x - a.x) < 0) inside = false;
+    }
+    const double d2 = inside ? -d : d, dy = std::fabs(p.y) - h;
+    if (d2 > 0 && dy > 0) return std::hypot(d2, dy);
+    if (d2 > 0) return d2;
+    if (dy > 0) return dy;
+    return std::max(d2, dy);
+}
+
+TEST(PrimitivesExact, HexPrism) {
+    SceneBuilder b;
+    // Circumradius 1 (vertices at (±1, 0) and (±1/2, ±√3/2) in xz), apothem √3/2, full height 2.
+    const double a = std::sqrt(3.0) / 2;
+    check_shape(
+        b, b.hex_prism(1.0f, 2.0f),
+        {{{0, 0, 0}, -a},
+         {{0, 0, 2}, 2 - a},    // off a flat side
+         {{3, 0, 0}, 2.0},      // off a vertex
+         {{0, 1.5f, 0}, 0.5},   // above the top
+         {{0, 0.5f, 0}, -0.5},  // the top is nearer than the sides
+         {{0.5f, 0, 0}, -a / 2},
+         {{3, 3, 0}, std::sqrt(8.0)},
+         {{0, 3, 2}, std::hypot(2.0, 2 - a)}},
+        [](vec3 p) { return hex_prism_reference(p, 1, 1); }, 2e-6, 2.0f);
+    check_shape(
+        b, b.hex_prism(0.3f, 3.0f), {{{0, 2, 0}, 0.5}},
+        [](vec3 p) { return hex_prism_reference(p, 0.3, 1.5); }, 2e-6, 2.0f);
+}
+
 // ---- parameters -----------------------------------------------------------------------------
 
 TEST(PrimitivesExact, InvalidParametersAreRefused) {

@@ -123,6 +123,8 @@ inline Shape random_primitive(SceneBuilder& b, Rng& r, uint32_t kind) {
             const float r2 = u > 0.85f ? 0.0f : r.uniform(0.05f, 0.55f);
             return b.capped_cone(r1, r2, r.uniform(0.15f, 1.2f));
         }
+        case math::kPrimHexPrism:
+            return b.hex_prism(r.uniform(0.1f, 0.55f), r.uniform(0.1f, 1.2f));
         default:
             throw std::logic_error("random_primitive: no generator for kind " +
                                    std::to_string(kind));

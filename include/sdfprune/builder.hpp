@@ -55,6 +55,9 @@ public:
     // Cone frustum along y, centred: `radius` at y = -height/2, `top_radius` at +height/2
     // (either may be 0).
     Shape capped_cone(float radius, float top_radius, float height);
+    // Hexagonal prism along y, centred: vertices at distance `radius` from the axis (two of
+    // them on the x axis), full `height`.
+    Shape hex_prism(float radius, float height);
     // Any kind of primitives.hpp's table with its fields in `shape` (checked when built).
     Shape primitive(uint32_t kind, const PrimitiveShape& shape);
 

@@ -143,6 +143,14 @@ inline constexpr PrimitiveKindInfo kPrimitiveTable[math::kPrimitiveKindCount] = 
              return std::string("radius or top_radius must be > 0");
          return std::string();
      }},
+    {math::kPrimHexPrism, "hex_prism",
+     "hexagonal prism along y of full `height`; `radius` = the hexagon's circumradius (vertices at x = ±radius)",
+     {table_detail::req("height", SDFPRUNE_AT(height), 1, table_detail::kPos, 1, 0.5f),
+      table_detail::req("radius", SDFPRUNE_AT(radius), 1, table_detail::kPos, 0, 0.8660254f)}, 2,
+     true,
+     [](const PrimitiveShape& s) { return vec3(s.radius, s.height / 2, s.radius * 0.8660254f); },
+     [](const PrimitiveShape& s) { return std::sqrt(s.radius * s.radius + s.height * s.height / 4); },
+     nullptr},
 };
 // clang-format on
 #undef SDFPRUNE_AT

@@ -27,7 +27,8 @@ SDFPRUNE_CONST uint kPrimCapsule = 4u;
 SDFPRUNE_CONST uint kPrimTorus = 5u;
 SDFPRUNE_CONST uint kPrimRoundedCylinder = 6u;
 SDFPRUNE_CONST uint kPrimCappedCone = 7u;
-SDFPRUNE_CONST uint kPrimitiveKindCount = 8u;
+SDFPRUNE_CONST uint kPrimHexPrism = 8u;
+SDFPRUNE_CONST uint kPrimitiveKindCount = 9u;
 // Operator kinds, stored in the same field as the primitive kinds.
 SDFPRUNE_CONST uint kOpUnion = 16u;
 SDFPRUNE_CONST uint kOpIntersection = 17u;
@@ -61,6 +62,7 @@ SDFPRUNE_FN float tape_sign(uint word) { return tape_negated(word) ? -1.0f : 1.0
 //   torus    a.x major radius (in xz), a.y minor radius
 //   rounded_cylinder  a.x half height (y), a.y radius, a.z rim rounding
 //   capped_cone       a.x half height h (y), a.y radius at y = -h, a.z radius at y = +h
+//   hex_prism         a.x apothem a (the hexagon's inradius, flat sides at z = ±a), a.y half height
 // (include/sdfprune/primitives.hpp maps each kind's scene-file fields to these slots.)
 // Every primitive below is an exact distance (1-Lipschitz, |f| = distance to the surface), so the
 // Lipschitz range f(c) ± L·R holds; each bounded one says why it lies in the ball of radius rho
@@ -147,6 +149,21 @@ SDFPRUNE_FN float sd_capped_cone(vec3 q, float h, float r1, float r2) {
     return s * sqrt(min(dot(ca, ca), dot(cb, cb)));
 }
 
+// A hexagonal prism along y: a regular hexagon in xz with vertices at x = ±2a/√3 and flat sides
+// at z = ±a (a: the apothem), extruded to |y| <= h. Reflections (isometries) fold (x, z) into the
+// sector of the side z = a, where the 2D value is the signed distance to that side's segment:
+// exact. The extrusion of an exact 2D distance is exact. Range: the shape lies in the cylinder
+// (2a/√3, h), so in the ball of radius |(2a/√3, h)|.
+SDFPRUNE_FN float sd_hex_prism(vec3 q, float apothem, float h) {
+    vec2 k = vec2(-0.8660254f, 0.5f);
+    vec2 p = abs(vec2(q.x, q.z));
+    p = p - 2.0f * min(dot(k, p), 0.0f) * k;
+    float half_side = 0.57735027f * apothem;
+    float e = length(p - vec2(clamp(p.x, -half_side, half_side), apothem));
+    vec2 w = vec2(p.y > apothem ? e : -e, abs(q.y) - h);
+    return min(max(w.x, w.y), 0.0f) + length(max(w, 0.0f));
+}
+
 SDFPRUNE_FN float eval_primitive_local(uint kind, PrimitiveParams prm, vec3 q) {
     if (kind == kPrimSphere) return sd_sphere(q, prm.a.x);
     if (kind == kPrimBox)
@@ -156,7 +173,8 @@ SDFPRUNE_FN float eval_primitive_local(uint kind, PrimitiveParams prm, vec3 q) {
     if (kind == kPrimCapsule) return sd_capsule(q, prm.a.x, prm.a.y);
     if (kind == kPrimTorus) return sd_torus(q, prm.a.x, prm.a.y);
     if (kind == kPrimRoundedCylinder) return sd_rounded_cylinder(q, prm.a.x, prm.a.y, prm.a.z);
-    return sd_capped_cone(q, prm.a.x, prm.a.y, prm.a.z);
+    if (kind == kPrimCappedCone) return sd_capped_cone(q, prm.a.x, prm.a.y, prm.a.z);
+    return sd_hex_prism(q, prm.a.x, prm.a.y);
 }
 
 SDFPRUNE_FN float eval_primitive(uint kind, PrimitiveParams prm, vec3 p) {

@@ -82,6 +82,13 @@ Shape SceneBuilder::capped_cone(float radius, float top_radius, float height) {
     return add({primitive_desc(math::kPrimCappedCone, s), {}});
 }
 
+Shape SceneBuilder::hex_prism(float radius, float height) {
+    PrimitiveShape s;
+    s.radius = radius;
+    s.height = height;
+    return add({primitive_desc(math::kPrimHexPrism, s), {}});
+}
+
 Shape SceneBuilder::combine(uint32_t kind, Shape a, Shape b, float k) {
     if (a.builder_ != this || b.builder_ != this)
         throw SceneError("shapes from another builder cannot be combined");
