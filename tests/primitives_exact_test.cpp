@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <functional>
 #include <string>
@@ -226,6 +227,76 @@ TEST(PrimitivesExact, HexPrism) {
     check_shape(
         b, b.hex_prism(0.3f, 3.0f), {{{0, 2, 0}, 0.5}},
         [](vec3 p) { return hex_prism_reference(p, 0.3, 1.5); }, 2e-6, 2.0f);
+}
+
+// ---- octahedron ----------------------------------------------------------------------------
+
+using D3 = std::array<double, 3>;
+D3 sub(D3 a, D3 b) {
+    return {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
+}
+double dot3(D3 a, D3 b) {
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+// Distance from p to the triangle abc (closest point by Voronoi regions, Ericson 5.1.5).
+double dist_triangle(D3 p, D3 a, D3 b, D3 c) {
+    const D3 ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
+    auto at = [&](double v, double w) {
+        const D3 x{a[0] + ab[0] * v + ac[0] * w, a[1] + ab[1] * v + ac[1] * w,
+                   a[2] + ab[2] * v + ac[2] * w};
+        const D3 d = sub(p, x);
+        return std::sqrt(dot3(d, d));
+    };
+    const double d1 = dot3(ab, ap), d2 = dot3(ac, ap);
+    if (d1 <= 0 && d2 <= 0) return at(0, 0);
+    const D3 bp = sub(p, b);
+    const double d3 = dot3(ab, bp), d4 = dot3(ac, bp);
+    if (d3 >= 0 && d4 <= d3) return at(1, 0);
+    const double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) return at(d1 / (d1 - d3), 0);
+    const D3 cp = sub(p, c);
+    const double d5 = dot3(ab, cp), d6 = dot3(ac, cp);
+    if (d6 >= 0 && d5 <= d6) return at(0, 1);
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) return at(0, d2 / (d2 - d6));
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+        const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return at(1 - w, w);
+    }
+    const double denom = 1 / (va + vb + vc);
+    return at(vb * denom, vc * denom);
+}
+
+// The eight faces as triangles; inside, the distance to the nearest face plane.
+double octahedron_reference(vec3 p, double s) {
+    const D3 q{p.x, p.y, p.z};
+    double d = INFINITY, plane = -INFINITY;
+    for (int f = 0; f < 8; ++f) {
+        const double sx = f & 1 ? -1 : 1, sy = f & 2 ? -1 : 1, sz = f & 4 ? -1 : 1;
+        d = std::min(d, dist_triangle(q, {sx * s, 0, 0}, {0, sy * s, 0}, {0, 0, sz * s}));
+        plane = std::max(plane, (sx * q[0] + sy * q[1] + sz * q[2] - s) / std::sqrt(3.0));
+    }
+    return plane <= 0 ? plane : d;
+}
+
+TEST(PrimitivesExact, Octahedron) {
+    SceneBuilder b;
+    const double s3 = std::sqrt(3.0);
+    check_shape(
+        b, b.octahedron(1.0f),
+        {{{0, 0, 0}, -1 / s3},
+         {{2, 0, 0}, 1.0},  // off a vertex
+         {{0, -3, 0}, 2.0},
+         {{1, 1, 0}, std::sqrt(0.5)},      // off an edge's midpoint
+         {{1, 1, 1}, 2 / s3},              // off a face's centre
+         {{0.2f, 0.2f, 0.2f}, -0.4 / s3},  // inside, nearest face
+         {{0, 0, 0.5f}, -0.5 / s3}},
+        [](vec3 p) { return octahedron_reference(p, 1); }, 2e-6, 2.0f);
+    check_shape(
+        b, b.octahedron(0.35f), {{{0, 0, 1}, 0.65}},
+        [](vec3 p) { return octahedron_reference(p, 0.35); }, 2e-6, 1.0f);
 }
 
 // ---- parameters -----------------------------------------------------------------------------

@@ -125,6 +125,8 @@ inline Shape random_primitive(SceneBuilder& b, Rng& r, uint32_t kind) {
         }
         case math::kPrimHexPrism:
             return b.hex_prism(r.uniform(0.1f, 0.55f), r.uniform(0.1f, 1.2f));
+        case math::kPrimOctahedron:
+            return b.octahedron(r.uniform(0.15f, 0.7f));
         default:
             throw std::logic_error("random_primitive: no generator for kind " +
                                    std::to_string(kind));

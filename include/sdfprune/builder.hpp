@@ -58,6 +58,7 @@ public:
     // Hexagonal prism along y, centred: vertices at distance `radius` from the axis (two of
     // them on the x axis), full `height`.
     Shape hex_prism(float radius, float height);
+    Shape octahedron(float radius);  // |x| + |y| + |z| <= radius: vertices on the axes
     // Any kind of primitives.hpp's table with its fields in `shape` (checked when built).
     Shape primitive(uint32_t kind, const PrimitiveShape& shape);
 

@@ -151,6 +151,10 @@ inline constexpr PrimitiveKindInfo kPrimitiveTable[math::kPrimitiveKindCount] = 
      [](const PrimitiveShape& s) { return vec3(s.radius, s.height / 2, s.radius * 0.8660254f); },
      [](const PrimitiveShape& s) { return std::sqrt(s.radius * s.radius + s.height * s.height / 4); },
      nullptr},
+    {math::kPrimOctahedron, "octahedron", "regular octahedron |x| + |y| + |z| <= `radius`",
+     {table_detail::req("radius", SDFPRUNE_AT(radius), 1, table_detail::kPos, 0)}, 1, true,
+     [](const PrimitiveShape& s) { return vec3(s.radius); },
+     [](const PrimitiveShape& s) { return s.radius; }, nullptr},
 };
 // clang-format on
 #undef SDFPRUNE_AT

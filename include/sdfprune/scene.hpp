@@ -65,7 +65,7 @@ float spectral_norm(const Affine& a);
 // The kind-specific parameters of a primitive, in the scene format's own terms.
 struct PrimitiveShape {
     float radius = 0;  // sphere, cylinder, cone (base), capsule, rounded_cylinder, capped_cone,
-                       // hex_prism (circumradius)
+                       // hex_prism (circumradius), octahedron
     float height = 0;        // cylinder, cone, rounded_cylinder (full, along y); capsule (segment)
     vec3 sides;              // box: full lengths
     vec4 bevel;              // box: xz corner radii, quadrants (+x+z, +x-z, -x+z, -x-z)

@@ -28,7 +28,8 @@ SDFPRUNE_CONST uint kPrimTorus = 5u;
 SDFPRUNE_CONST uint kPrimRoundedCylinder = 6u;
 SDFPRUNE_CONST uint kPrimCappedCone = 7u;
 SDFPRUNE_CONST uint kPrimHexPrism = 8u;
-SDFPRUNE_CONST uint kPrimitiveKindCount = 9u;
+SDFPRUNE_CONST uint kPrimOctahedron = 9u;
+SDFPRUNE_CONST uint kPrimitiveKindCount = 10u;
 // Operator kinds, stored in the same field as the primitive kinds.
 SDFPRUNE_CONST uint kOpUnion = 16u;
 SDFPRUNE_CONST uint kOpIntersection = 17u;
@@ -63,6 +64,7 @@ SDFPRUNE_FN float tape_sign(uint word) { return tape_negated(word) ? -1.0f : 1.0
 //   rounded_cylinder  a.x half height (y), a.y radius, a.z rim rounding
 //   capped_cone       a.x half height h (y), a.y radius at y = -h, a.z radius at y = +h
 //   hex_prism         a.x apothem a (the hexagon's inradius, flat sides at z = ±a), a.y half height
+//   octahedron        a.x radius s (|x| + |y| + |z| <= s)
 // (include/sdfprune/primitives.hpp maps each kind's scene-file fields to these slots.)
 // Every primitive below is an exact distance (1-Lipschitz, |f| = distance to the surface), so the
 // Lipschitz range f(c) ± L·R holds; each bounded one says why it lies in the ball of radius rho
@@ -164,6 +166,29 @@ SDFPRUNE_FN float sd_hex_prism(vec3 q, float apothem, float h) {
     return min(max(w.x, w.y), 0.0f) + length(max(w, 0.0f));
 }
 
+// The regular octahedron |x| + |y| + |z| <= s (vertices on the axes at distance s). Where the
+// point projects into its octant's face (every |p_i| >= m/3, m = |x| + |y| + |z| − s; always so
+// inside) the distance is to that face's plane, m/√3 (inside, the octant's face plane is the
+// nearest of the eight). Elsewhere it is the distance to the face's boundary: in the octant's
+// frame rotated so that the coordinate below m/3 comes first, to the edge from (0, s, 0) to
+// (0, 0, s), clamped to it. Exact (1-Lipschitz). Range: the shape lies in the ball of radius s.
+SDFPRUNE_FN float sd_octahedron(vec3 q, float s) {
+    vec3 p = abs(q);
+    float m = p.x + p.y + p.z - s;
+    vec3 r;
+    if (3.0f * p.x < m) {
+        r = p;
+    } else if (3.0f * p.y < m) {
+        r = vec3(p.y, p.z, p.x);
+    } else if (3.0f * p.z < m) {
+        r = vec3(p.z, p.x, p.y);
+    } else {
+        return m * 0.57735027f;
+    }
+    float k = clamp(0.5f * (r.z - r.y + s), 0.0f, s);
+    return length(vec3(r.x, r.y - s + k, r.z - k));
+}
+
 SDFPRUNE_FN float eval_primitive_local(uint kind, PrimitiveParams prm, vec3 q) {
     if (kind == kPrimSphere) return sd_sphere(q, prm.a.x);
     if (kind == kPrimBox)
@@ -174,7 +199,8 @@ SDFPRUNE_FN float eval_primitive_local(uint kind, PrimitiveParams prm, vec3 q) {
     if (kind == kPrimTorus) return sd_torus(q, prm.a.x, prm.a.y);
     if (kind == kPrimRoundedCylinder) return sd_rounded_cylinder(q, prm.a.x, prm.a.y, prm.a.z);
     if (kind == kPrimCappedCone) return sd_capped_cone(q, prm.a.x, prm.a.y, prm.a.z);
-    return sd_hex_prism(q, prm.a.x, prm.a.y);
+    if (kind == kPrimHexPrism) return sd_hex_prism(q, prm.a.x, prm.a.y);
+    return sd_octahedron(q, prm.a.x);
 }
 
 SDFPRUNE_FN float eval_primitive(uint kind, PrimitiveParams prm, vec3 p) {

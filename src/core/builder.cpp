@@ -89,6 +89,12 @@ Shape SceneBuilder::hex_prism(float radius, float height) {
     return add({primitive_desc(math::kPrimHexPrism, s), {}});
 }
 
+Shape SceneBuilder::octahedron(float radius) {
+    PrimitiveShape s;
+    s.radius = radius;
+    return add({primitive_desc(math::kPrimOctahedron, s), {}});
+}
+
 Shape SceneBuilder::combine(uint32_t kind, Shape a, Shape b, float k) {
     if (a.builder_ != this || b.builder_ != this)
         throw SceneError("shapes from another builder cannot be combined");
