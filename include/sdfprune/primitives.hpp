@@ -155,6 +155,15 @@ inline constexpr PrimitiveKindInfo kPrimitiveTable[math::kPrimitiveKindCount] = 
      {table_detail::req("radius", SDFPRUNE_AT(radius), 1, table_detail::kPos, 0)}, 1, true,
      [](const PrimitiveShape& s) { return vec3(s.radius); },
      [](const PrimitiveShape& s) { return s.radius; }, nullptr},
+    {math::kPrimPlane, "plane",
+     "half-space dot(p, normal) <= offset·|normal| (unbounded: see bounding_box)",
+     {table_detail::req("normal", SDFPRUNE_AT(normal), 3, table_detail::kAny, 0),
+      table_detail::opt("offset", SDFPRUNE_AT(offset), 1, table_detail::kAny, 3)}, 2, false,
+     nullptr, nullptr,
+     [](const PrimitiveShape& s) {
+         if (!(math::length(s.normal) > 1e-20f)) return std::string("normal must not be zero");
+         return std::string();
+     }},
 };
 // clang-format on
 #undef SDFPRUNE_AT
