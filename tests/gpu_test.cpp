@@ -180,6 +180,7 @@ TEST(Gpu, RenderMatchesCpu) {
     spec.placement = Placement::kMixed;
     RandomSceneSpec cut = spec;
     cut.plane_cut = true;
+    cut.union_share = 1.0f;  // a union of solids, half of it cut away: something to hit
     const Scene scenes[] = {builtin_scene("demo"), random_scene(77, spec), random_scene(78, cut)};
     for (const Scene& sc : scenes) {
         PruneOptions o;
