@@ -7,8 +7,9 @@
 //
 // Adding a primitive: a kind id and an sd_* function in sdf_math.h (one more line in
 // eval_primitive_local), any new PrimitiveShape member in scene.hpp, one entry below, a builder
-// method, and its analytic and range tests (tests/primitives_test.cpp,
-// tests/primitive_range_test.cpp).
+// method, and a generator in tests/prune_check.hpp (random_primitive): the range test
+// (tests/primitive_range_test.cpp), the JSON round trip and the property tests then cover it;
+// its analytic test goes beside the others (tests/primitives_exact_test.cpp).
 #pragma once
 
 #include <algorithm>
