@@ -18,6 +18,11 @@ SceneNodeDesc primitive_desc(uint32_t kind, const PrimitiveShape& shape) {
 }
 }  // namespace
 
+Shape SceneBuilder::primitive(uint32_t kind, const PrimitiveShape& shape) {
+    if (kind >= math::kPrimitiveKindCount) throw SceneError("unknown primitive");
+    return add({primitive_desc(kind, shape), {}});
+}
+
 Shape SceneBuilder::sphere(float radius) {
     PrimitiveShape s;
     s.radius = radius;
@@ -59,6 +64,42 @@ Shape SceneBuilder::torus(float major_radius, float minor_radius) {
     s.major_radius = major_radius;
     s.minor_radius = minor_radius;
     return add({primitive_desc(math::kPrimTorus, s), {}});
+}
+
+Shape SceneBuilder::rounded_cylinder(float radius, float height, float rounding) {
+    PrimitiveShape s;
+    s.radius = radius;
+    s.height = height;
+    s.rounding = rounding;
+    return add({primitive_desc(math::kPrimRoundedCylinder, s), {}});
+}
+
+Shape SceneBuilder::capped_cone(float radius, float top_radius, float height) {
+    PrimitiveShape s;
+    s.radius = radius;
+    s.top_radius = top_radius;
+    s.height = height;
+    return add({primitive_desc(math::kPrimCappedCone, s), {}});
+}
+
+Shape SceneBuilder::hex_prism(float radius, float height) {
+    PrimitiveShape s;
+    s.radius = radius;
+    s.height = height;
+    return add({primitive_desc(math::kPrimHexPrism, s), {}});
+}
+
+Shape SceneBuilder::octahedron(float radius) {
+    PrimitiveShape s;
+    s.radius = radius;
+    return add({primitive_desc(math::kPrimOctahedron, s), {}});
+}
+
+Shape SceneBuilder::plane(vec3 normal, float offset) {
+    PrimitiveShape s;
+    s.normal = normal;
+    s.offset = offset;
+    return add({primitive_desc(math::kPrimPlane, s), {}});
 }
 
 Shape SceneBuilder::combine(uint32_t kind, Shape a, Shape b, float k) {

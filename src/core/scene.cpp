@@ -5,6 +5,7 @@
 #include <cmath>
 #include <string>
 
+#include "sdfprune/primitives.hpp"
 #include "sdfprune/scene.hpp"
 
 namespace sdfprune {
@@ -13,21 +14,9 @@ namespace {
 bool finite(float x) { return std::isfinite(x); }
 bool finite(vec3 v) { return finite(v.x) && finite(v.y) && finite(v.z); }
 
-std::string positive_error(const char* field, float v) {
-    if (!finite(v)) return std::string(field) + " must be finite";
-    if (!(v > 0)) return std::string(field) + " must be > 0 (got " + std::to_string(v) + ")";
-    return {};
-}
-
 std::string non_negative_error(const char* field, float v) {
     if (!finite(v)) return std::string(field) + " must be finite";
     if (!(v >= 0)) return std::string(field) + " must be >= 0 (got " + std::to_string(v) + ")";
-    return {};
-}
-
-std::string first_error(std::initializer_list<std::string> errors) {
-    for (const std::string& e : errors)
-        if (!e.empty()) return e;
     return {};
 }
 
@@ -36,42 +25,8 @@ math::PrimitiveParams bake_params(uint32_t kind, const PrimitiveShape& s, const 
     p.row0 = vec4(world.m[0], world.m[1], world.m[2], world.m[3]);
     p.row1 = vec4(world.m[4], world.m[5], world.m[6], world.m[7]);
     p.row2 = vec4(world.m[8], world.m[9], world.m[10], world.m[11]);
-    switch (kind) {
-        case math::kPrimSphere: p.a = vec4(s.radius, 0, 0, 0); break;
-        case math::kPrimBox:
-            p.a = vec4(s.sides.x / 2, s.sides.y / 2, s.sides.z / 2, 0);
-            p.b = s.bevel;
-            p.c = vec4(s.round_x, s.round_y, 0, 0);
-            break;
-        case math::kPrimCylinder: p.a = vec4(s.height / 2, s.radius, 0, 0); break;
-        case math::kPrimCone: p.a = vec4(s.radius, s.height / 2, 0, 0); break;
-        case math::kPrimCapsule: p.a = vec4(s.height / 2, s.radius, 0, 0); break;
-        default: p.a = vec4(s.major_radius, s.minor_radius, 0, 0); break;
-    }
+    primitive_slots(kind, s, p.a, p.b, p.c);
     return p;
-}
-
-// Half extents of a local box that holds the primitive, centred at the local origin.
-vec3 local_half_extents(uint32_t kind, const PrimitiveShape& s) {
-    switch (kind) {
-        case math::kPrimSphere: return vec3(s.radius);
-        case math::kPrimBox: return s.sides * 0.5f;
-        case math::kPrimCylinder:
-        case math::kPrimCone: return {s.radius, s.height / 2, s.radius};
-        case math::kPrimCapsule: return {s.radius, s.height / 2 + s.radius, s.radius};
-        default: return {s.major_radius + s.minor_radius, s.minor_radius,
-                         s.major_radius + s.minor_radius};
-    }
-}
-
-// Radius of a ball about the local origin that holds the primitive.
-float local_bounding_radius(uint32_t kind, const PrimitiveShape& s) {
-    switch (kind) {
-        case math::kPrimSphere: return s.radius;
-        case math::kPrimCapsule: return s.height / 2 + s.radius;
-        case math::kPrimTorus: return s.major_radius + s.minor_radius;
-        default: return math::length(local_half_extents(kind, s));
-    }
 }
 
 PrimitiveBound primitive_bound(uint32_t kind, const PrimitiveShape& shape,
@@ -88,10 +43,11 @@ PrimitiveBound primitive_bound(uint32_t kind, const PrimitiveShape& shape,
                             std::fabs(dotc(1, 1) - s2) < tol && std::fabs(dotc(2, 2) - s2) < tol &&
                             std::fabs(dotc(0, 1)) < tol && std::fabs(dotc(0, 2)) < tol &&
                             std::fabs(dotc(1, 2)) < tol;
-    if (!similarity) return b;
+    // An unbounded primitive (a half-space) has no ball holding it: Lipschitz range only.
+    if (!similarity || !primitive_info(kind).bounded) return b;
     b.centre = world.inverse().apply(vec3(0.0f));
     b.f0 = math::eval_primitive_local(kind, params, vec3(0.0f));
-    b.rho = local_bounding_radius(kind, shape);
+    b.rho = primitive_bounding_radius(kind, shape);
     // Rounding of the centre and the scale is absorbed into a slightly looser scale/rho.
     b.scale = float(std::sqrt(s2) * (1 - 2e-6));
     b.rho *= 1 + 1e-6f;
@@ -107,36 +63,7 @@ std::string validate_node(const SceneNodeDesc& n) {
         if (n.kind > math::kOpDifference) return "unknown operator";
         return non_negative_error("blendRadius", n.blend);
     }
-    const PrimitiveShape& s = n.shape;
-    std::string e;
-    switch (n.kind) {
-        case math::kPrimSphere: e = positive_error("radius", s.radius); break;
-        case math::kPrimBox:
-            e = first_error({positive_error("sides[0]", s.sides.x),
-                             positive_error("sides[1]", s.sides.y),
-                             positive_error("sides[2]", s.sides.z),
-                             non_negative_error("bevel[0]", s.bevel.x),
-                             non_negative_error("bevel[1]", s.bevel.y),
-                             non_negative_error("bevel[2]", s.bevel.z),
-                             non_negative_error("bevel[3]", s.bevel.w),
-                             non_negative_error("round_x", s.round_x),
-                             non_negative_error("round_y", s.round_y)});
-            break;
-        case math::kPrimCylinder:
-        case math::kPrimCone:
-            e = first_error({positive_error("radius", s.radius), positive_error("height", s.height)});
-            break;
-        case math::kPrimCapsule:
-            e = first_error(
-                {positive_error("radius", s.radius), non_negative_error("height", s.height)});
-            break;
-        case math::kPrimTorus:
-            e = first_error({positive_error("major_radius", s.major_radius),
-                             positive_error("minor_radius", s.minor_radius)});
-            break;
-        default: return "unknown primitive";
-    }
-    if (!e.empty()) return e;
+    if (std::string e = validate_primitive(n.kind, n.shape); !e.empty()) return e;
     if (!finite(n.color) || n.color.x < 0 || n.color.y < 0 || n.color.z < 0 || n.color.x > 1 ||
         n.color.y > 1 || n.color.z > 1)
         return "color components must be in [0, 1]";
@@ -227,16 +154,39 @@ Scene build_scene(std::span<const SceneNodeDesc> nodes, uint32_t root, const Aab
     return sc;
 }
 
+bool shape_is_bounded(const Scene& sc) {
+    // Post-order: children before parents. A difference's right operand (negated) never makes
+    // the result bounded or unbounded: the result lies in its left operand.
+    std::vector<uint8_t> bounded(sc.size());
+    for (uint32_t i = 0; i < sc.size(); ++i) {
+        const uint32_t k = sc.kind[i];
+        if (sc.is_primitive(i))
+            bounded[i] = primitive_info(k).bounded;
+        else if (k == math::kOpUnion)
+            bounded[i] = bounded[sc.left[i]] && bounded[sc.right[i]];
+        else if (k == math::kOpIntersection)
+            bounded[i] = bounded[sc.left[i]] || bounded[sc.right[i]];
+        else
+            bounded[i] = bounded[sc.left[i]];
+    }
+    return sc.size() == 0 || bounded[sc.root()];
+}
+
 Aabb bounding_box(const Scene& scene, float pad) {
+    if (!shape_is_bounded(scene))
+        throw SceneError(
+            "the scene's shape is unbounded (a plane not cut off by bounded shapes): give it an "
+            "explicit aabb");
     vec3 lo(INFINITY), hi(-INFINITY);
     for (uint32_t p = 0; p < scene.primitive_count(); ++p) {
+        if (!primitive_info(scene.kind[scene.primitive_node[p]]).bounded) continue;
         const math::PrimitiveParams& prm = scene.params[p];
         Affine world;
         const vec4 rows[3] = {prm.row0, prm.row1, prm.row2};
         for (int i = 0; i < 3; ++i)
             for (int j = 0; j < 4; ++j) world.m[4 * i + j] = rows[i][j];
         const Affine inv = world.inverse();
-        const vec3 h = local_half_extents(scene.kind[scene.primitive_node[p]], scene.shape[p]);
+        const vec3 h = primitive_half_extents(scene.kind[scene.primitive_node[p]], scene.shape[p]);
         const vec3 c = inv.apply(vec3(0.0f));
         for (int i = 0; i < 3; ++i) {
             const float e = std::fabs(inv.m[4 * i]) * h.x + std::fabs(inv.m[4 * i + 1]) * h.y +
@@ -276,13 +226,11 @@ SceneInfo scene_info(const Scene& sc) {
 }
 
 namespace {
-constexpr const char* kPrimitiveNames[math::kPrimitiveKindCount] = {
-    "sphere", "box", "cylinder", "cone", "capsule", "torus"};
 constexpr const char* kOperatorNames[3] = {"union", "inter", "sub"};
 }  // namespace
 
 const char* primitive_kind_name(uint32_t kind) {
-    return kind < math::kPrimitiveKindCount ? kPrimitiveNames[kind] : "?";
+    return kind < math::kPrimitiveKindCount ? kPrimitiveTable[kind].name : "?";
 }
 
 const char* operator_kind_name(uint32_t kind) {
@@ -293,7 +241,7 @@ const char* operator_kind_name(uint32_t kind) {
 
 uint32_t primitive_kind_from_name(std::string_view name) {
     for (uint32_t k = 0; k < math::kPrimitiveKindCount; ++k)
-        if (name == kPrimitiveNames[k]) return k;
+        if (name == kPrimitiveTable[k].name) return k;
     return kNone;
 }
 

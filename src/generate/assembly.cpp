@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "generate_internal.hpp"
+#include "sdfprune/primitives.hpp"
 
 namespace sdfprune::gen {
 
@@ -73,26 +74,7 @@ Aabb surface_bounds(const Scene& sc, float pad) {
         if (sc.is_primitive(i)) {
             const uint32_t p = sc.primitive[i];
             const PrimitiveShape& s = sc.shape[p];
-            vec3 h;
-            switch (sc.kind[i]) {
-                case math::kPrimSphere:
-                    h = vec3(s.radius);
-                    break;
-                case math::kPrimBox:
-                    h = s.sides * 0.5f;
-                    break;
-                case math::kPrimCapsule:
-                    h = {s.radius, s.height / 2 + s.radius, s.radius};
-                    break;
-                case math::kPrimTorus: {
-                    const float r = s.major_radius + s.minor_radius;
-                    h = {r, s.minor_radius, r};
-                    break;
-                }
-                default:
-                    h = {s.radius, s.height / 2, s.radius};
-                    break;  // cylinder, cone
-            }
+            const vec3 h = primitive_half_extents(sc.kind[i], s);
             const math::PrimitiveParams& prm = sc.params[p];
             Affine world;
             const vec4 rows[3] = {prm.row0, prm.row1, prm.row2};

@@ -6,14 +6,18 @@
 #include <rapidjson/stringbuffer.h>
 #include <rapidjson/writer.h>
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 
 #include "sdfprune/io.hpp"
+#include "sdfprune/primitives.hpp"
 
 namespace sdfprune {
 namespace {
 
+// The structural fields of a node; the primitives' parameter fields (primitives.hpp) follow
+// from kFirstParam on, one per distinct field name of the primitive table.
 enum class Field : uint8_t {
     None,
     Unknown,
@@ -24,42 +28,69 @@ enum class Field : uint8_t {
     LeftChild,
     RightChild,
     PrimitiveType,
-    Radius,
-    Height,
-    Sides,
-    Bevel,
-    RoundX,
-    RoundY,
     Color,
-    MajorRadius,
-    MinorRadius,
     AabbMin,
     AabbMax,
+    kFirstParam,
 };
 
 struct FieldInfo {
     const char* name;
     Field field;
-    char type;       // 's' string, 'n' number, 'a' array of numbers, 'o' object
-    uint8_t count;   // arrays: exact number of entries
+    char type;      // 's' string, 'n' number, 'a' array of numbers, 'o' object
+    uint8_t count;  // arrays: exact number of entries
+    const PrimitiveField* param = nullptr;  // parameter fields: where the values go
 };
 
-constexpr FieldInfo kFields[] = {
-    {"nodeType", Field::NodeType, 's', 0},      {"matrix", Field::Matrix, 'a', 12},
-    {"blendMode", Field::BlendMode, 's', 0},    {"blendRadius", Field::BlendRadius, 'n', 0},
-    {"leftChild", Field::LeftChild, 'o', 0},    {"rightChild", Field::RightChild, 'o', 0},
-    {"primitiveType", Field::PrimitiveType, 's', 0}, {"radius", Field::Radius, 'n', 0},
-    {"height", Field::Height, 'n', 0},          {"sides", Field::Sides, 'a', 3},
-    {"bevel", Field::Bevel, 'a', 4},            {"round_x", Field::RoundX, 'n', 0},
-    {"round_y", Field::RoundY, 'n', 0},         {"color", Field::Color, 'a', 3},
-    {"major_radius", Field::MajorRadius, 'n', 0}, {"minor_radius", Field::MinorRadius, 'n', 0},
-    {"aabb_min", Field::AabbMin, 'a', 3},       {"aabb_max", Field::AabbMax, 'a', 3},
-};
+// Every field a node may have: the structural ones, then each primitive field name once.
+const std::vector<FieldInfo>& fields() {
+    static const std::vector<FieldInfo> all = [] {
+        std::vector<FieldInfo> v = {
+            {"nodeType", Field::NodeType, 's', 0},
+            {"matrix", Field::Matrix, 'a', 12},
+            {"blendMode", Field::BlendMode, 's', 0},
+            {"blendRadius", Field::BlendRadius, 'n', 0},
+            {"leftChild", Field::LeftChild, 'o', 0},
+            {"rightChild", Field::RightChild, 'o', 0},
+            {"primitiveType", Field::PrimitiveType, 's', 0},
+            {"color", Field::Color, 'a', 3},
+            {"aabb_min", Field::AabbMin, 'a', 3},
+            {"aabb_max", Field::AabbMax, 'a', 3},
+        };
+        uint32_t next = uint32_t(Field::kFirstParam);
+        for (const PrimitiveKindInfo& k : kPrimitiveTable)
+            for (uint32_t i = 0; i < k.field_count; ++i) {
+                const PrimitiveField& f = k.fields[i];
+                const bool known = std::any_of(v.begin(), v.end(), [&](const FieldInfo& x) {
+                    return std::string_view(x.name) == f.name;
+                });
+                if (!known)
+                    v.push_back({f.name, Field(next++), f.count == 1 ? 'n' : 'a',
+                                 f.count == 1 ? uint8_t(0) : f.count, &f});
+            }
+        return v;
+    }();
+    return all;
+}
 
 const FieldInfo* field_info(Field f) {
-    for (const FieldInfo& i : kFields)
+    for (const FieldInfo& i : fields())
         if (i.field == f) return &i;
     return nullptr;
+}
+
+Field field_named(std::string_view name) {
+    for (const FieldInfo& i : fields())
+        if (name == i.name) return i.field;
+    return Field::Unknown;
+}
+
+// "sphere, box, ..." for messages.
+std::string primitive_names() {
+    std::string out;
+    for (const PrimitiveKindInfo& k : kPrimitiveTable)
+        out += (out.empty() ? "" : ", ") + std::string(k.name);
+    return out;
 }
 
 const char* type_name(char t) {
@@ -71,7 +102,9 @@ const char* type_name(char t) {
     }
 }
 
-uint32_t bit(Field f) { return 1u << uint32_t(f); }
+uint64_t bit(Field f) {
+    return uint64_t(1) << uint32_t(f);
+}
 
 // One node while it is being read.
 struct RawNode {
@@ -80,7 +113,7 @@ struct RawNode {
     bool is_right = false;
     uint8_t node_type = 0;  // 0 unset, 1 primitive, 2 operator
     uint32_t prim_kind = kNone, op_kind = kNone;
-    uint32_t seen = 0;
+    uint64_t seen = 0;
 };
 
 struct Frame {
@@ -262,9 +295,7 @@ private:
     void key(std::string_view name) {
         Frame& f = top();
         if (f.kind == Frame::Skip) return;
-        Field field = Field::Unknown;
-        for (const FieldInfo& i : kFields)
-            if (name == i.name) field = i.field;
+        const Field field = field_named(name);
         if (field != Field::Unknown) {
             RawNode& n = nodes[f.node];
             if (n.seen & bit(field)) fail("duplicate field \"" + std::string(name) + "\"");
@@ -293,8 +324,7 @@ private:
             } else {
                 n.prim_kind = primitive_kind_from_name(s);
                 if (n.prim_kind == kNone)
-                    fail("unknown primitive type " + quoted +
-                         " (sphere, box, cylinder, cone, capsule, torus)");
+                    fail("unknown primitive type " + quoted + " (" + primitive_names() + ")");
             }
         }
         f.field = Field::None;
@@ -316,16 +346,10 @@ private:
         const FieldInfo* fi = expect('n', "a number");
         if (fi) {
             if (!std::isfinite(x)) fail("numbers must be finite float values");
-            PrimitiveShape& s = nodes[f.node].desc.shape;
-            switch (fi->field) {
-                case Field::BlendRadius: nodes[f.node].desc.blend = x; break;
-                case Field::Radius: s.radius = x; break;
-                case Field::Height: s.height = x; break;
-                case Field::RoundX: s.round_x = x; break;
-                case Field::RoundY: s.round_y = x; break;
-                case Field::MajorRadius: s.major_radius = x; break;
-                default: s.minor_radius = x; break;
-            }
+            if (fi->param)
+                field_values(nodes[f.node].desc.shape, *fi->param)[0] = x;
+            else
+                nodes[f.node].desc.blend = x;
         }
         f.field = Field::None;
     }
@@ -340,10 +364,14 @@ private:
     }
 
     void store_array(RawNode& n, Field field, uint32_t i, float x) {
+        if (const FieldInfo* fi = field_info(field); fi->param) {
+            field_values(n.desc.shape, *fi->param)[i] = x;
+            return;
+        }
         switch (field) {
-            case Field::Matrix: n.desc.matrix.m[i] = x; break;
-            case Field::Sides: n.desc.shape.sides[int(i)] = x; break;
-            case Field::Bevel: n.desc.shape.bevel[int(i)] = x; break;
+            case Field::Matrix:
+                n.desc.matrix.m[i] = x;
+                break;
             case Field::Color: n.desc.color[int(i)] = x; break;
             case Field::AabbMin: aabb.min[int(i)] = x; break;
             default: aabb.max[int(i)] = x; break;
@@ -354,6 +382,7 @@ private:
         if (!(n.seen & bit(field)))
             fail("missing field \"" + std::string(field_info(field)->name) + "\"");
     }
+    void require(const RawNode& n, const char* name) { require(n, field_named(name)); }
 
     void finish_node(uint32_t index) {
         RawNode& n = nodes[index];
@@ -372,18 +401,9 @@ private:
         } else {
             require(n, Field::PrimitiveType);
             n.desc.kind = n.prim_kind;
-            switch (n.prim_kind) {
-                case math::kPrimSphere: require(n, Field::Radius); break;
-                case math::kPrimBox: require(n, Field::Sides); break;
-                case math::kPrimTorus:
-                    require(n, Field::MajorRadius);
-                    require(n, Field::MinorRadius);
-                    break;
-                default:
-                    require(n, Field::Radius);
-                    require(n, Field::Height);
-                    break;
-            }
+            const PrimitiveKindInfo& info = primitive_info(n.prim_kind);
+            for (uint32_t i = 0; i < info.field_count; ++i)
+                if (info.fields[i].required) require(n, info.fields[i].name);
         }
         if (std::string e = validate_node(n.desc); !e.empty()) fail(e);
     }
@@ -462,25 +482,22 @@ void write_primitive_fields(JsonWriter& w, const Scene& sc, uint32_t node) {
     const PrimitiveShape& s = sc.shape[p];
     w.Key("primitiveType");
     w.String(primitive_kind_name(kind));
-    switch (kind) {
-        case math::kPrimSphere: write_number(w, "radius", s.radius); break;
-        case math::kPrimBox: {
-            write_vec(w, "sides", s.sides);
-            const float b[4] = {s.bevel.x, s.bevel.y, s.bevel.z, s.bevel.w};
-            write_floats(w, "bevel", b, 4);
-            break;
-        }
-        case math::kPrimTorus:
-            write_number(w, "major_radius", s.major_radius);
-            write_number(w, "minor_radius", s.minor_radius);
-            break;
-        default:
-            write_number(w, "height", s.height);
-            write_number(w, "radius", s.radius);
-            break;
+    const PrimitiveKindInfo& info = primitive_info(kind);
+    bool rounding_written = false;
+    for (uint32_t i = 0; i < info.field_count; ++i) {
+        const PrimitiveField& f = info.fields[i];
+        const float* v = field_values(s, f);
+        if (f.count == 1)
+            write_number(w, f.name, v[0]);
+        else
+            write_floats(w, f.name, v, f.count);
+        rounding_written |= std::string_view(f.name) == "round_x";
     }
-    write_number(w, "round_x", s.round_x);
-    write_number(w, "round_y", s.round_y);
+    // The reference format gives every primitive round_x and round_y.
+    if (!rounding_written) {
+        write_number(w, "round_x", s.round_x);
+        write_number(w, "round_y", s.round_y);
+    }
     write_vec(w, "color", sc.color[p]);
 }
 
