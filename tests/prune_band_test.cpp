@@ -100,7 +100,8 @@ Scene band_scene(uint64_t seed, Transform t, uint32_t count, uint32_t grid) {
             shapes.push_back(on_cell_planes(b, r, grid));
             continue;
         }
-        const uint32_t kind = i % math::kPrimitiveKindCount;
+        // Every bounded kind (a half-space would fill half of these scenes).
+        const uint32_t kind = i % math::kPrimPlane;
         shapes.push_back(place(test::random_primitive(b, r, kind).scaled(0.5f), r, t));
     }
     // Unions mostly, so the shape stays non-empty; intersections and differences among them.
@@ -223,14 +224,14 @@ TEST_P(PruneBand, BandPointsAreNearFieldAndExact) {
         Rng r(seed + 17);
         const float R = math::length(g.cell_size()) * 0.5f;
         const std::vector<vec3> pts = band_candidates(
-            sc, c.grid / 8, c.grid, (c.far_field_c - 1.0f) * R, kSanitized ? 4 : 24, r);
+            sc, c.grid / 8, c.grid, (c.far_field_c - 1.0f) * R, kSanitized ? 8 : 24, r);
         const BandStats st = check_band(g, pts, fail);
         EXPECT_EQ(fail.count(), 0u) << fail.context() << ": " << st.far << " of " << st.band
                                     << " band points in far-field cells";
         band += st.band;
     }
     // The band is really sampled.
-    EXPECT_GT(band, kSanitized ? 50u : 500u);
+    EXPECT_GT(band, kSanitized ? 20u : 200u);
     RecordProperty("band_points", std::to_string(band));
 }
 
