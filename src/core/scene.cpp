@@ -10,12 +10,8 @@
 namespace sdfprune {
 namespace {
 
-bool finite(float x) {
-    return std::isfinite(x);
-}
-bool finite(vec3 v) {
-    return finite(v.x) && finite(v.y) && finite(v.z);
-}
+bool finite(float x) { return std::isfinite(x); }
+bool finite(vec3 v) { return finite(v.x) && finite(v.y) && finite(v.z); }
 
 std::string positive_error(const char* field, float v) {
     if (!finite(v)) return std::string(field) + " must be finite";
@@ -41,26 +37,16 @@ math::PrimitiveParams bake_params(uint32_t kind, const PrimitiveShape& s, const 
     p.row1 = vec4(world.m[4], world.m[5], world.m[6], world.m[7]);
     p.row2 = vec4(world.m[8], world.m[9], world.m[10], world.m[11]);
     switch (kind) {
-        case math::kPrimSphere:
-            p.a = vec4(s.radius, 0, 0, 0);
-            break;
+        case math::kPrimSphere: p.a = vec4(s.radius, 0, 0, 0); break;
         case math::kPrimBox:
             p.a = vec4(s.sides.x / 2, s.sides.y / 2, s.sides.z / 2, 0);
             p.b = s.bevel;
             p.c = vec4(s.round_x, s.round_y, 0, 0);
             break;
-        case math::kPrimCylinder:
-            p.a = vec4(s.height / 2, s.radius, 0, 0);
-            break;
-        case math::kPrimCone:
-            p.a = vec4(s.radius, s.height / 2, 0, 0);
-            break;
-        case math::kPrimCapsule:
-            p.a = vec4(s.height / 2, s.radius, 0, 0);
-            break;
-        default:
-            p.a = vec4(s.major_radius, s.minor_radius, 0, 0);
-            break;
+        case math::kPrimCylinder: p.a = vec4(s.height / 2, s.radius, 0, 0); break;
+        case math::kPrimCone: p.a = vec4(s.radius, s.height / 2, 0, 0); break;
+        case math::kPrimCapsule: p.a = vec4(s.height / 2, s.radius, 0, 0); break;
+        default: p.a = vec4(s.major_radius, s.minor_radius, 0, 0); break;
     }
     return p;
 }
@@ -68,32 +54,23 @@ math::PrimitiveParams bake_params(uint32_t kind, const PrimitiveShape& s, const 
 // Half extents of a local box that holds the primitive, centred at the local origin.
 vec3 local_half_extents(uint32_t kind, const PrimitiveShape& s) {
     switch (kind) {
-        case math::kPrimSphere:
-            return vec3(s.radius);
-        case math::kPrimBox:
-            return s.sides * 0.5f;
+        case math::kPrimSphere: return vec3(s.radius);
+        case math::kPrimBox: return s.sides * 0.5f;
         case math::kPrimCylinder:
-        case math::kPrimCone:
-            return {s.radius, s.height / 2, s.radius};
-        case math::kPrimCapsule:
-            return {s.radius, s.height / 2 + s.radius, s.radius};
-        default:
-            return {s.major_radius + s.minor_radius, s.minor_radius,
-                    s.major_radius + s.minor_radius};
+        case math::kPrimCone: return {s.radius, s.height / 2, s.radius};
+        case math::kPrimCapsule: return {s.radius, s.height / 2 + s.radius, s.radius};
+        default: return {s.major_radius + s.minor_radius, s.minor_radius,
+                         s.major_radius + s.minor_radius};
     }
 }
 
 // Radius of a ball about the local origin that holds the primitive.
 float local_bounding_radius(uint32_t kind, const PrimitiveShape& s) {
     switch (kind) {
-        case math::kPrimSphere:
-            return s.radius;
-        case math::kPrimCapsule:
-            return s.height / 2 + s.radius;
-        case math::kPrimTorus:
-            return s.major_radius + s.minor_radius;
-        default:
-            return math::length(local_half_extents(kind, s));
+        case math::kPrimSphere: return s.radius;
+        case math::kPrimCapsule: return s.height / 2 + s.radius;
+        case math::kPrimTorus: return s.major_radius + s.minor_radius;
+        default: return math::length(local_half_extents(kind, s));
     }
 }
 
@@ -104,9 +81,7 @@ PrimitiveBound primitive_bound(uint32_t kind, const PrimitiveShape& shape,
     double c[3][3];
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) c[j][i] = world.m[4 * i + j];
-    auto dotc = [&](int i, int j) {
-        return c[i][0] * c[j][0] + c[i][1] * c[j][1] + c[i][2] * c[j][2];
-    };
+    auto dotc = [&](int i, int j) { return c[i][0] * c[j][0] + c[i][1] * c[j][1] + c[i][2] * c[j][2]; };
     const double s2 = (dotc(0, 0) + dotc(1, 1) + dotc(2, 2)) / 3;
     const double tol = 1e-5 * s2;
     const bool similarity = s2 > 0 && std::fabs(dotc(0, 0) - s2) < tol &&
@@ -135,18 +110,17 @@ std::string validate_node(const SceneNodeDesc& n) {
     const PrimitiveShape& s = n.shape;
     std::string e;
     switch (n.kind) {
-        case math::kPrimSphere:
-            e = positive_error("radius", s.radius);
-            break;
+        case math::kPrimSphere: e = positive_error("radius", s.radius); break;
         case math::kPrimBox:
-            e = first_error(
-                {positive_error("sides[0]", s.sides.x), positive_error("sides[1]", s.sides.y),
-                 positive_error("sides[2]", s.sides.z), non_negative_error("bevel[0]", s.bevel.x),
-                 non_negative_error("bevel[1]", s.bevel.y),
-                 non_negative_error("bevel[2]", s.bevel.z),
-                 non_negative_error("bevel[3]", s.bevel.w),
-                 non_negative_error("round_x", s.round_x),
-                 non_negative_error("round_y", s.round_y)});
+            e = first_error({positive_error("sides[0]", s.sides.x),
+                             positive_error("sides[1]", s.sides.y),
+                             positive_error("sides[2]", s.sides.z),
+                             non_negative_error("bevel[0]", s.bevel.x),
+                             non_negative_error("bevel[1]", s.bevel.y),
+                             non_negative_error("bevel[2]", s.bevel.z),
+                             non_negative_error("bevel[3]", s.bevel.w),
+                             non_negative_error("round_x", s.round_x),
+                             non_negative_error("round_y", s.round_y)});
             // Each quadrant (rim) uses its own radius: where two neighbours differ, a radius
             // beyond the half side they meet across makes the field jump there, so it is no
             // longer Lipschitz and pruning would be wrong. Equal radii stay continuous.
@@ -161,8 +135,7 @@ std::string validate_node(const SceneNodeDesc& n) {
             break;
         case math::kPrimCylinder:
         case math::kPrimCone:
-            e = first_error(
-                {positive_error("radius", s.radius), positive_error("height", s.height)});
+            e = first_error({positive_error("radius", s.radius), positive_error("height", s.height)});
             break;
         case math::kPrimCapsule:
             e = first_error(
@@ -172,8 +145,7 @@ std::string validate_node(const SceneNodeDesc& n) {
             e = first_error({positive_error("major_radius", s.major_radius),
                              positive_error("minor_radius", s.minor_radius)});
             break;
-        default:
-            return "unknown primitive";
+        default: return "unknown primitive";
     }
     if (!e.empty()) return e;
     if (!finite(n.color) || n.color.x < 0 || n.color.y < 0 || n.color.z < 0 || n.color.x > 1 ||
@@ -185,7 +157,8 @@ std::string validate_node(const SceneNodeDesc& n) {
 Scene build_scene(std::span<const SceneNodeDesc> nodes, uint32_t root, const Aabb& aabb) {
     if (root >= nodes.size()) throw SceneError("scene has no root node");
     for (int i = 0; i < 3; ++i) {
-        if (!finite(aabb.min[i]) || !finite(aabb.max[i])) throw SceneError("aabb must be finite");
+        if (!finite(aabb.min[i]) || !finite(aabb.max[i]))
+            throw SceneError("aabb must be finite");
         if (!(aabb.max[i] > aabb.min[i]))
             throw SceneError("aabb_max must be greater than aabb_min on every axis");
     }
@@ -215,7 +188,8 @@ Scene build_scene(std::span<const SceneNodeDesc> nodes, uint32_t root, const Aab
             stack.push_back({d.left, false, false, v.world.compose(nodes[d.left].matrix)});
             continue;
         }
-        if (std::string e = validate_node(d); !e.empty()) throw SceneNodeError(v.desc, e);
+        if (std::string e = validate_node(d); !e.empty())
+            throw SceneNodeError(v.desc, e);
         if (sc.kind.size() >= kMaxNodes) throw SceneError("scene has too many nodes");
         const uint32_t out = uint32_t(sc.kind.size());
         sc.kind.push_back(d.kind);
@@ -313,8 +287,8 @@ SceneInfo scene_info(const Scene& sc) {
 }
 
 namespace {
-constexpr const char* kPrimitiveNames[math::kPrimitiveKindCount] = {"sphere", "box",     "cylinder",
-                                                                    "cone",   "capsule", "torus"};
+constexpr const char* kPrimitiveNames[math::kPrimitiveKindCount] = {
+    "sphere", "box", "cylinder", "cone", "capsule", "torus"};
 constexpr const char* kOperatorNames[3] = {"union", "inter", "sub"};
 }  // namespace
 

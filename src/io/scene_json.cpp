@@ -40,29 +40,20 @@ enum class Field : uint8_t {
 struct FieldInfo {
     const char* name;
     Field field;
-    char type;      // 's' string, 'n' number, 'a' array of numbers, 'o' object
-    uint8_t count;  // arrays: exact number of entries
+    char type;       // 's' string, 'n' number, 'a' array of numbers, 'o' object
+    uint8_t count;   // arrays: exact number of entries
 };
 
 constexpr FieldInfo kFields[] = {
-    {"nodeType", Field::NodeType, 's', 0},
-    {"matrix", Field::Matrix, 'a', 12},
-    {"blendMode", Field::BlendMode, 's', 0},
-    {"blendRadius", Field::BlendRadius, 'n', 0},
-    {"leftChild", Field::LeftChild, 'o', 0},
-    {"rightChild", Field::RightChild, 'o', 0},
-    {"primitiveType", Field::PrimitiveType, 's', 0},
-    {"radius", Field::Radius, 'n', 0},
-    {"height", Field::Height, 'n', 0},
-    {"sides", Field::Sides, 'a', 3},
-    {"bevel", Field::Bevel, 'a', 4},
-    {"round_x", Field::RoundX, 'n', 0},
-    {"round_y", Field::RoundY, 'n', 0},
-    {"color", Field::Color, 'a', 3},
-    {"major_radius", Field::MajorRadius, 'n', 0},
-    {"minor_radius", Field::MinorRadius, 'n', 0},
-    {"aabb_min", Field::AabbMin, 'a', 3},
-    {"aabb_max", Field::AabbMax, 'a', 3},
+    {"nodeType", Field::NodeType, 's', 0},      {"matrix", Field::Matrix, 'a', 12},
+    {"blendMode", Field::BlendMode, 's', 0},    {"blendRadius", Field::BlendRadius, 'n', 0},
+    {"leftChild", Field::LeftChild, 'o', 0},    {"rightChild", Field::RightChild, 'o', 0},
+    {"primitiveType", Field::PrimitiveType, 's', 0}, {"radius", Field::Radius, 'n', 0},
+    {"height", Field::Height, 'n', 0},          {"sides", Field::Sides, 'a', 3},
+    {"bevel", Field::Bevel, 'a', 4},            {"round_x", Field::RoundX, 'n', 0},
+    {"round_y", Field::RoundY, 'n', 0},         {"color", Field::Color, 'a', 3},
+    {"major_radius", Field::MajorRadius, 'n', 0}, {"minor_radius", Field::MinorRadius, 'n', 0},
+    {"aabb_min", Field::AabbMin, 'a', 3},       {"aabb_max", Field::AabbMax, 'a', 3},
 };
 
 const FieldInfo* field_info(Field f) {
@@ -73,20 +64,14 @@ const FieldInfo* field_info(Field f) {
 
 const char* type_name(char t) {
     switch (t) {
-        case 's':
-            return "a string";
-        case 'n':
-            return "a number";
-        case 'a':
-            return "an array of numbers";
-        default:
-            return "an object";
+        case 's': return "a string";
+        case 'n': return "a number";
+        case 'a': return "an array of numbers";
+        default: return "an object";
     }
 }
 
-uint32_t bit(Field f) {
-    return 1u << uint32_t(f);
-}
+uint32_t bit(Field f) { return 1u << uint32_t(f); }
 
 // One node while it is being read.
 struct RawNode {
@@ -111,58 +96,36 @@ struct ParseFailure {
 };
 
 class SceneHandler {
-  public:
+public:
     std::vector<RawNode> nodes;
     Aabb aabb;
     std::string error;  // set when a handler call returned false
     size_t depth = 0;
 
-    bool StartObject() {
-        return guard([&] { start_object(); });
-    }
-    bool EndObject(rapidjson::SizeType) {
-        return guard([&] { end_object(); });
-    }
-    bool StartArray() {
-        return guard([&] { start_array(); });
-    }
-    bool EndArray(rapidjson::SizeType) {
-        return guard([&] { end_array(); });
-    }
+    bool StartObject() { return guard([&] { start_object(); }); }
+    bool EndObject(rapidjson::SizeType) { return guard([&] { end_object(); }); }
+    bool StartArray() { return guard([&] { start_array(); }); }
+    bool EndArray(rapidjson::SizeType) { return guard([&] { end_array(); }); }
     bool Key(const char* s, rapidjson::SizeType n, bool) {
         return guard([&] { key(std::string_view(s, n)); });
     }
     bool String(const char* s, rapidjson::SizeType n, bool) {
         return guard([&] { string(std::string_view(s, n)); });
     }
+    // Never called with kParseNumbersAsStringsFlag, but the reader's interface needs them.
+    bool Int(int v) { return guard([&] { number(v); }); }
+    bool Uint(unsigned v) { return guard([&] { number(v); }); }
+    bool Int64(int64_t v) { return guard([&] { number(double(v)); }); }
+    bool Uint64(uint64_t v) { return guard([&] { number(double(v)); }); }
+    bool Double(double v) { return guard([&] { number(v); }); }
     // Numbers arrive as text (kParseNumbersAsStringsFlag) and are converted by from_chars:
     // correctly rounded like RapidJSON's full-precision path, whose DiyFp code in Debian's
     // RapidJSON 1.1.0 calls clz(0) (undefined) on some inputs (fuzz/regressions/scene_loader).
-    // Never called with kParseNumbersAsStringsFlag, but the reader's interface needs them.
-    bool Int(int v) {
-        return guard([&] { number(v); });
-    }
-    bool Uint(unsigned v) {
-        return guard([&] { number(v); });
-    }
-    bool Int64(int64_t v) {
-        return guard([&] { number(double(v)); });
-    }
-    bool Uint64(uint64_t v) {
-        return guard([&] { number(double(v)); });
-    }
-    bool Double(double v) {
-        return guard([&] { number(v); });
-    }
     bool RawNumber(const char* s, rapidjson::SizeType n, bool) {
         return guard([&] { number(to_double(std::string_view(s, n))); });
     }
-    bool Null() {
-        return guard([&] { scalar("null"); });
-    }
-    bool Bool(bool) {
-        return guard([&] { scalar("a boolean"); });
-    }
+    bool Null() { return guard([&] { scalar("null"); }); }
+    bool Bool(bool) { return guard([&] { scalar("a boolean"); }); }
 
     // The JSON pointer of a node, with long runs elided so messages stay one short line.
     std::string node_path(uint32_t node) const {
@@ -182,7 +145,7 @@ class SceneHandler {
         return path.empty() ? "/" : path;
     }
 
-  private:
+private:
     std::vector<Frame> frames_;
 
     template <class F>
@@ -340,16 +303,12 @@ class SceneHandler {
             std::string quoted(1, '"');
             quoted.append(s.substr(0, 64)).push_back('"');
             if (fi->field == Field::NodeType) {
-                if (s == "primitive")
-                    n.node_type = 1;
-                else if (s == "binaryOperator")
-                    n.node_type = 2;
-                else
-                    fail("unknown node type " + quoted + " (primitive, binaryOperator)");
+                if (s == "primitive") n.node_type = 1;
+                else if (s == "binaryOperator") n.node_type = 2;
+                else fail("unknown node type " + quoted + " (primitive, binaryOperator)");
             } else if (fi->field == Field::BlendMode) {
                 n.op_kind = operator_kind_from_name(s);
-                if (n.op_kind == kNone)
-                    fail("unknown blend mode " + quoted + " (union, inter, sub)");
+                if (n.op_kind == kNone) fail("unknown blend mode " + quoted + " (union, inter, sub)");
             } else {
                 n.prim_kind = primitive_kind_from_name(s);
                 if (n.prim_kind == kNone)
@@ -378,27 +337,13 @@ class SceneHandler {
             if (!std::isfinite(x)) fail("numbers must be finite float values");
             PrimitiveShape& s = nodes[f.node].desc.shape;
             switch (fi->field) {
-                case Field::BlendRadius:
-                    nodes[f.node].desc.blend = x;
-                    break;
-                case Field::Radius:
-                    s.radius = x;
-                    break;
-                case Field::Height:
-                    s.height = x;
-                    break;
-                case Field::RoundX:
-                    s.round_x = x;
-                    break;
-                case Field::RoundY:
-                    s.round_y = x;
-                    break;
-                case Field::MajorRadius:
-                    s.major_radius = x;
-                    break;
-                default:
-                    s.minor_radius = x;
-                    break;
+                case Field::BlendRadius: nodes[f.node].desc.blend = x; break;
+                case Field::Radius: s.radius = x; break;
+                case Field::Height: s.height = x; break;
+                case Field::RoundX: s.round_x = x; break;
+                case Field::RoundY: s.round_y = x; break;
+                case Field::MajorRadius: s.major_radius = x; break;
+                default: s.minor_radius = x; break;
             }
         }
         f.field = Field::None;
@@ -415,24 +360,12 @@ class SceneHandler {
 
     void store_array(RawNode& n, Field field, uint32_t i, float x) {
         switch (field) {
-            case Field::Matrix:
-                n.desc.matrix.m[i] = x;
-                break;
-            case Field::Sides:
-                n.desc.shape.sides[int(i)] = x;
-                break;
-            case Field::Bevel:
-                n.desc.shape.bevel[int(i)] = x;
-                break;
-            case Field::Color:
-                n.desc.color[int(i)] = x;
-                break;
-            case Field::AabbMin:
-                aabb.min[int(i)] = x;
-                break;
-            default:
-                aabb.max[int(i)] = x;
-                break;
+            case Field::Matrix: n.desc.matrix.m[i] = x; break;
+            case Field::Sides: n.desc.shape.sides[int(i)] = x; break;
+            case Field::Bevel: n.desc.shape.bevel[int(i)] = x; break;
+            case Field::Color: n.desc.color[int(i)] = x; break;
+            case Field::AabbMin: aabb.min[int(i)] = x; break;
+            default: aabb.max[int(i)] = x; break;
         }
     }
 
@@ -451,20 +384,16 @@ class SceneHandler {
         require(n, Field::NodeType);
         require(n, Field::Matrix);
         if (n.node_type == 2) {
-            for (Field f :
-                 {Field::BlendMode, Field::BlendRadius, Field::LeftChild, Field::RightChild})
+            for (Field f : {Field::BlendMode, Field::BlendRadius, Field::LeftChild,
+                            Field::RightChild})
                 require(n, f);
             n.desc.kind = n.op_kind;
         } else {
             require(n, Field::PrimitiveType);
             n.desc.kind = n.prim_kind;
             switch (n.prim_kind) {
-                case math::kPrimSphere:
-                    require(n, Field::Radius);
-                    break;
-                case math::kPrimBox:
-                    require(n, Field::Sides);
-                    break;
+                case math::kPrimSphere: require(n, Field::Radius); break;
+                case math::kPrimBox: require(n, Field::Sides); break;
                 case math::kPrimTorus:
                     require(n, Field::MajorRadius);
                     require(n, Field::MinorRadius);
@@ -495,8 +424,7 @@ Scene parse_scene(std::string_view json, const std::string& name) {
         throw SceneError(name + ": invalid JSON at byte " + std::to_string(r.Offset()) + ": " +
                          rapidjson::GetParseError_En(r.Code()));
     }
-    if (h.nodes.empty())
-        throw SceneError(name + ": the top-level value must be an object (a node)");
+    if (h.nodes.empty()) throw SceneError(name + ": the top-level value must be an object (a node)");
     std::vector<SceneNodeDesc> descs;
     descs.reserve(h.nodes.size());
     for (const RawNode& n : h.nodes) descs.push_back(n.desc);
@@ -555,9 +483,7 @@ void write_primitive_fields(JsonWriter& w, const Scene& sc, uint32_t node) {
     w.Key("primitiveType");
     w.String(primitive_kind_name(kind));
     switch (kind) {
-        case math::kPrimSphere:
-            write_number(w, "radius", s.radius);
-            break;
+        case math::kPrimSphere: write_number(w, "radius", s.radius); break;
         case math::kPrimBox: {
             write_vec(w, "sides", s.sides);
             const float b[4] = {s.bevel.x, s.bevel.y, s.bevel.z, s.bevel.w};
