@@ -5,12 +5,15 @@ CMAKE_FLAGS ?=
 PACKAGES = build-essential cmake ninja-build pkg-config libtbb-dev libcli11-dev rapidjson-dev \
            libgtest-dev libbenchmark-dev libpng-dev libopenvdb-dev libboost-iostreams-dev \
            valgrind clang-format time libvulkan-dev glslc spirv-tools mesa-vulkan-drivers
+# Only for `make fuzz`: clang and its runtime libraries (libFuzzer, ASan, UBSan).
+FUZZ_PACKAGES = clang libclang-rt-14-dev
+FUZZ_SECONDS ?= 600
 
-.PHONY: setup build test run bench sanitize format clean
+.PHONY: setup build test run bench sanitize fuzz format clean
 
 # Installs every system dependency (as root, non-interactive); does nothing when all are present.
 setup:
-	@missing=$$(for p in $(PACKAGES); do dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed' || echo $$p; done); \
+	@missing=$$(for p in $(PACKAGES) $(EXTRA_PACKAGES); do dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed' || echo $$p; done); \
 	if [ -n "$$missing" ]; then \
 	  echo "make setup: installing$$(echo $$missing | sed 's/^/ /')"; \
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
@@ -42,8 +45,17 @@ sanitize: setup
 	cmake --build build-asan -j $(JOBS)
 	cd build-asan && ASAN_OPTIONS=detect_leaks=1 ctest --output-on-failure -j $(JOBS)
 
+# libFuzzer targets (fuzz/): built with clang, -fsanitize=fuzzer,address,undefined, in
+# build-fuzz/; each runs FUZZ_SECONDS (default 600) and reports executions and coverage.
+fuzz:
+	@$(MAKE) --no-print-directory setup EXTRA_PACKAGES="$(FUZZ_PACKAGES)"
+	CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  -DSDFPRUNE_FUZZ=ON -DSDFPRUNE_TESTS=OFF -DSDFPRUNE_BENCH=OFF -DSDFPRUNE_VULKAN=OFF
+	cmake --build build-fuzz -j $(JOBS) --target fuzz_scene_loader fuzz_npy_reader fuzz_prune_eval
+	FUZZ_SECONDS=$(FUZZ_SECONDS) ./fuzz/run.sh build-fuzz
+
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.hpp' '*.h')
 
 clean:
-	rm -rf $(BUILD) build-asan
+	rm -rf $(BUILD) build-asan build-fuzz

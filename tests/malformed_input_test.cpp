@@ -171,6 +171,13 @@ std::vector<Case> malformed_cases() {
         {"negative_bevel",
          make_scene({{kBox, "\"bevel\":[0.1,0.1,0.1,0.1]", "\"bevel\":[0.1,-0.1,0.1,0.1]"}}),
          "/rightChild"},
+        // Unequal radii beyond the half side they meet across make the field jump (found by
+        // fuzz/fuzz_prune_eval.cpp: pruning was then wrong); equal ones stay continuous.
+        {"unequal_bevel_beyond_half_side",
+         make_scene({{kBox, "\"bevel\":[0.1,0.1,0.1,0.1]", "\"bevel\":[0.6,0.1,0.1,0.1]"}}),
+         "/rightChild"},
+        {"unequal_rounding_beyond_half_height",
+         make_scene({{kBox, "\"round_x\":0.05", "\"round_x\":1.5"}}), "/rightChild"},
         {"negative_blend_radius",
          make_scene({{kInner, "\"blendRadius\":0.05", "\"blendRadius\":-0.1"}}), "/leftChild"},
         {"color_out_of_range", make_scene({{kSphere, "\"color\":[1,0,0]", "\"color\":[2,0,0]"}}),

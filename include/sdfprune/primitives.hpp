@@ -71,6 +71,19 @@ constexpr PrimitiveField opt(const char* name, size_t at, uint8_t count, FieldCh
                              int8_t slot, float scale = 1.0f) {
     return {name, uint16_t(at), count, check, false, slot, scale};
 }
+// A box's rims: each quadrant (and the top and bottom rim) uses its own radius; where two
+// neighbours differ, a radius beyond the half side they meet across makes the field jump there,
+// so it is no longer Lipschitz and pruning would be wrong. Equal radii stay continuous (found by
+// fuzzing: fuzz/regressions/prune_eval/box_unequal_bevel_discontinuous.bin).
+inline std::string box_rims_check(const PrimitiveShape& s) {
+    const vec4 b = s.bevel;
+    const bool equal = b.x == b.y && b.x == b.z && b.x == b.w;
+    if (!equal && std::max({b.x, b.y, b.z, b.w}) > std::min(s.sides.x, s.sides.z) * 0.5f)
+        return "unequal bevel radii must be <= min(sides[0], sides[2]) / 2";
+    if (s.round_x != s.round_y && std::max(s.round_x, s.round_y) > s.sides.y * 0.5f)
+        return "unequal round_x and round_y must be <= sides[1] / 2";
+    return {};
+}
 }  // namespace table_detail
 
 #define SDFPRUNE_AT(member) offsetof(PrimitiveShape, member)
@@ -86,7 +99,7 @@ inline constexpr PrimitiveKindInfo kPrimitiveTable[math::kPrimitiveKindCount] = 
       table_detail::opt("bevel", SDFPRUNE_AT(bevel), 4, table_detail::kNonNeg, 4),
       table_detail::opt("round_x", SDFPRUNE_AT(round_x), 1, table_detail::kNonNeg, 8),
       table_detail::opt("round_y", SDFPRUNE_AT(round_y), 1, table_detail::kNonNeg, 9)}, 4, true,
-     [](const PrimitiveShape& s) { return s.sides * 0.5f; }, nullptr, nullptr},
+     [](const PrimitiveShape& s) { return s.sides * 0.5f; }, nullptr, table_detail::box_rims_check},
     {math::kPrimCylinder, "cylinder", "cylinder along y of full `height` and `radius`, centred",
      {table_detail::req("height", SDFPRUNE_AT(height), 1, table_detail::kPos, 0, 0.5f),
       table_detail::req("radius", SDFPRUNE_AT(radius), 1, table_detail::kPos, 1)}, 2, true,

@@ -281,11 +281,14 @@ SDFPRUNE_FN vec2 operator_range(float s, float k, float a_lo, float a_hi, float 
 // map is a similarity of scale `scale` sending `centre` to the local origin, given f0 = the local
 // SDF at the origin and rho = the radius of a local ball around the origin holding the shape.
 // Uses |q| - rho <= f(q) <= |q| + f0 (f is 1-Lipschitz); exact for a sphere (f0 = -r, rho = r).
+// `scale` is the map's scale rounded down by up to 2e-6 (PrimitiveBound): right for the lower
+// bound, but the upper one needs it rounded up, or a far-field constant deep inside a large
+// primitive ends up a few 1e-6 beyond f (fuzz/regressions/prune_eval/sphere_far_field_scale.bin).
 SDFPRUNE_FN vec2 similarity_range(vec3 centre, float scale, float f0, float rho, vec3 cc, vec3 hs) {
     vec3 d = abs(centre - cc);
     float near_dist = length(max(d - hs, 0.0f));
     float far_dist = length(d + hs);
-    return vec2(scale * near_dist - rho, scale * far_dist + f0);
+    return vec2(scale * near_dist - rho, scale * (1.0f + 6e-6f) * far_dist + f0);
 }
 
 // ---- far field -------------------------------------------------------------------------------

@@ -145,12 +145,18 @@ public:
     bool String(const char* s, rapidjson::SizeType n, bool) {
         return guard([&] { string(std::string_view(s, n)); });
     }
+    // Never called with kParseNumbersAsStringsFlag, but the reader's interface needs them.
     bool Int(int v) { return guard([&] { number(v); }); }
     bool Uint(unsigned v) { return guard([&] { number(v); }); }
     bool Int64(int64_t v) { return guard([&] { number(double(v)); }); }
     bool Uint64(uint64_t v) { return guard([&] { number(double(v)); }); }
     bool Double(double v) { return guard([&] { number(v); }); }
-    bool RawNumber(const char*, rapidjson::SizeType, bool) { return false; }
+    // Numbers arrive as text (kParseNumbersAsStringsFlag) and are converted by from_chars:
+    // correctly rounded like RapidJSON's full-precision path, whose DiyFp code in Debian's
+    // RapidJSON 1.1.0 calls clz(0) (undefined) on some inputs (fuzz/regressions/scene_loader).
+    bool RawNumber(const char* s, rapidjson::SizeType n, bool) {
+        return guard([&] { number(to_double(std::string_view(s, n))); });
+    }
     bool Null() { return guard([&] { scalar("null"); }); }
     bool Bool(bool) { return guard([&] { scalar("a boolean"); }); }
 
@@ -209,6 +215,19 @@ private:
     }
 
     Frame& top() { return frames_.back(); }
+
+    // A JSON number's text (RapidJSON has checked its syntax) as the nearest double; beyond the
+    // double range ±infinity or ±0, as strtod gives.
+    static double to_double(std::string_view t) {
+        double v = 0;
+        if (std::from_chars(t.data(), t.data() + t.size(), v).ec == std::errc()) return v;
+        long double w = 0;  // out of range: overflow or underflow?
+        const bool parsed = std::from_chars(t.data(), t.data() + t.size(), w).ec == std::errc();
+        const bool negative = !t.empty() && t[0] == '-';
+        const bool tiny =
+            parsed ? std::fabs(w) < 1 : t.find("e-") != t.npos || t.find("E-") != t.npos;
+        return tiny ? (negative ? -0.0 : 0.0) : (negative ? -HUGE_VAL : HUGE_VAL);
+    }
 
     // The field of the current node awaiting a value of JSON type `type`; nullptr to ignore.
     const FieldInfo* expect(char type, const char* got) {
@@ -417,7 +436,8 @@ Scene parse_scene(std::string_view json, const std::string& name) {
     // A NUL-terminated copy is not needed: MemoryStream reads exactly the given bytes.
     rapidjson::MemoryStream ms(json.data(), json.size());
     rapidjson::EncodedInputStream<rapidjson::UTF8<>, rapidjson::MemoryStream> is(ms);
-    constexpr unsigned kFlags = rapidjson::kParseIterativeFlag | rapidjson::kParseFullPrecisionFlag;
+    constexpr unsigned kFlags =
+        rapidjson::kParseIterativeFlag | rapidjson::kParseNumbersAsStringsFlag;
     rapidjson::ParseResult r = reader.Parse<kFlags>(is, h);
     if (r.IsError()) {
         if (!h.error.empty()) throw SceneError(name + ": " + h.error);
