@@ -2,9 +2,10 @@
 from __future__ import annotations
 
 import os
-from typing import Any, Optional, Sequence, Tuple
+from typing import TYPE_CHECKING, Any, Optional, Sequence, Tuple
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 from . import _sdfprune as _core
 from ._progress import progress_callback
@@ -50,8 +51,8 @@ class PrunedGrid:
                              "prune with backend='cpu'")
         return self._core
 
-    def __call__(self, points: Any, *, out: Optional[np.ndarray] = None, threads: int = 0,
-                 progress: Any = None) -> np.ndarray:
+    def __call__(self, points: Any, *, out: "Optional[np.ndarray]" = None, threads: int = 0,
+                 progress: Any = None) -> "np.ndarray":
         """The pruned SDF at points, (N, 3) -> (N,) float32 (see Shape.__call__)."""
         return _core.eval_grid(self._cpu("evaluation at points"), _points(points), out,
                                int(threads), progress_callback(progress, "evaluating"))
@@ -59,7 +60,7 @@ class PrunedGrid:
     eval = __call__
 
     def discretize(self, res: Optional[int] = None, *, threads: int = 0,
-                   progress: Any = None) -> np.ndarray:
+                   progress: Any = None) -> "np.ndarray":
         """The pruned SDF at the centres of a res³ grid over the bounds (default: the grid's
         own resolution, the fastest), (res, res, res) float32 indexed [z, y, x]."""
         res = self.resolution if res is None else int(res)
@@ -69,7 +70,7 @@ class PrunedGrid:
                                      progress_callback(progress, "discretizing"))
 
     def mesh(self, res: Optional[int] = None, *, threads: int = 0,
-             progress: Any = None) -> Tuple[np.ndarray, np.ndarray]:
+             progress: Any = None) -> Tuple["np.ndarray", "np.ndarray"]:
         """(vertices (V, 3) float32, faces (F, 3) uint32) on res³ cubes (see Shape.mesh)."""
         res = self.resolution if res is None else int(res)
         return _core.mesh_grid(self._cpu("meshing"), res, int(threads),
@@ -78,7 +79,7 @@ class PrunedGrid:
     def render(self, width: int = 640, height: int = 360, *, yaw: float = 30, pitch: float = 25,
                distance: Optional[float] = None, fov: float = 40,
                target: Optional[Sequence[float]] = None, shading: str = "shaded",
-               shadows: bool = True, threads: int = 0, progress: Any = None) -> np.ndarray:
+               shadows: bool = True, threads: int = 0, progress: Any = None) -> "np.ndarray":
         """A sphere-traced picture on the pruned grid, (height, width, 3) uint8 (see
         Shape.render; the same camera as `sdfprune render`)."""
         return _core.render(self._core, int(width), int(height), float(yaw), float(pitch),

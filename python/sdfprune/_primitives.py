@@ -8,10 +8,8 @@ from __future__ import annotations
 import math
 from typing import Any, Optional, Sequence, Union
 
-import numpy as np
-
 from . import _sdfprune as _core
-from ._shape import Shape, _color, _vec3
+from ._shape import Shape, _color, _is_number, _vec3
 
 Number = Union[int, float]
 
@@ -47,10 +45,10 @@ def box(size: Union[Number, Sequence[Number]] = 1, center: Optional[Sequence[flo
     bevel: corner radii of the box's xz outline (one number for all four corners, or 4 for the
     quadrants +x+z, +x−z, −x+z, −x−z); round_top / round_bottom: rounding of the top (+y) and
     bottom (−y) rims (the scene format's round_x / round_y)."""
-    sides = (float(size),) * 3 if np.isscalar(size) else _vec3(size, "size")
+    sides = (float(size),) * 3 if _is_number(size) else _vec3(size, "size")
     fields: dict = {"sides": sides}
     if bevel is not None:
-        fields["bevel"] = (float(bevel),) * 4 if np.isscalar(bevel) else tuple(bevel)
+        fields["bevel"] = (float(bevel),) * 4 if _is_number(bevel) else tuple(bevel)
     if round_top:
         fields["round_x"] = round_top
     if round_bottom:

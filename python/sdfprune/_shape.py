@@ -7,15 +7,20 @@ the built scene and pruned grids are cached on the shape.
 from __future__ import annotations
 
 import math
+import numbers
 import os
-from typing import Any, Callable, Optional, Sequence, Tuple, Union
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, Optional, Sequence, Tuple, Union
 
 from . import _sdfprune as _core
 from ._progress import progress_callback
 
+if TYPE_CHECKING:  # numpy is imported on first use: `import sdfprune` stays fast
+    import numpy as np
+
 Vec3 = Tuple[float, float, float]
+# Scenes with at most this many nodes answer f(points) with the whole tree by default: it costs
+# about what a lookup in the pruned grid costs, and every value is exact.
+EXACT_NODES = 64
 Bounds = Tuple[Sequence[float], Sequence[float]]
 
 X = (1.0, 0.0, 0.0)
@@ -30,8 +35,12 @@ _SAVE_EXTS = _MESH_EXTS + (".npy", ".vdb", ".png")
 
 # ---- 3x4 affine maps as 12-tuples (row-major), local -> world -------------------------------
 
+def _is_number(x: Any) -> bool:
+    return isinstance(x, numbers.Number) or getattr(x, "ndim", None) == 0
+
+
 def _vec3(v: Any, what: str) -> Vec3:
-    if np.isscalar(v):
+    if _is_number(v) or isinstance(v, (str, bytes)):
         raise ValueError(f"{what} must be a 3-vector")
     t = tuple(float(x) for x in v)
     if len(t) != 3:
@@ -182,9 +191,13 @@ class Shape:
         return self._placed((1.0, 0.0, 0.0, x, 0.0, 1.0, 0.0, y, 0.0, 0.0, 1.0, z))
 
     def scale(self, factor: Union[float, Sequence[float]]) -> "Shape":
-        """The shape scaled about the origin: uniformly by a number, or per axis by (sx, sy, sz)
-        (non-uniform scales stay exact for pruning through their Lipschitz bound)."""
-        if np.isscalar(factor):
+        """The shape scaled about the origin: uniformly by a number, or per axis by (sx, sy, sz).
+
+        As in the scene format, the field of the scaled shape at p is the unscaled field at the
+        mapped point: the surface is exact, values are divided by the scale (a uniform scale s
+        gives a field with Lipschitz bound 1/s, which pruning accounts for). To keep true
+        distances, scale the primitives' own sizes instead."""
+        if _is_number(factor):
             s = (float(factor),) * 3  # type: ignore[arg-type]
         else:
             s = _vec3(factor, "scale")
@@ -291,15 +304,19 @@ class Shape:
         return g
 
     # ---- queries ----
-    def __call__(self, points: Any, *, exact: bool = False, grid: int = 256, out=None,
-                 threads: int = 0, progress: Any = None) -> np.ndarray:
+    def __call__(self, points: Any, *, exact: Optional[bool] = None, grid: int = 256,
+                 out=None, threads: int = 0, progress: Any = None) -> "np.ndarray":
         """The SDF at points: (N, 3) float32/float64 array-like in, (N,) float32 out (negative
         inside). float32 C-contiguous input is read in place (no copy).
 
-        By default through the pruned grid (self.prune(grid), like `sdfprune eval`): exact near
-        the surface and outside the bounds; in far-field cells a conservative value (right
-        sign, magnitude never above the distance). exact=True evaluates the whole tree at every
-        point (exact everywhere, slower on large scenes)."""
+        exact=False: through the pruned grid (self.prune(grid), as `sdfprune eval`): exact
+        near the surface (cells within about 2 cell diagonals of it) and outside the bounds;
+        elsewhere the far-field cell's conservative value (right sign, magnitude never above
+        the distance: a safe sphere-tracing step). exact=True: the whole tree at every point,
+        exact everywhere (slow on large scenes). Default (None): exact for scenes of at most
+        EXACT_NODES (64) nodes, where it costs no more, else pruned."""
+        if exact is None:
+            exact = self.scene().nodes <= EXACT_NODES
         if exact:
             arr = _points(points)
             return _finish(_core.eval_scene(self.scene(), arr, out, int(threads),
@@ -308,7 +325,7 @@ class Shape:
                                                  progress=progress)
 
     def discretize(self, res: int = 256, bounds: Optional[Bounds] = None, *, exact: bool = False,
-                   threads: int = 0, progress: Any = None) -> np.ndarray:
+                   threads: int = 0, progress: Any = None) -> "np.ndarray":
         """The SDF at the centres of a res³ grid of cells over `bounds` (default: the shape's),
         an (res, res, res) float32 array indexed [z, y, x]. Pruned at grid = res: far-field
         cells hold their conservative bound; exact=True evaluates the whole tree everywhere."""
@@ -319,7 +336,7 @@ class Shape:
             res, threads=threads, progress=progress)
 
     def mesh(self, res: int = 256, bounds: Optional[Bounds] = None, *, threads: int = 0,
-             progress: Any = None) -> Tuple[np.ndarray, np.ndarray]:
+             progress: Any = None) -> Tuple["np.ndarray", "np.ndarray"]:
         """The surface as (vertices (V, 3) float32, faces (F, 3) uint32): marching tetrahedra on
         res³ cubes over `bounds` (default: the shape's); closed, 2-manifold, faces
         counter-clockwise seen from outside."""
@@ -330,7 +347,7 @@ class Shape:
                distance: Optional[float] = None, fov: float = 40,
                target: Optional[Sequence[float]] = None, shading: str = "shaded",
                shadows: bool = True, grid: int = 256, threads: int = 0,
-               progress: Any = None) -> np.ndarray:
+               progress: Any = None) -> "np.ndarray":
         """A sphere-traced picture, (height, width, 3) uint8, with the CLI's camera: orbiting
         the bounds' centre (or `target`) at yaw/pitch degrees, `distance` (default: frames
         the bounds), vertical `fov` degrees; shading 'shaded', 'normals' or 'heatmap'."""
@@ -418,8 +435,9 @@ def loads(text: str, name: str = "<string>") -> Shape:
     return Shape(("scene", scene), scene.aabb)
 
 
-def _points(points: Any) -> np.ndarray:
+def _points(points: Any) -> "np.ndarray":
     """An (N, 3) float32/float64 view of `points` (no copy for float32/float64 arrays)."""
+    import numpy as np
     if isinstance(points, np.ndarray) and points.dtype in (np.float32, np.float64):
         arr = points
     else:
@@ -443,5 +461,5 @@ def _points(points: Any) -> np.ndarray:
     return arr
 
 
-def _finish(values: np.ndarray, points: Any) -> np.ndarray:
+def _finish(values: "np.ndarray", points: Any) -> "np.ndarray":
     return values

@@ -221,7 +221,9 @@ void bind_scene(py::module_& m) {
         "load_scene",
         [](const std::string& path) {
             py::gil_scoped_release nogil;
-            return std::make_shared<Scene>(load_scene(path));
+            // Reading first, so an unreadable file is an IoError (OSError), not a scene error.
+            const std::string text = read_file(path);
+            return std::make_shared<Scene>(parse_scene(text, path));
         },
         py::arg("path"));
     m.def(

@@ -30,10 +30,10 @@ def test_eval_matches_cli(tmp_path, cli, example, which):
     cli("eval", scene, tmp_path / "p.npy", "-o", tmp_path / "pruned.npy", "--quiet")
     cli("eval", scene, tmp_path / "p.npy", "-o", tmp_path / "naive.npy", "--method", "naive",
         "--quiet")
-    np.testing.assert_array_equal(f(pts), np.load(tmp_path / "pruned.npy"))
+    np.testing.assert_array_equal(f(pts, exact=False), np.load(tmp_path / "pruned.npy"))
     np.testing.assert_array_equal(f(pts, exact=True), np.load(tmp_path / "naive.npy"))
     loaded = sp.load(scene)
-    np.testing.assert_array_equal(loaded(pts), f(pts))
+    np.testing.assert_array_equal(loaded(pts, exact=False), f(pts, exact=False))
     np.testing.assert_array_equal(loaded(pts, exact=True), f(pts, exact=True))
 
 
@@ -63,7 +63,7 @@ def test_stats_match_cli(tmp_path, cli, example):
     got = example.prune(64).stats
     for key in ("cells", "near_field_cells", "active_avg", "active_std", "active_max",
                 "tape_avg", "tape_max", "levels", "tape_bytes"):
-        assert got[key] == want[key], key
+        assert got[key] == pytest.approx(want[key], rel=1e-6), key
 
 
 def test_discretize_matches_cli(tmp_path, cli, example):

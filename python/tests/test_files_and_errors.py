@@ -45,7 +45,8 @@ def test_bad_outputs_write_nothing(tmp_path, example):
 def test_bad_scenes(tmp_path):
     with pytest.raises(OSError):
         sp.load(tmp_path / "nope.json")
-    (tmp_path / "bad.json").write_text('{"nodeType": "primitive", "primitiveType": "sphere", '
+    (tmp_path / "bad.json").write_text('{"aabb_min": [-1, -1, -1], "aabb_max": [1, 1, 1], '
+                                       '"nodeType": "primitive", "primitiveType": "sphere", '
                                        '"radius": -1, "matrix": [1,0,0,0,0,1,0,0,0,0,1,0]}')
     with pytest.raises(ValueError, match="radius must be > 0"):
         sp.load(tmp_path / "bad.json")
@@ -105,7 +106,9 @@ def test_pruned_grid_reuse(example):
     v, faces = g.mesh()
     assert len(faces) > 0
     assert g.discretize().shape == (64, 64, 64)
+    p = np.array([[0.6, 0.6, 0], [0.3, 0.2, 0.75]], np.float32)
+    want = g(p)
     del example
     import gc
     gc.collect()
-    assert g([[0.6, 0.6, 0]])[0] == pytest.approx(-0.1, abs=1e-6)   # grid keeps its scene
+    np.testing.assert_array_equal(g(p), want)   # the grid keeps its scene alive
