@@ -17,11 +17,15 @@ from ._sdfprune import GpuError, __version__
 from ._shape import (ORIGIN, SDF3, X, Y, Z, Shape, difference, intersection, load, loads,
                      union)
 from ._grid import PrunedGrid
+from . import _primitives
 from ._primitives import (PRIMITIVES, box, capsule, cone, cylinder, primitive, sphere,
                           torus)
+
+# Every other kind of the engine's primitive table, as a function of its fields.
+globals().update({name: getattr(_primitives, name) for name in _primitives.GENERATED})
 
 __all__ = [
     "Shape", "SDF3", "PrunedGrid", "GpuError", "X", "Y", "Z", "ORIGIN",
     "sphere", "box", "cylinder", "cone", "capsule", "torus", "primitive", "PRIMITIVES",
     "union", "intersection", "difference", "load", "loads", "__version__",
-]
+] + list(_primitives.GENERATED)

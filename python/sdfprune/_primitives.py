@@ -92,3 +92,38 @@ def torus(major_radius: Number = 1, minor_radius: Number = 0.25,
     """A torus in the xz plane: a tube of `minor_radius` around a circle of `major_radius`."""
     return primitive("torus", major_radius=major_radius, minor_radius=minor_radius,
                      center=center, color=color)
+
+
+def _generated(name: str, summary: str, fields: list):
+    """A function for a table kind without a hand-written one above: its fields, in the
+    table's order, as parameters (optional fields default to the engine's default)."""
+    import inspect
+    names = [f[0] for f in fields]
+
+    def make(*args: Any, center: Optional[Sequence[float]] = None,
+             color: Optional[Sequence[float]] = None, **kw: Any) -> Shape:
+        if len(args) > len(names):
+            raise TypeError(f"{name}() takes at most {len(names)} positional arguments")
+        for n, a in zip(names, args):
+            if n in kw:
+                raise TypeError(f"{name}() got multiple values for argument '{n}'")
+            kw[n] = a
+        return primitive(name, center=center, color=color, **kw)
+
+    P = inspect.Parameter
+    params = [P(n, P.POSITIONAL_OR_KEYWORD, default=P.empty if req else None)
+              for n, _, req in fields]
+    params += [P("center", P.KEYWORD_ONLY, default=None), P("color", P.KEYWORD_ONLY, default=None)]
+    make.__signature__ = inspect.Signature(params)  # type: ignore[attr-defined]
+    make.__name__ = make.__qualname__ = name
+    described = ", ".join(f"{n} ({c} numbers)" if c > 1 else n for n, c, _ in fields)
+    make.__doc__ = (f"{summary[:1].upper()}{summary[1:]}.\n\nFields (the scene format's, from the "
+                    f"engine's primitive table): {described}; center=, color= as for sphere().")
+    return make
+
+
+GENERATED = []
+for _name, (_kind, _summary, _fields, _bounded) in PRIMITIVES.items():
+    if _name not in globals():
+        globals()[_name] = _generated(_name, _summary, _fields)
+        GENERATED.append(_name)
