@@ -108,6 +108,25 @@ inline Shape random_primitive(SceneBuilder& b, Rng& r, uint32_t kind) {
                 r.uniform() < 0.15f ? major * r.uniform(1.0f, 1.5f) : major * r.uniform(0.1f, 0.8f);
             return b.torus(major, minor);
         }
+        case math::kPrimRoundedCylinder: {
+            const float radius = r.uniform(0.08f, 0.5f), height = r.uniform(0.15f, 1.2f);
+            const float lim = std::min(radius, height / 2);
+            const float u = r.uniform();
+            return b.rounded_cylinder(radius, height,
+                                      u < 0.15f   ? lim
+                                      : u < 0.25f ? 0.0f
+                                                  : r.uniform(0, lim));
+        }
+        case math::kPrimCappedCone: {
+            const float u = r.uniform();
+            const float r1 = u < 0.15f ? 0.0f : r.uniform(0.05f, 0.55f);
+            const float r2 = u > 0.85f ? 0.0f : r.uniform(0.05f, 0.55f);
+            return b.capped_cone(r1, r2, r.uniform(0.15f, 1.2f));
+        }
+        case math::kPrimHexPrism:
+            return b.hex_prism(r.uniform(0.1f, 0.55f), r.uniform(0.1f, 1.2f));
+        case math::kPrimOctahedron:
+            return b.octahedron(r.uniform(0.15f, 0.7f));
         default:
             throw std::logic_error("random_primitive: no generator for kind " +
                                    std::to_string(kind));

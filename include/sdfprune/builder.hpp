@@ -50,6 +50,15 @@ public:
     Shape cone(float radius, float height);      // base (radius) at y = -height/2, apex at +height/2
     Shape capsule(float radius, float height);   // inner segment of length `height` along y
     Shape torus(float major_radius, float minor_radius);  // in the xz plane
+    // Cylinder along y, centred, both rims rounded by `rounding` <= min(radius, height / 2).
+    Shape rounded_cylinder(float radius, float height, float rounding);
+    // Cone frustum along y, centred: `radius` at y = -height/2, `top_radius` at +height/2
+    // (either may be 0).
+    Shape capped_cone(float radius, float top_radius, float height);
+    // Hexagonal prism along y, centred: vertices at distance `radius` from the axis (two of
+    // them on the x axis), full `height`.
+    Shape hex_prism(float radius, float height);
+    Shape octahedron(float radius);  // |x| + |y| + |z| <= radius: vertices on the axes
     // Any kind of primitives.hpp's table with its fields in `shape` (checked when built).
     Shape primitive(uint32_t kind, const PrimitiveShape& shape);
 

@@ -11,6 +11,8 @@
 // tests/primitive_range_test.cpp).
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -109,6 +111,50 @@ inline constexpr PrimitiveKindInfo kPrimitiveTable[math::kPrimitiveKindCount] = 
          return vec3(r, s.minor_radius, r);
      },
      [](const PrimitiveShape& s) { return s.major_radius + s.minor_radius; }, nullptr},
+    {math::kPrimRoundedCylinder, "rounded_cylinder",
+     "cylinder along y of full `height` and `radius`, both rims rounded by `rounding`",
+     {table_detail::req("height", SDFPRUNE_AT(height), 1, table_detail::kPos, 0, 0.5f),
+      table_detail::req("radius", SDFPRUNE_AT(radius), 1, table_detail::kPos, 1),
+      table_detail::req("rounding", SDFPRUNE_AT(rounding), 1, table_detail::kNonNeg, 2)}, 3, true,
+     [](const PrimitiveShape& s) { return vec3(s.radius, s.height / 2, s.radius); },
+     [](const PrimitiveShape& s) { return std::sqrt(s.radius * s.radius + s.height * s.height / 4); },
+     [](const PrimitiveShape& s) {
+         // The distance is exact only while the rounded rims fit the cylinder.
+         if (s.rounding > s.radius || s.rounding > s.height / 2)
+             return std::string("rounding must be <= radius and <= height/2");
+         return std::string();
+     }},
+    {math::kPrimCappedCone, "capped_cone",
+     "cone frustum along y of full `height`: `radius` at y = -height/2, `top_radius` at +height/2",
+     {table_detail::req("height", SDFPRUNE_AT(height), 1, table_detail::kPos, 0, 0.5f),
+      table_detail::req("radius", SDFPRUNE_AT(radius), 1, table_detail::kNonNeg, 1),
+      table_detail::req("top_radius", SDFPRUNE_AT(top_radius), 1, table_detail::kNonNeg, 2)}, 3,
+     true,
+     [](const PrimitiveShape& s) {
+         const float r = std::max(s.radius, s.top_radius);
+         return vec3(r, s.height / 2, r);
+     },
+     [](const PrimitiveShape& s) {
+         const float r = std::max(s.radius, s.top_radius);
+         return std::sqrt(r * r + s.height * s.height / 4);
+     },
+     [](const PrimitiveShape& s) {
+         if (!(std::max(s.radius, s.top_radius) > 0))
+             return std::string("radius or top_radius must be > 0");
+         return std::string();
+     }},
+    {math::kPrimHexPrism, "hex_prism",
+     "hexagonal prism along y of full `height`; `radius` = the hexagon's circumradius (vertices at x = ±radius)",
+     {table_detail::req("height", SDFPRUNE_AT(height), 1, table_detail::kPos, 1, 0.5f),
+      table_detail::req("radius", SDFPRUNE_AT(radius), 1, table_detail::kPos, 0, 0.8660254f)}, 2,
+     true,
+     [](const PrimitiveShape& s) { return vec3(s.radius, s.height / 2, s.radius * 0.8660254f); },
+     [](const PrimitiveShape& s) { return std::sqrt(s.radius * s.radius + s.height * s.height / 4); },
+     nullptr},
+    {math::kPrimOctahedron, "octahedron", "regular octahedron |x| + |y| + |z| <= `radius`",
+     {table_detail::req("radius", SDFPRUNE_AT(radius), 1, table_detail::kPos, 0)}, 1, true,
+     [](const PrimitiveShape& s) { return vec3(s.radius); },
+     [](const PrimitiveShape& s) { return s.radius; }, nullptr},
 };
 // clang-format on
 #undef SDFPRUNE_AT

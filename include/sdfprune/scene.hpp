@@ -64,14 +64,17 @@ float spectral_norm(const Affine& a);
 
 // The kind-specific parameters of a primitive, in the scene format's own terms.
 struct PrimitiveShape {
-    float radius = 0;        // sphere, cylinder, cone (base), capsule
-    float height = 0;        // cylinder, cone (full height along y), capsule (inner segment)
+    float radius = 0;  // sphere, cylinder, cone (base), capsule, rounded_cylinder, capped_cone,
+                       // hex_prism (circumradius), octahedron
+    float height = 0;        // cylinder, cone, rounded_cylinder (full, along y); capsule (segment)
     vec3 sides;              // box: full lengths
     vec4 bevel;              // box: xz corner radii, quadrants (+x+z, +x-z, -x+z, -x-z)
     float round_x = 0;       // box: rounding of the top (+y) edges
     float round_y = 0;       // box: rounding of the bottom (-y) edges
     float major_radius = 0;  // torus, in the xz plane
     float minor_radius = 0;  // torus
+    float rounding = 0;      // rounded_cylinder: rim radius
+    float top_radius = 0;    // capped_cone: radius at y = +height/2 (radius: at -height/2)
     bool operator==(const PrimitiveShape&) const = default;
 };
 

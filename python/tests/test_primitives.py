@@ -87,3 +87,12 @@ def test_capsule_endpoints():
 def test_docstrings():
     assert "radius" in sp.sphere.__doc__
     assert sp.box.__doc__ and sp.Shape.translate.__doc__ and sp.Shape.__call__.__doc__
+
+
+def test_every_table_kind_has_a_function():
+    import inspect
+    for name, (kind, summary, fields, bounded) in sp.PRIMITIVES.items():
+        fn = getattr(sp, name)
+        assert fn.__doc__
+        params = inspect.signature(fn).parameters
+        assert all(f[0] in params or name in ("box",) for f in fields), name

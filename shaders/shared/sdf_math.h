@@ -25,7 +25,11 @@ SDFPRUNE_CONST uint kPrimCylinder = 2u;
 SDFPRUNE_CONST uint kPrimCone = 3u;
 SDFPRUNE_CONST uint kPrimCapsule = 4u;
 SDFPRUNE_CONST uint kPrimTorus = 5u;
-SDFPRUNE_CONST uint kPrimitiveKindCount = 6u;
+SDFPRUNE_CONST uint kPrimRoundedCylinder = 6u;
+SDFPRUNE_CONST uint kPrimCappedCone = 7u;
+SDFPRUNE_CONST uint kPrimHexPrism = 8u;
+SDFPRUNE_CONST uint kPrimOctahedron = 9u;
+SDFPRUNE_CONST uint kPrimitiveKindCount = 10u;
 // Operator kinds, stored in the same field as the primitive kinds.
 SDFPRUNE_CONST uint kOpUnion = 16u;
 SDFPRUNE_CONST uint kOpIntersection = 17u;
@@ -57,6 +61,14 @@ SDFPRUNE_FN float tape_sign(uint word) { return tape_negated(word) ? -1.0f : 1.0
 //   cone     a.x base radius (at y = -h), a.y half height h
 //   capsule  a.x half length of the inner segment (y), a.y radius
 //   torus    a.x major radius (in xz), a.y minor radius
+//   rounded_cylinder  a.x half height (y), a.y radius, a.z rim rounding
+//   capped_cone       a.x half height h (y), a.y radius at y = -h, a.z radius at y = +h
+//   hex_prism         a.x apothem a (the hexagon's inradius, flat sides at z = ±a), a.y half height
+//   octahedron        a.x radius s (|x| + |y| + |z| <= s)
+// (include/sdfprune/primitives.hpp maps each kind's scene-file fields to these slots.)
+// Every primitive below is an exact distance (1-Lipschitz, |f| = distance to the surface), so the
+// Lipschitz range f(c) ± L·R holds; each bounded one says why it lies in the ball of radius rho
+// that similarity_range uses (primitives.hpp gives rho and the local box).
 struct PrimitiveParams {
     vec4 row0;
     vec4 row1;
@@ -116,6 +128,67 @@ SDFPRUNE_FN float sd_torus(vec3 q, float major, float minor) {
     return length(vec2(length(vec2(q.x, q.z)) - major, q.y)) - minor;
 }
 
+// A cylinder (half height h, radius r, along y) with both rims rounded by `rounding` <= min(r, h):
+// the Minkowski sum of the convex cylinder (r − rounding, h − rounding) and a ball of radius
+// `rounding`, whose exact signed distance is the inner cylinder's minus `rounding` (sd_extrude of
+// the disc). Range: the shape lies in the cylinder (r, h), so in the ball of radius |(r, h)|.
+SDFPRUNE_FN float sd_rounded_cylinder(vec3 q, float half_height, float radius, float rounding) {
+    return sd_extrude(length(vec2(q.x, q.z)) - radius, q.y, half_height, rounding);
+}
+
+// A cone frustum along y: radius r1 at y = -h, r2 at y = +h (either may be 0, not both). In the
+// (rho, y) half-plane its profile is a convex trapezoid; the value is the distance to the nearer
+// of the cap segment on the point's side (ca) and the slanted side (cb), negative inside: the
+// exact signed distance. Range: the shape lies in the cylinder (max(r1, r2), h), so in the ball
+// of radius |(max(r1, r2), h)|.
+SDFPRUNE_FN float sd_capped_cone(vec3 q, float h, float r1, float r2) {
+    vec2 p = vec2(length(vec2(q.x, q.z)), q.y);
+    vec2 k1 = vec2(r2, h);
+    vec2 k2 = vec2(r2 - r1, 2.0f * h);
+    vec2 ca = vec2(p.x - min(p.x, p.y < 0.0f ? r1 : r2), abs(p.y) - h);
+    vec2 cb = p - k1 + k2 * clamp(dot(k1 - p, k2) / dot(k2, k2), 0.0f, 1.0f);
+    float s = (cb.x < 0.0f && ca.y < 0.0f) ? -1.0f : 1.0f;
+    return s * sqrt(min(dot(ca, ca), dot(cb, cb)));
+}
+
+// A hexagonal prism along y: a regular hexagon in xz with vertices at x = ±2a/√3 and flat sides
+// at z = ±a (a: the apothem), extruded to |y| <= h. Reflections (isometries) fold (x, z) into the
+// sector of the side z = a, where the 2D value is the signed distance to that side's segment:
+// exact. The extrusion of an exact 2D distance is exact. Range: the shape lies in the cylinder
+// (2a/√3, h), so in the ball of radius |(2a/√3, h)|.
+SDFPRUNE_FN float sd_hex_prism(vec3 q, float apothem, float h) {
+    vec2 k = vec2(-0.8660254f, 0.5f);
+    vec2 p = abs(vec2(q.x, q.z));
+    p = p - 2.0f * min(dot(k, p), 0.0f) * k;
+    float half_side = 0.57735027f * apothem;
+    float e = length(p - vec2(clamp(p.x, -half_side, half_side), apothem));
+    vec2 w = vec2(p.y > apothem ? e : -e, abs(q.y) - h);
+    return min(max(w.x, w.y), 0.0f) + length(max(w, 0.0f));
+}
+
+// The regular octahedron |x| + |y| + |z| <= s (vertices on the axes at distance s). Where the
+// point projects into its octant's face (every |p_i| >= m/3, m = |x| + |y| + |z| − s; always so
+// inside) the distance is to that face's plane, m/√3 (inside, the octant's face plane is the
+// nearest of the eight). Elsewhere it is the distance to the face's boundary: in the octant's
+// frame rotated so that the coordinate below m/3 comes first, to the edge from (0, s, 0) to
+// (0, 0, s), clamped to it. Exact (1-Lipschitz). Range: the shape lies in the ball of radius s.
+SDFPRUNE_FN float sd_octahedron(vec3 q, float s) {
+    vec3 p = abs(q);
+    float m = p.x + p.y + p.z - s;
+    vec3 r;
+    if (3.0f * p.x < m) {
+        r = p;
+    } else if (3.0f * p.y < m) {
+        r = vec3(p.y, p.z, p.x);
+    } else if (3.0f * p.z < m) {
+        r = vec3(p.z, p.x, p.y);
+    } else {
+        return m * 0.57735027f;
+    }
+    float k = clamp(0.5f * (r.z - r.y + s), 0.0f, s);
+    return length(vec3(r.x, r.y - s + k, r.z - k));
+}
+
 SDFPRUNE_FN float eval_primitive_local(uint kind, PrimitiveParams prm, vec3 q) {
     if (kind == kPrimSphere) return sd_sphere(q, prm.a.x);
     if (kind == kPrimBox)
@@ -123,7 +196,11 @@ SDFPRUNE_FN float eval_primitive_local(uint kind, PrimitiveParams prm, vec3 q) {
     if (kind == kPrimCylinder) return sd_cylinder(q, prm.a.x, prm.a.y);
     if (kind == kPrimCone) return sd_cone(q, prm.a.x, prm.a.y);
     if (kind == kPrimCapsule) return sd_capsule(q, prm.a.x, prm.a.y);
-    return sd_torus(q, prm.a.x, prm.a.y);
+    if (kind == kPrimTorus) return sd_torus(q, prm.a.x, prm.a.y);
+    if (kind == kPrimRoundedCylinder) return sd_rounded_cylinder(q, prm.a.x, prm.a.y, prm.a.z);
+    if (kind == kPrimCappedCone) return sd_capped_cone(q, prm.a.x, prm.a.y, prm.a.z);
+    if (kind == kPrimHexPrism) return sd_hex_prism(q, prm.a.x, prm.a.y);
+    return sd_octahedron(q, prm.a.x);
 }
 
 SDFPRUNE_FN float eval_primitive(uint kind, PrimitiveParams prm, vec3 p) {

@@ -94,6 +94,35 @@ Shape SceneBuilder::scene(const Scene& scene) {
     return Shape(this, id[scene.root()]);
 }
 
+Shape SceneBuilder::rounded_cylinder(float radius, float height, float rounding) {
+    PrimitiveShape s;
+    s.radius = radius;
+    s.height = height;
+    s.rounding = rounding;
+    return add({primitive_desc(math::kPrimRoundedCylinder, s), {}});
+}
+
+Shape SceneBuilder::capped_cone(float radius, float top_radius, float height) {
+    PrimitiveShape s;
+    s.radius = radius;
+    s.top_radius = top_radius;
+    s.height = height;
+    return add({primitive_desc(math::kPrimCappedCone, s), {}});
+}
+
+Shape SceneBuilder::hex_prism(float radius, float height) {
+    PrimitiveShape s;
+    s.radius = radius;
+    s.height = height;
+    return add({primitive_desc(math::kPrimHexPrism, s), {}});
+}
+
+Shape SceneBuilder::octahedron(float radius) {
+    PrimitiveShape s;
+    s.radius = radius;
+    return add({primitive_desc(math::kPrimOctahedron, s), {}});
+}
+
 Shape SceneBuilder::combine(uint32_t kind, Shape a, Shape b, float k) {
     if (a.builder_ != this || b.builder_ != this)
         throw SceneError("shapes from another builder cannot be combined");
