@@ -3,6 +3,7 @@
 // runs with the GIL released; results come back as numpy arrays that own the engine's buffers
 // (no copy).
 #include <algorithm>
+#include <cstdint>
 #include <cstring>
 #include <string>
 
@@ -124,11 +125,13 @@ Points points_of(const py::array& a) {
     if (a.ndim() != 2 || a.shape(1) != 3)
         throw py::value_error("points must be an (N, 3) array");
     p.n = size_t(a.shape(0));
-    if (a.dtype().is(py::dtype::of<float>()) &&
-        (a.flags() & py::array::c_style) == py::array::c_style) {
+    const bool f32 = py::isinstance<py::array_t<float>>(a);  // equivalent dtype, native order
+    const bool f64 = py::isinstance<py::array_t<double>>(a);
+    if (f32 && (a.flags() & py::array::c_style) == py::array::c_style &&
+        reinterpret_cast<uintptr_t>(a.data()) % alignof(vec3) == 0) {
         p.direct = static_cast<const vec3*>(a.data());
-    } else if (a.dtype().is(py::dtype::of<double>()) || a.dtype().is(py::dtype::of<float>())) {
-        p.is_double = a.dtype().is(py::dtype::of<double>());
+    } else if (f32 || f64) {
+        p.is_double = f64;
     } else {
         throw py::value_error("points must be float32 or float64");
     }
@@ -166,7 +169,10 @@ py::array_t<float> eval_sliced(const py::array& points, const py::object& out_ob
     if (out_obj.is_none()) {
         out = py::array_t<float>(py::ssize_t(p.n));
     } else {
-        out = py::cast<py::array_t<float>>(out_obj);
+        // No conversion: results written to a converted copy would be lost.
+        if (!py::isinstance<py::array_t<float>>(out_obj))
+            throw py::value_error("out must be a float32 array");
+        out = py::reinterpret_borrow<py::array_t<float>>(out_obj);
         if (out.ndim() != 1 || size_t(out.shape(0)) != p.n ||
             !(out.flags() & py::array::c_style) || !out.writeable())
             throw py::value_error("out must be a writable C-contiguous float32 array of shape (N,)");

@@ -24,7 +24,17 @@ def test_dtypes_and_layouts():
     assert f([0.0, 0.0, 0.0]).shape == (1,)
     assert f(np.zeros((0, 3), np.float32)).shape == (0,)
     out = np.empty(1000, np.float32)
-    assert f(P.astype(np.float32), out=out) is out
+    assert f(P.astype(np.float32), out=out, exact=False) is out
+    np.testing.assert_array_equal(out, f(P, exact=False))
+    with pytest.raises(ValueError):
+        f(P, out=np.empty(1000), exact=False)          # float64 out: refused, not copied
+    with pytest.raises(ValueError):
+        f(P, out=np.empty(999, np.float32), exact=False)
+    raw = np.zeros(1000 * 12 + 4, np.uint8)
+    unaligned = raw[1:1 + 12000].view(np.float32).reshape(1000, 3)
+    unaligned[:] = P
+    assert not unaligned.flags.aligned
+    np.testing.assert_array_equal(f(unaligned, exact=False), f(P, exact=False))
 
 
 @pytest.mark.parametrize("bad", [np.zeros((4, 2)), np.zeros((2, 3, 3)), np.zeros(5), "abc",
