@@ -34,9 +34,11 @@ python: build
 	SDFPRUNE_BUILD_DIR=$(abspath $(BUILD)) CMAKE_BUILD_PARALLEL_LEVEL=$(JOBS) \
 	  $(PYENV)/bin/pip install --no-build-isolation --no-deps -q .
 
+# ctest, then the Python suite (run even when ctest fails, so both summaries show).
 test: build python
-	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
-	SDFPRUNE_CLI=$(abspath $(BUILD))/sdfprune $(PYENV)/bin/python -m pytest python/tests -q -p no:cacheprovider
+	@status=0; (cd $(BUILD) && ctest --output-on-failure -j $(JOBS)) || status=1; \
+	SDFPRUNE_CLI=$(abspath $(BUILD))/sdfprune $(PYENV)/bin/python -m pytest python/tests -q \
+	  -p no:cacheprovider || status=1; exit $$status
 
 run: build
 	./tools/run_demo.sh $(BUILD)
