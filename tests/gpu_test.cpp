@@ -84,6 +84,7 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
         spec.placement = places[seed % 5];
         spec.subtree_place = seed % 3 == 0 ? 0.3f : 0.0f;
         spec.clip_aabb = seed % 6 == 5;
+        spec.plane_cut = seed % 4 == 2;
         const Scene sc = random_scene(seed, spec);
         PruneOptions o;
         o.resolution = seed % 2 ? 32 : 24;
@@ -177,7 +178,10 @@ TEST(Gpu, RenderMatchesCpu) {
     RandomSceneSpec spec;
     spec.primitives = 24;
     spec.placement = Placement::kMixed;
-    const Scene scenes[] = {builtin_scene("demo"), random_scene(77, spec)};
+    RandomSceneSpec cut = spec;
+    cut.plane_cut = true;
+    cut.union_share = 1.0f;  // a union of solids, half of it cut away: something to hit
+    const Scene scenes[] = {builtin_scene("demo"), random_scene(77, spec), random_scene(78, cut)};
     for (const Scene& sc : scenes) {
         PruneOptions o;
         o.resolution = 64;
@@ -217,6 +221,7 @@ TEST(Gpu, DiscretizeMatchesCpu) {
     RandomSceneSpec spec;
     spec.primitives = 16;
     spec.placement = Placement::kNonUniform;
+    spec.plane_cut = true;
     const Scene sc = random_scene(5, spec);
     PruneOptions o;
     o.resolution = 32;

@@ -12,9 +12,11 @@
 #include <string>
 #include <vector>
 
+#include "prune_check.hpp"
 #include "sdfprune/builder.hpp"
 #include "sdfprune/builtin.hpp"
 #include "sdfprune/eval.hpp"
+#include "sdfprune/io.hpp"
 #include "sdfprune/primitives.hpp"
 
 namespace sdfprune {
@@ -297,6 +299,104 @@ TEST(PrimitivesExact, Octahedron) {
     check_shape(
         b, b.octahedron(0.35f), {{{0, 0, 1}, 0.65}},
         [](vec3 p) { return octahedron_reference(p, 0.35); }, 2e-6, 1.0f);
+}
+
+// ---- half-space --------------------------------------------------------------------------
+
+TEST(PrimitivesExact, Plane) {
+    SceneBuilder b;
+    // Normal (0, 2, 0) (not unit), offset 0.5: the half-space y <= 0.5.
+    const Scene sc = b.build(b.plane({0, 2, 0}, 0.5f), kBox);
+    EXPECT_NEAR(eval_point(sc, {0, 0, 0}), -0.5, 1e-7);
+    EXPECT_NEAR(eval_point(sc, {3, 2, -1}), 1.5, 1e-6);
+    EXPECT_NEAR(eval_point(sc, {0, -4, 7}), -4.5, 1e-6);
+    // A tilted one against dot(p, n̂) − offset written in double.
+    const vec3 n(1, -2, 2);  // |n| = 3
+    const Scene tilted = b.build(b.plane(n, -0.25f), kBox);
+    Rng r(9);
+    for (int i = 0; i < 1000; ++i) {
+        const vec3 p(r.uniform(-4, 4), r.uniform(-4, 4), r.uniform(-4, 4));
+        const double want = (double(p.x) - 2.0 * p.y + 2.0 * p.z) / 3.0 + 0.25;
+        EXPECT_NEAR(eval_point(tilted, p), want, 2e-6);
+    }
+    // Moved by a placement: the plane y <= 0 rotated to x <= 0, then shifted to x <= 1.
+    const Scene moved =
+        b.build(b.plane({0, 1, 0}).rotated({0, 0, 1}, -1.5707963f).translated({1, 0, 0}), kBox);
+    EXPECT_NEAR(eval_point(moved, {3, 5, -2}), 2.0, 2e-6);
+    EXPECT_NEAR(eval_point(moved, {0, 1, 1}), -1.0, 2e-6);
+    EXPECT_EQ(sc.bound[0].scale, 0.0f) << "no similarity bound for an unbounded primitive";
+    PrimitiveShape zero;
+    EXPECT_EQ(validate_primitive(math::kPrimPlane, zero), "normal must not be zero");
+}
+
+// Scene bounds with half-spaces: the hull of the bounded primitives where the tree bounds the
+// shape, else a one-line refusal.
+TEST(PrimitivesExact, PlaneSceneBounds) {
+    SceneBuilder b;
+    const Shape ball = b.sphere(1.0f).translated({2, 0, 0});
+    const Shape half = b.plane({0, 1, 0}, 0.25f);
+    const Scene alone = b.build(ball);
+    for (const Shape s : {ball & half, ball - half, smooth_intersection(half, ball, 0.2f),
+                          (ball & half) | b.box({1, 1, 1})}) {
+        const Scene sc = b.build(s);
+        EXPECT_TRUE(shape_is_bounded(sc));
+        if (sc.primitive_count() == 2) {
+            EXPECT_EQ(sc.aabb.min, alone.aabb.min);
+            EXPECT_EQ(sc.aabb.max, alone.aabb.max);
+        }
+    }
+    for (const Shape s : {half, ball | half, half - ball, smooth_union(ball, half, 0.1f),
+                          (ball | half) & (half - ball)}) {
+        try {
+            (void)b.build(s);
+            ADD_FAILURE() << "an unbounded scene was built without an aabb";
+        } catch (const SceneError& e) {
+            EXPECT_STREQ(e.what(),
+                         "the scene's shape is unbounded (a plane not cut off by bounded shapes): "
+                         "give it an explicit aabb");
+        }
+        EXPECT_NO_THROW((void)b.build(s, kBox)) << "an explicit aabb is always accepted";
+    }
+}
+
+// ---- every kind through the scene format ----------------------------------------------------
+
+TEST(PrimitivesExact, EveryKindRoundTripsThroughJson) {
+    Rng r(21);
+    for (uint32_t k = 0; k < math::kPrimitiveKindCount; ++k) {
+        SceneBuilder b;
+        const Shape s = test::random_primitive(b, r, k).translated({0.1f, 0.2f, 0.3f});
+        const Scene sc = b.build(s | b.sphere(0.1f), kBox);
+        const std::string json = scene_to_json(sc);
+        EXPECT_NE(json.find(std::string("\"primitiveType\":\"") + primitive_kind_name(k) + "\""),
+                  std::string::npos);
+        const Scene back = parse_scene(json, "round trip");
+        EXPECT_EQ(back.kind, sc.kind) << primitive_kind_name(k);
+        ASSERT_EQ(back.params.size(), sc.params.size());
+        EXPECT_EQ(back.params[0].a, sc.params[0].a) << primitive_kind_name(k);
+        EXPECT_EQ(back.params[0].b, sc.params[0].b);
+        EXPECT_EQ(back.params[0].c, sc.params[0].c);
+        EXPECT_EQ(scene_to_json(back), json);
+        // A required field missing is named.
+        const PrimitiveKindInfo& info = primitive_info(k);
+        for (uint32_t f = 0; f < info.field_count; ++f) {
+            if (!info.fields[f].required) continue;
+            const std::string key = std::string("\"") + info.fields[f].name + "\":";
+            std::string broken = json;
+            const size_t at = broken.find(key);
+            ASSERT_NE(at, std::string::npos);
+            broken.replace(at, key.size(), "\"ignored_field\":");
+            try {
+                (void)parse_scene(broken, "broken");
+                ADD_FAILURE() << primitive_kind_name(k) << " loaded without " << key;
+            } catch (const SceneError& e) {
+                EXPECT_NE(std::string(e.what()).find("missing field \"" +
+                                                     std::string(info.fields[f].name) + "\""),
+                          std::string::npos)
+                    << e.what();
+            }
+        }
+    }
 }
 
 // ---- parameters -----------------------------------------------------------------------------

@@ -17,6 +17,7 @@
 #include "sdfprune/builder.hpp"
 #include "sdfprune/builtin.hpp"
 #include "sdfprune/eval.hpp"
+#include "sdfprune/primitives.hpp"
 #include "sdfprune/prune.hpp"
 
 namespace sdfprune::test {
@@ -62,6 +63,7 @@ struct RandomSceneSpec {
     float union_share = 0.5f;    // share of unions; the rest: 45 % intersections, 55 % differences
     float subtree_place = 0.0f;  // chance that an operator's result gets its own placement
     bool clip_aabb = false;      // an AABB that cuts through the content instead of holding it
+    bool plane_cut = false;      // the tree intersected with, or minus, a random half-space
 };
 
 inline vec3 random_in_box(Rng& r, vec3 lo, vec3 hi) {
@@ -127,6 +129,8 @@ inline Shape random_primitive(SceneBuilder& b, Rng& r, uint32_t kind) {
             return b.hex_prism(r.uniform(0.1f, 0.55f), r.uniform(0.1f, 1.2f));
         case math::kPrimOctahedron:
             return b.octahedron(r.uniform(0.15f, 0.7f));
+        case math::kPrimPlane:
+            return b.plane(random_direction(r) * r.uniform(0.5f, 2.0f), r.uniform(-0.3f, 0.3f));
         default:
             throw std::logic_error("random_primitive: no generator for kind " +
                                    std::to_string(kind));
@@ -223,12 +227,24 @@ inline Scene random_scene(uint64_t seed, const RandomSceneSpec& spec) {
     Rng r(seed);
     SceneBuilder b;
     std::vector<Shape> leaves;
+    // Leaves of every bounded kind; half-spaces only through spec.plane_cut.
+    std::vector<uint32_t> kinds;
+    for (uint32_t k = 0; k < math::kPrimitiveKindCount; ++k)
+        if (primitive_info(k).bounded) kinds.push_back(k);
+    const uint32_t n_kinds = uint32_t(kinds.size());
     for (uint32_t i = 0; i < spec.primitives; ++i) {
-        const uint32_t kind =
-            uint32_t(r.uniform() * float(math::kPrimitiveKindCount)) % math::kPrimitiveKindCount;
+        const uint32_t kind = kinds[uint32_t(r.uniform() * float(n_kinds)) % n_kinds];
         leaves.push_back(place(random_primitive(b, r, kind), r, spec.placement));
     }
-    const Shape root = random_tree(b, r, spec, leaves, 0, leaves.size());
+    Shape root = random_tree(b, r, spec, leaves, 0, leaves.size());
+    if (spec.plane_cut) {
+        const Shape plane = place(
+            random_primitive(b, r, math::kPrimPlane), r,
+            spec.placement == Placement::kRigid ? Placement::kRigid : Placement::kMixed, 0.2f);
+        const float k = r.uniform() < spec.smooth_prob ? r.uniform(0.02f, 0.35f) : 0.0f;
+        root = b.combine(r.uniform() < 0.5f ? math::kOpIntersection : math::kOpDifference, root,
+                         plane, k);
+    }
     const Aabb content = b.build(root).aabb;  // bounding_box() of the built scene
     const vec3 size = content.max - content.min;
     Aabb box;

@@ -30,6 +30,7 @@ RandomSceneSpec property_spec(uint32_t i) {
     s.primitives = i % 10 == 0 ? 1 + i % 3 : 2 + uint32_t(r.uniform() * 40.0f);
     s.subtree_place = i % 2 ? 0.25f : 0.0f;
     s.clip_aabb = i % 7 == 6;
+    s.plane_cut = i % 5 == 3;
     return s;
 }
 
@@ -37,8 +38,8 @@ std::string describe(uint32_t i, const RandomSceneSpec& s, const PruneOptions& o
     std::ostringstream os;
     os << "scene " << i << " (" << s.primitives << " primitives, " << test::tree_shape_name(s.tree)
        << ", " << test::placement_name(s.placement) << ", smooth " << s.smooth_prob
-       << (s.clip_aabb ? ", clipped AABB" : "") << "), grid " << o.resolution << " factor "
-       << o.factor << " C " << o.far_field_c
+       << (s.clip_aabb ? ", clipped AABB" : "") << (s.plane_cut ? ", cut by a plane" : "")
+       << "), grid " << o.resolution << " factor " << o.factor << " C " << o.far_field_c
        << (o.bounds == CellBounds::kInterval ? " interval" : " lipschitz")
        << (o.far_field ? "" : " no-far-field") << (o.hierarchy ? "" : " no-hierarchy");
     return os.str();

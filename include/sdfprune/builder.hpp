@@ -59,6 +59,10 @@ public:
     // them on the x axis), full `height`.
     Shape hex_prism(float radius, float height);
     Shape octahedron(float radius);  // |x| + |y| + |z| <= radius: vertices on the axes
+    // The half-space dot(p, normal) <= offset·|normal| (the side `normal` points away from),
+    // unbounded: combine it with bounded shapes (intersection, or subtract it) or build the
+    // scene over an explicit AABB.
+    Shape plane(vec3 normal, float offset = 0);
     // Any kind of primitives.hpp's table with its fields in `shape` (checked when built).
     Shape primitive(uint32_t kind, const PrimitiveShape& shape);
 

@@ -23,7 +23,8 @@ Scene parse_scene(std::string_view json, const std::string& name);
 
 // Writes the scene in the reference format: node matrices as loaded, compact JSON, numbers
 // printed as the shortest decimal that reads back to the same float, so load -> save -> load
-// gives the same scene. Extension fields (capsule, torus) are documented in README.md.
+// gives the same scene. Extension primitives (capsule, torus, rounded_cylinder, capped_cone,
+// hex_prism, octahedron, plane: the table of primitives.hpp) are documented in README.md.
 std::string scene_to_json(const Scene& scene);
 void save_scene(const Scene& scene, const std::string& path);
 

@@ -7,8 +7,9 @@
 //
 // Adding a primitive: a kind id and an sd_* function in sdf_math.h (one more line in
 // eval_primitive_local), any new PrimitiveShape member in scene.hpp, one entry below, a builder
-// method, and its analytic and range tests (tests/primitives_test.cpp,
-// tests/primitive_range_test.cpp).
+// method, and a generator in tests/prune_check.hpp (random_primitive): the range test
+// (tests/primitive_range_test.cpp), the JSON round trip and the property tests then cover it;
+// its analytic test goes beside the others (tests/primitives_exact_test.cpp).
 #pragma once
 
 #include <algorithm>
@@ -155,6 +156,15 @@ inline constexpr PrimitiveKindInfo kPrimitiveTable[math::kPrimitiveKindCount] = 
      {table_detail::req("radius", SDFPRUNE_AT(radius), 1, table_detail::kPos, 0)}, 1, true,
      [](const PrimitiveShape& s) { return vec3(s.radius); },
      [](const PrimitiveShape& s) { return s.radius; }, nullptr},
+    {math::kPrimPlane, "plane",
+     "half-space dot(p, normal) <= offset·|normal| (unbounded: see bounding_box)",
+     {table_detail::req("normal", SDFPRUNE_AT(normal), 3, table_detail::kAny, 0),
+      table_detail::opt("offset", SDFPRUNE_AT(offset), 1, table_detail::kAny, 3)}, 2, false,
+     nullptr, nullptr,
+     [](const PrimitiveShape& s) {
+         if (!(math::length(s.normal) > 1e-20f)) return std::string("normal must not be zero");
+         return std::string();
+     }},
 };
 // clang-format on
 #undef SDFPRUNE_AT

@@ -75,6 +75,8 @@ struct PrimitiveShape {
     float minor_radius = 0;  // torus
     float rounding = 0;      // rounded_cylinder: rim radius
     float top_radius = 0;    // capped_cone: radius at y = +height/2 (radius: at -height/2)
+    vec3 normal;             // plane: outward normal (any length > 0)
+    float offset = 0;        // plane: signed distance of the plane from the origin along normal
     bool operator==(const PrimitiveShape&) const = default;
 };
 
@@ -142,8 +144,16 @@ Scene build_scene(std::span<const SceneNodeDesc> nodes, uint32_t root, const Aab
 // Checks one primitive's or operator's parameters; returns "" when valid, else the reason.
 std::string validate_node(const SceneNodeDesc& node);
 
-// An AABB holding every primitive of the scene (from each primitive's local bounding box),
-// padded by `pad` times its size on each side.
+// Whether the scene's shape is bounded, judged from the tree (conservatively): a bounded
+// primitive is (a plane is not); a union when both operands are; an intersection when either
+// is; a difference when its left operand is. Blending does not change the answer.
+bool shape_is_bounded(const Scene& scene);
+
+// The AABB used when a scene gives none (SceneBuilder::build without one, generators): the hull
+// of the bounded primitives' world boxes (from each one's local box), padded by `pad` times its
+// size on each side. Half-spaces add nothing: when shape_is_bounded holds, the shape lies in the
+// union of its bounded primitives, so in that hull. Throws SceneError when it does not hold
+// (e.g. a plane alone, or a union with a plane): such a scene needs an explicit AABB.
 Aabb bounding_box(const Scene& scene, float pad = 0.05f);
 
 // Summary figures of a scene.

@@ -29,7 +29,8 @@ SDFPRUNE_CONST uint kPrimRoundedCylinder = 6u;
 SDFPRUNE_CONST uint kPrimCappedCone = 7u;
 SDFPRUNE_CONST uint kPrimHexPrism = 8u;
 SDFPRUNE_CONST uint kPrimOctahedron = 9u;
-SDFPRUNE_CONST uint kPrimitiveKindCount = 10u;
+SDFPRUNE_CONST uint kPrimPlane = 10u;
+SDFPRUNE_CONST uint kPrimitiveKindCount = 11u;
 // Operator kinds, stored in the same field as the primitive kinds.
 SDFPRUNE_CONST uint kOpUnion = 16u;
 SDFPRUNE_CONST uint kOpIntersection = 17u;
@@ -65,6 +66,8 @@ SDFPRUNE_FN float tape_sign(uint word) { return tape_negated(word) ? -1.0f : 1.0
 //   capped_cone       a.x half height h (y), a.y radius at y = -h, a.z radius at y = +h
 //   hex_prism         a.x apothem a (the hexagon's inradius, flat sides at z = ±a), a.y half height
 //   octahedron        a.x radius s (|x| + |y| + |z| <= s)
+//   plane             a.xyz normal n (any length), a.w offset: the half-space dot(q, n/|n|) <=
+//   offset
 // (include/sdfprune/primitives.hpp maps each kind's scene-file fields to these slots.)
 // Every primitive below is an exact distance (1-Lipschitz, |f| = distance to the surface), so the
 // Lipschitz range f(c) ± L·R holds; each bounded one says why it lies in the ball of radius rho
@@ -189,6 +192,14 @@ SDFPRUNE_FN float sd_octahedron(vec3 q, float s) {
     return length(vec3(r.x, r.y - s + k, r.z - k));
 }
 
+// The half-space dot(q, n)/|n| <= offset: the exact signed distance to its boundary plane
+// (1-Lipschitz, so the Lipschitz range holds). Unbounded: no ball holds it and f(q) >= |q| − rho
+// fails for every rho, so it gets no similarity bound (PrimitiveBound::scale = 0) and pruning
+// uses its Lipschitz range only; scenes with one need care for their AABB (bounding_box).
+SDFPRUNE_FN float sd_plane(vec3 q, vec3 n, float offset) {
+    return dot(q, n) / length(n) - offset;
+}
+
 SDFPRUNE_FN float eval_primitive_local(uint kind, PrimitiveParams prm, vec3 q) {
     if (kind == kPrimSphere) return sd_sphere(q, prm.a.x);
     if (kind == kPrimBox)
@@ -200,7 +211,8 @@ SDFPRUNE_FN float eval_primitive_local(uint kind, PrimitiveParams prm, vec3 q) {
     if (kind == kPrimRoundedCylinder) return sd_rounded_cylinder(q, prm.a.x, prm.a.y, prm.a.z);
     if (kind == kPrimCappedCone) return sd_capped_cone(q, prm.a.x, prm.a.y, prm.a.z);
     if (kind == kPrimHexPrism) return sd_hex_prism(q, prm.a.x, prm.a.y);
-    return sd_octahedron(q, prm.a.x);
+    if (kind == kPrimOctahedron) return sd_octahedron(q, prm.a.x);
+    return sd_plane(q, vec3(prm.a.x, prm.a.y, prm.a.z), prm.a.w);
 }
 
 SDFPRUNE_FN float eval_primitive(uint kind, PrimitiveParams prm, vec3 p) {

@@ -123,6 +123,13 @@ Shape SceneBuilder::octahedron(float radius) {
     return add({primitive_desc(math::kPrimOctahedron, s), {}});
 }
 
+Shape SceneBuilder::plane(vec3 normal, float offset) {
+    PrimitiveShape s;
+    s.normal = normal;
+    s.offset = offset;
+    return add({primitive_desc(math::kPrimPlane, s), {}});
+}
+
 Shape SceneBuilder::combine(uint32_t kind, Shape a, Shape b, float k) {
     if (a.builder_ != this || b.builder_ != this)
         throw SceneError("shapes from another builder cannot be combined");

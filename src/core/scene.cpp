@@ -154,9 +154,32 @@ Scene build_scene(std::span<const SceneNodeDesc> nodes, uint32_t root, const Aab
     return sc;
 }
 
+bool shape_is_bounded(const Scene& sc) {
+    // Post-order: children before parents. A difference's right operand (negated) never makes
+    // the result bounded or unbounded: the result lies in its left operand.
+    std::vector<uint8_t> bounded(sc.size());
+    for (uint32_t i = 0; i < sc.size(); ++i) {
+        const uint32_t k = sc.kind[i];
+        if (sc.is_primitive(i))
+            bounded[i] = primitive_info(k).bounded;
+        else if (k == math::kOpUnion)
+            bounded[i] = bounded[sc.left[i]] && bounded[sc.right[i]];
+        else if (k == math::kOpIntersection)
+            bounded[i] = bounded[sc.left[i]] || bounded[sc.right[i]];
+        else
+            bounded[i] = bounded[sc.left[i]];
+    }
+    return sc.size() == 0 || bounded[sc.root()];
+}
+
 Aabb bounding_box(const Scene& scene, float pad) {
+    if (!shape_is_bounded(scene))
+        throw SceneError(
+            "the scene's shape is unbounded (a plane not cut off by bounded shapes): give it an "
+            "explicit aabb");
     vec3 lo(INFINITY), hi(-INFINITY);
     for (uint32_t p = 0; p < scene.primitive_count(); ++p) {
+        if (!primitive_info(scene.kind[scene.primitive_node[p]]).bounded) continue;
         const math::PrimitiveParams& prm = scene.params[p];
         Affine world;
         const vec4 rows[3] = {prm.row0, prm.row1, prm.row2};
