@@ -96,3 +96,16 @@ def test_every_table_kind_has_a_function():
         assert fn.__doc__
         params = inspect.signature(fn).parameters
         assert all(f[0] in params or name in ("box",) for f in fields), name
+
+
+def test_plane_half_space_and_bounds():
+    if "plane" not in sp.PRIMITIVES:
+        pytest.skip("this engine has no plane primitive")
+    half = sp.plane((0, 2, 0), 0.2)                     # y <= 0.2
+    with pytest.raises(ValueError):
+        half.bounds                                     # unbounded: bounds must be given
+    f = half.bounded(((-1, -1, -1), (1, 1, 1)))
+    np.testing.assert_allclose(f(P, exact=True), P[:, 1] - 0.2, atol=1e-6)
+    cut = sp.sphere(1) & sp.plane(normal=(0, 1, 0))
+    np.testing.assert_allclose(cut(P, exact=True),
+                               np.maximum(length(P.astype(np.float64)) - 1, P[:, 1]), atol=2e-6)
