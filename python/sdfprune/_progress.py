@@ -30,8 +30,14 @@ def progress_callback(progress: Any, label: str) -> Optional[Callable[[float], N
                     bar.close()
             return update
 
-        def text(f: float) -> None:
-            sys.stderr.write(f"\r{label}: {100 * f:5.1f} %" + ("\n" if f >= 1 else ""))
+        shown = [-1]
+
+        def text(f: float) -> None:  # whole percents only, one line ended once
+            pct = int(100 * f)
+            if pct <= shown[0]:
+                return
+            shown[0] = pct
+            sys.stderr.write(f"\r{label}: {pct:3d} %" + ("\n" if pct >= 100 else ""))
             sys.stderr.flush()
         return text
     raise ValueError("progress must be None, True or a callable(fraction)")
