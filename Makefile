@@ -4,12 +4,16 @@ JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 PACKAGES = build-essential cmake ninja-build pkg-config libtbb-dev libcli11-dev rapidjson-dev \
            libgtest-dev libbenchmark-dev libpng-dev libopenvdb-dev libboost-iostreams-dev \
-           valgrind clang-format time libvulkan-dev glslc spirv-tools mesa-vulkan-drivers
+           valgrind clang-format time libvulkan-dev glslc spirv-tools mesa-vulkan-drivers \
+           python3 python3-dev python3-venv python3-numpy python3-pytest python3-setuptools \
+           python3-wheel pybind11-dev python3-skimage
 # Only for `make fuzz`: clang and its runtime libraries (libFuzzer, ASan, UBSan).
 FUZZ_PACKAGES = clang libclang-rt-14-dev
 FUZZ_SECONDS ?= 600
+# The Python package's test environment (never Debian's system python): a venv in the build tree.
+PYENV = $(BUILD)/pyenv
 
-.PHONY: setup build test run bench sanitize fuzz format clean
+.PHONY: setup build python test run bench sanitize fuzz format clean
 
 # Installs every system dependency (as root, non-interactive); does nothing when all are present.
 setup:
@@ -26,8 +30,18 @@ $(BUILD)/build.ninja: CMakeLists.txt
 build: setup $(BUILD)/build.ninja
 	cmake --build $(BUILD) -j $(JOBS)
 
-test: build
-	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
+# The Python package, installed into $(PYENV) by pip from this tree, built in $(BUILD) (the
+# engine library is not compiled a second time; only the module is added).
+python: build
+	@test -x $(PYENV)/bin/python || /usr/bin/python3 -m venv --system-site-packages $(PYENV)
+	SDFPRUNE_BUILD_DIR=$(abspath $(BUILD)) CMAKE_BUILD_PARALLEL_LEVEL=$(JOBS) \
+	  $(PYENV)/bin/pip install --no-build-isolation --no-deps -q .
+
+# ctest, then the Python suite (run even when ctest fails, so both summaries show).
+test: build python
+	@status=0; (cd $(BUILD) && ctest --output-on-failure -j $(JOBS)) || status=1; \
+	SDFPRUNE_CLI=$(abspath $(BUILD))/sdfprune $(PYENV)/bin/python -m pytest python/tests -q \
+	  -p no:cacheprovider || status=1; exit $$status
 
 run: build
 	./tools/run_demo.sh $(BUILD)
@@ -35,9 +49,10 @@ run: build
 # Micro-benchmarks, then BENCHMARKS.md: the issues' targets on the reference scenes, Tables 1-2
 # over generated scenes, and the scaling plot docs/scaling.png (tens of minutes on 2 cores: the
 # naive baselines are slow by design and estimated beyond a budget).
-bench: build
+bench: build python
 	./$(BUILD)/sdfprune_bench --benchmark_min_time=0.2
 	./bench/run_bench.sh $(BUILD)
+	./bench/python.sh $(BUILD)
 
 # Address + undefined-behaviour sanitizers, separate build tree.
 sanitize: setup

@@ -66,6 +66,11 @@ public:
     // Any kind of primitives.hpp's table with its fields in `shape` (checked when built).
     Shape primitive(uint32_t kind, const PrimitiveShape& shape);
 
+    // A built or loaded scene as a shape of this builder: its tree with each node's matrix
+    // (as a placement, its inverse) and colors; its AABB is not kept. Throws SceneError when a
+    // node's matrix is singular.
+    Shape scene(const Scene& scene);
+
     // kind: math::kOpUnion, kOpIntersection or kOpDifference; k >= 0 is the blend radius.
     Shape combine(uint32_t kind, Shape a, Shape b, float k);
 

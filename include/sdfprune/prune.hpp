@@ -14,13 +14,15 @@
 // count.
 //
 // Thread-safety: a PrunedGrid is immutable; any number of threads may query it. It refers to
-// the Scene it was built from, which must outlive it.
+// the Scene it was built from, which must outlive it, unless it was made by the overload of
+// prune() taking a std::shared_ptr, which keeps the scene alive (shared ownership).
 #pragma once
 
 #include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <functional>
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -249,6 +251,8 @@ class PrunedGrid {
 
   private:
     friend PrunedGrid prune(const Scene&, const PruneOptions&);
+    friend PrunedGrid prune(std::shared_ptr<const Scene>, const PruneOptions&);
+    std::shared_ptr<const Scene> owner_;  // set by the shared-ownership prune(); else empty
     struct Level {
         uint32_t res = 0;     // cells per axis of the whole level
         uint32_t factor = 0;  // cells per axis of one block (level 0: res)
@@ -299,6 +303,10 @@ class PrunedGrid {
 };
 
 PrunedGrid prune(const Scene& scene, const PruneOptions& options = {});
+// The same, sharing ownership of an immutable scene: the grid (and its copies) keep it alive,
+// so it may be dropped by the caller (language bindings rely on this). Throws
+// std::invalid_argument for a null scene.
+PrunedGrid prune(std::shared_ptr<const Scene> scene, const PruneOptions& options = {});
 
 // ---- the per-cell stages, exposed for tests ------------------------------------------------
 

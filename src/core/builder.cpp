@@ -66,6 +66,34 @@ Shape SceneBuilder::torus(float major_radius, float minor_radius) {
     return add({primitive_desc(math::kPrimTorus, s), {}});
 }
 
+Shape SceneBuilder::scene(const Scene& scene) {
+    // Each primitive's whole world->local map (the matrices composed from the root down, as
+    // build_scene does) becomes its placement; operators get none. Parents come after their
+    // children in post-order, so a downward pass runs from the root to index 0.
+    const uint32_t n = scene.size();
+    std::vector<Affine> world(n);
+    for (uint32_t i = n; i-- > 0;)
+        world[i] = scene.parent[i] == kNone ? scene.local[i]
+                                            : world[scene.parent[i]].compose(scene.local[i]);
+    std::vector<uint32_t> id(n);
+    for (uint32_t i = 0; i < n; ++i) {
+        Node node;
+        node.desc.kind = scene.kind[i];
+        if (scene.is_primitive(i)) {
+            const uint32_t p = scene.primitive[i];
+            node.desc.shape = scene.shape[p];
+            node.desc.color = scene.color[p];
+            if (!(world[i] == Affine())) node.placement = world[i].inverse();
+        } else {
+            node.desc.left = id[scene.left[i]];
+            node.desc.right = id[scene.right[i]];
+            node.desc.blend = scene.blend[i];
+        }
+        id[i] = add(node).id_;
+    }
+    return Shape(this, id[scene.root()]);
+}
+
 Shape SceneBuilder::rounded_cylinder(float radius, float height, float rounding) {
     PrimitiveShape s;
     s.radius = radius;
