@@ -140,6 +140,8 @@ struct CellView {
     uint32_t primitives = 0;         // near-field: primitives in the tape
 };
 
+struct SceneEdit;
+
 class PrunedGrid {
   public:
     const Scene& scene() const { return *scene_; }
@@ -252,6 +254,7 @@ class PrunedGrid {
   private:
     friend PrunedGrid prune(const Scene&, const PruneOptions&);
     friend PrunedGrid prune(std::shared_ptr<const Scene>, const PruneOptions&);
+    friend PrunedGrid update(const PrunedGrid&, const Scene&, const SceneEdit&);
     std::shared_ptr<const Scene> owner_;  // set by the shared-ownership prune(); else empty
     struct Level {
         uint32_t res = 0;     // cells per axis of the whole level
@@ -393,5 +396,36 @@ inline vec3 sub_box_centre(const CellBox& box, uint32_t S, uint32_t i, uint32_t 
 // Appends the pruned tape to `out`; returns the number of primitives in it.
 uint32_t compact_tape(const Scene& scene, std::span<const uint32_t> tape, CellScratch& s,
                       std::vector<uint32_t>& out);
+
+// ---- incremental re-pruning (prune_update.cpp) -----------------------------------------------
+// An edit between two scenes of the same tree (same nodes, kinds of node and children): the
+// nodes whose pruning data changed (kind, sign, blend radius, Lipschitz bound, or a primitive's
+// parameters, transform and bound). Colors do not count: pruning never reads them.
+struct SceneEdit {
+    std::vector<uint32_t> nodes;
+};
+
+// The edit from `before` to `after`. Throws std::invalid_argument when the two are not the same
+// tree (a different node count, children or kinds of node), or their AABBs differ.
+SceneEdit scene_edit(const Scene& before, const Scene& after);
+
+// The pruned grid of `edited`, re-pruning only the blocks an edit can reach and copying every
+// other cell, tape and constant from `old`. The result is identical, cell for cell, tape word for
+// tape word and constant for constant, to prune(edited, old.options()). Why: a cell's result
+// depends only on its parent's tape words and the data of the nodes those words name. So a block
+// of children is copied where its parent's new tape equals its old tape word for word and names
+// no edited node (nor does any tape below it, each being a subset of its parent's); every other
+// block goes through prune_level_step again, from the coarsest level down. An edit that changes
+// the root's Lipschitz bound (used by every far-field cell) prunes everything again.
+// `old` must have been built with PruneOptions::coarse_tapes (it needs the coarse cells' own
+// tapes: std::invalid_argument otherwise), and `edit` must name every changed node (see
+// scene_edit). `edited` must outlive the result. stats().prune_ms is the update's time;
+// cells_pruned and tape_words_visited count its own work.
+PrunedGrid update(const PrunedGrid& old, const Scene& edited, const SceneEdit& edit);
+PrunedGrid update(const PrunedGrid& old, const Scene& edited);  // edit = scene_edit(old, edited)
+
+// `scene` with primitive `primitive` (an index into scene.params) moved by `offset` in world
+// space: the edit that incremental re-pruning is measured with (--edit-bench).
+Scene moved_primitive(const Scene& scene, uint32_t primitive, vec3 offset);
 
 }  // namespace sdfprune
