@@ -25,8 +25,15 @@ std::string_view as_text(std::span<const uint8_t> data) {
 }
 
 std::string str(vec3 p) {
-    return "(" + std::to_string(p.x) + ", " + std::to_string(p.y) + ", " + std::to_string(p.z) +
-           ")";
+    // Appended piece by piece: GCC 12 warns (-Wrestrict, falsely) on "(" + std::string.
+    std::string s = "(";
+    s += std::to_string(p.x);
+    s += ", ";
+    s += std::to_string(p.y);
+    s += ", ";
+    s += std::to_string(p.z);
+    s += ")";
+    return s;
 }
 
 // Values this large lose the relative precision the checks assume (and may overflow).

@@ -424,6 +424,11 @@ SceneEdit scene_edit(const Scene& before, const Scene& after);
 PrunedGrid update(const PrunedGrid& old, const Scene& edited, const SceneEdit& edit);
 PrunedGrid update(const PrunedGrid& old, const Scene& edited);  // edit = scene_edit(old, edited)
 
+// Whether two grids hold the same cells: per level, the same far-field cells with the same
+// constants, the same near-field cells with the same tape words, and the same values and
+// children (the pools' layout may differ).
+bool same_cells(const PrunedGrid& a, const PrunedGrid& b);
+
 // `scene` with primitive `primitive` (an index into scene.params) moved by `offset` in world
 // space: the edit that incremental re-pruning is measured with (--edit-bench).
 Scene moved_primitive(const Scene& scene, uint32_t primitive, vec3 offset);

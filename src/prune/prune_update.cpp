@@ -7,11 +7,19 @@
 #include <cstring>
 #include <stdexcept>
 
+#include <tbb/enumerable_thread_specific.h>
+
+#include "../core/parallel.hpp"
 #include "prune_level.hpp"
 #include "sdfprune/prune.hpp"
 
 namespace sdfprune {
 namespace {
+
+// The words of the tape whose header ([length, primitives]) is at `header`.
+std::span<const uint32_t> tape_words(const uint32_t* header) {
+    return {header + 2, header[0]};
+}
 
 bool same_bytes(const auto& a, const auto& b) {
     return std::memcmp(&a, &b, sizeof(a)) == 0;
@@ -96,7 +104,7 @@ PrunedGrid update(const PrunedGrid& old, const Scene& sc, const SceneEdit& edit)
     st.levels = old.stats_.levels;
     const uint32_t N = old.resolution();
 
-    CellScratch scratch;
+    tbb::enumerable_thread_specific<CellScratch> scratch;
     LevelChunk sums;  // the finest level's counts, copied cells included
     uint64_t far_finest = 0;
     // The previous level's tapes ([length, primitives, words...]) for this level's pruned
@@ -119,7 +127,41 @@ PrunedGrid update(const PrunedGrid& old, const Scene& sc, const SceneEdit& edit)
         // the old cell it equals.
         std::vector<uint32_t> same_as_old(level.cells.size(), PrunedCell::kFarField);
         const LevelGeometry geo = level_geometry(sc, opt, level.res, f, finest, kPruneChunkCells);
+        // The blocks to prune again, in parallel (each into its own chunk), with the check of
+        // their near-field cells against the old grid; then every block's tapes in order.
+        std::vector<uint64_t> pruned;
+        for (uint64_t b = 0; b < blocks.size(); ++b)
+            if (blocks[b].old_first == PrunedCell::kFarField) pruned.push_back(b);
+        std::vector<LevelChunk> outs(pruned.size());
+        ParallelOptions po;
+        po.threads = opt.threads;
+        parallel_for<PruneCancelled>(pruned.size(), po, [&](uint64_t k) {
+            const uint64_t b = pruned[k];
+            const BlockSource& src = blocks[b];
+            const std::span<PrunedCell> cells =
+                std::span(level.cells).subspan(b * per_block, per_block);
+            LevelChunk& out = outs[k];
+            prune_level_step(sc, opt, geo, std::span(&src.parent, 1), cells, scratch.local(), out);
+            for (uint32_t local = 0; local < per_block; ++local) {
+                const PrunedCell& c = cells[local];
+                if (c.tape == PrunedCell::kFarField) continue;
+                const std::span<const uint32_t> t = tape_words(out.words.data() + c.tape);
+                if (!clean(t)) continue;
+                // The old grid's cell at the same place, if it has one at this level.
+                const CellCoord at = block_cell(src.parent.origin, f, local);
+                const uint32_t scale = N / level.res;
+                const PrunedGrid::CellRef ref =
+                    old.descend(at.x * scale, at.y * scale, at.z * scale, li);
+                if (ref.level != li) continue;
+                const PrunedCell& oc = old_level.cells[ref.index];
+                if (oc.tape == PrunedCell::kFarField) continue;
+                const std::span<const uint32_t> ot = old.tape_at(oc.tape);
+                if (std::equal(t.begin(), t.end(), ot.begin(), ot.end()))
+                    same_as_old[b * per_block + local] = ref.index;
+            }
+        });
         words.clear();
+        size_t next_pruned = 0;
         for (uint64_t b = 0; b < blocks.size(); ++b) {
             const std::span<PrunedCell> cells =
                 std::span(level.cells).subspan(b * per_block, per_block);
@@ -138,29 +180,14 @@ PrunedGrid update(const PrunedGrid& old, const Scene& sc, const SceneEdit& edit)
                 }
                 continue;
             }
-            LevelChunk out;
-            prune_level_step(sc, opt, geo, std::span(&src.parent, 1), cells, scratch, out);
+            const LevelChunk& out = outs[next_pruned++];
             st.cells_pruned += out.pruned;
             st.tape_words_visited += out.words_visited;
-            for (uint32_t local = 0; local < per_block; ++local) {
-                PrunedCell& c = cells[local];
+            for (PrunedCell& c : cells) {
                 if (c.tape == PrunedCell::kFarField) continue;
                 const uint32_t* header = out.words.data() + c.tape;
-                const std::span<const uint32_t> t(header + 2, header[0]);
                 c.tape = uint32_t(words.size());
                 words.insert(words.end(), header, header + 2 + header[0]);
-                if (!clean(t)) continue;
-                // The old grid's cell at the same place, if it has one at this level.
-                const CellCoord at = block_cell(src.parent.origin, f, local);
-                const uint32_t scale = N / level.res;
-                const PrunedGrid::CellRef ref =
-                    old.descend(at.x * scale, at.y * scale, at.z * scale, li);
-                if (ref.level != li) continue;
-                const PrunedCell& oc = old_level.cells[ref.index];
-                if (oc.tape == PrunedCell::kFarField) continue;
-                const std::span<const uint32_t> ot = old.tape_at(oc.tape);
-                if (std::equal(t.begin(), t.end(), ot.begin(), ot.end()))
-                    same_as_old[b * per_block + local] = ref.index;
             }
         }
 
@@ -213,6 +240,31 @@ PrunedGrid update(const PrunedGrid& old, const Scene& sc, const SceneEdit& edit)
     st.prune_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     return g;
+}
+
+bool same_cells(const PrunedGrid& a, const PrunedGrid& b) {
+    if (a.level_count() != b.level_count()) return false;
+    for (uint32_t l = 0; l < a.level_count(); ++l) {
+        const auto ca = a.level_cells(l), cb = b.level_cells(l);
+        if (ca.size() != cb.size()) return false;
+        const bool finest = l + 1 == a.level_count();
+        for (size_t i = 0; i < ca.size(); ++i) {
+            const PrunedCell &x = ca[i], &y = cb[i];
+            const bool far = x.tape == PrunedCell::kFarField;
+            if (far != (y.tape == PrunedCell::kFarField) || !same_bytes(x.value, y.value))
+                return false;
+            if (far) {
+                if (!same_bytes(x.bound, y.bound)) return false;
+                continue;
+            }
+            const auto ta = a.tape_at(x.tape), tb = b.tape_at(y.tape);
+            if (!std::equal(ta.begin(), ta.end(), tb.begin(), tb.end()) ||
+                a.tape_pool()[x.tape + 1] != b.tape_pool()[y.tape + 1] ||
+                (!finest && x.children != y.children))
+                return false;
+        }
+    }
+    return true;
 }
 
 Scene moved_primitive(const Scene& scene, uint32_t primitive, vec3 offset) {

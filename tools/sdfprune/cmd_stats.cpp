@@ -3,9 +3,11 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 
 #include "command.hpp"
+#include "sdfprune/builtin.hpp"
 #include "sdfprune/gpu.hpp"
 #include "sdfprune/prune.hpp"
 
@@ -52,6 +54,44 @@ PruneOptions with_bounds_flag(PruneOptions options, bool lipschitz_bounds) {
     return options;
 }
 
+struct EditBench {
+    double full_ms = 0, incremental_ms = 0;
+    double full_words = 0, incremental_words = 0;  // tape words visited (medians)
+    bool identical = true;
+};
+
+// Times `count` random single-primitive moves of grid's scene (each a small step, as a drag
+// in an editor would make, from the original scene): a full prune against update(); medians.
+EditBench edit_bench(const PrunedGrid& grid, uint32_t count, uint64_t seed) {
+    const Scene& sc = grid.scene();
+    Rng r(seed);
+    const float step = math::length(sc.aabb.max - sc.aabb.min) * 0.005f;
+    std::vector<double> full, incremental, full_words, incremental_words;
+    EditBench out;
+    for (uint32_t i = 0; i < count; ++i) {
+        const uint32_t p =
+            std::min(uint32_t(r.uniform() * float(sc.primitive_count())), sc.primitive_count() - 1);
+        const vec3 d(r.uniform(-1.0f, 1.0f), r.uniform(-1.0f, 1.0f), r.uniform(-1.0f, 1.0f));
+        const Scene moved = moved_primitive(sc, p, d * step);
+        const PrunedGrid a = prune(moved, grid.options());
+        const PrunedGrid b = update(grid, moved);
+        full.push_back(a.stats().prune_ms);
+        incremental.push_back(b.stats().prune_ms);
+        full_words.push_back(double(a.stats().tape_words_visited));
+        incremental_words.push_back(double(b.stats().tape_words_visited));
+        out.identical = out.identical && same_cells(a, b);
+    }
+    const auto median = [](std::vector<double>& v) {
+        std::sort(v.begin(), v.end());
+        return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+    };
+    out.full_ms = median(full);
+    out.incremental_ms = median(incremental);
+    out.full_words = median(full_words);
+    out.incremental_words = median(incremental_words);
+    return out;
+}
+
 void add_stats(CLI::App& app, std::vector<Command>& commands) {
     struct Args {
         std::string scene;
@@ -59,6 +99,8 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
         bool lipschitz = false;
         bool json = false;
         std::string backend = "cpu";
+        uint32_t edit_bench = 0;
+        uint64_t seed = 1;
     };
     auto args = std::make_shared<Args>();
     CLI::App* sub =
@@ -69,14 +111,25 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
     add_prune_options(sub, args->prune, args->lipschitz);
     sub->add_flag("--json", args->json, "print the figures as one JSON object on the last line");
     add_backend_option(sub, args->backend);
+    sub->add_option("--edit-bench", args->edit_bench,
+                    "also time N random single-primitive moves: incremental update against a full "
+                    "prune (medians; CPU backend)")
+        ->check(CLI::Range(0u, 100000u));
+    sub->add_option("--seed", args->seed, "random seed of --edit-bench's moves")
+        ->capture_default_str();
     sub->footer(
         "Examples:\n  sdfprune stats scenes/molecule.json\n"
         "  sdfprune stats scenes/trees.json --grid 128 --no-farfield --json\n"
+        "  sdfprune stats scenes/molecule.json --edit-bench 20 --json\n"
         "  sdfprune stats scenes/molecule.json --backend vulkan   (times and bytes on the GPU)");
     commands.push_back(
         {sub, [args] {
              const Scene sc = load_scene_arg(args->scene);
-             const PruneOptions o = with_bounds_flag(args->prune, args->lipschitz);
+             PruneOptions o = with_bounds_flag(args->prune, args->lipschitz);
+             if (args->edit_bench > 0 && args->backend != "cpu")
+                 throw std::invalid_argument("--edit-bench runs on the CPU backend only");
+             // Incremental updates need the coarse cells' own tapes.
+             if (args->edit_bench > 0) o.coarse_tapes = true;
              if (!o.hierarchy && !args->json)
                  std::fprintf(stderr, "pruning the full tree in all %u³ cells (no hierarchy)...\n",
                               o.resolution);
@@ -91,6 +144,9 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                  cpu_grid = std::make_unique<PrunedGrid>(prune(sc, o));
              }
              const PruneStats& s = device_grid ? device_grid->stats() : cpu_grid->stats();
+             const EditBench edits = args->edit_bench > 0
+                                         ? edit_bench(*cpu_grid, args->edit_bench, args->seed)
+                                         : EditBench{};
              if (args->json) {
                  std::string levels;
                  for (uint32_t r : s.levels)
@@ -121,6 +177,13 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                      .add("peak_rss_bytes", peak_rss_bytes());
                  if (device)
                      j.add("device", device->name()).add("wall_ms", device_grid->stats().wall_ms);
+                 if (args->edit_bench > 0)
+                     j.add("edit_count", args->edit_bench)
+                         .add("edit_full_ms", edits.full_ms)
+                         .add("edit_incremental_ms", edits.incremental_ms)
+                         .add("edit_identical", edits.identical)
+                         .add("edit_full_words", edits.full_words)
+                         .add("edit_incremental_words", edits.incremental_words);
                  std::printf("%s\n", j.str().c_str());
                  return 0;
              }
@@ -150,7 +213,15 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                      s.prune_ms, double(s.prune_peak_bytes) / 1e6);
              std::printf("  pruned grid               %.1f MB; process peak RSS %.1f MB\n",
                          double(s.tape_bytes) / 1e6, double(peak_rss_bytes()) / 1e6);
-             return 0;
+             if (args->edit_bench > 0)
+                 std::printf(
+                     "  %u single-primitive moves: full prune %.1f ms, incremental %.2f ms "
+                     "(medians, %.1f %%), %s\n",
+                     args->edit_bench, edits.full_ms, edits.incremental_ms,
+                     100.0 * edits.incremental_ms / edits.full_ms,
+                     edits.identical ? "identical to the full prunes"
+                                     : "NOT identical to the full prunes");
+             return edits.identical ? 0 : 1;
          }});
 }
 
