@@ -6,7 +6,7 @@ PACKAGES = build-essential cmake ninja-build pkg-config libtbb-dev libcli11-dev 
            libgtest-dev libbenchmark-dev libpng-dev libopenvdb-dev libboost-iostreams-dev \
            valgrind clang-format time libvulkan-dev glslc spirv-tools mesa-vulkan-drivers \
            python3 python3-dev python3-venv python3-numpy python3-pytest python3-setuptools \
-           python3-wheel pybind11-dev python3-skimage
+           python3-wheel pybind11-dev python3-skimage libcpp-httplib-dev chromium
 # Only for `make fuzz`: clang and its runtime libraries (libFuzzer, ASan, UBSan).
 FUZZ_PACKAGES = clang libclang-rt-14-dev
 FUZZ_SECONDS ?= 600
