@@ -13,31 +13,44 @@
 namespace sdfprune {
 namespace {
 
-// Every level's cells (tape contents, constants, values, children) and the statistics.
+// The same hierarchy, cell for cell (tape contents, constants, values), and the statistics. The
+// blocks are matched by walking both hierarchies (update() lays its arrays out differently).
 void expect_same_grid(const PrunedGrid& a, const PrunedGrid& b, const std::string& what) {
     SCOPED_TRACE(what);
     ASSERT_EQ(a.level_count(), b.level_count());
+    std::vector<PrunedGrid::Block> ba, bb;
+    a.for_each_block([&](const PrunedGrid::Block& x) { ba.push_back(x); });
+    b.for_each_block([&](const PrunedGrid::Block& x) { bb.push_back(x); });
     uint64_t differing = 0;
-    for (uint32_t l = 0; l < a.level_count(); ++l) {
-        const auto ca = a.level_cells(l), cb = b.level_cells(l);
-        ASSERT_EQ(ca.size(), cb.size()) << "level " << l;
-        for (size_t i = 0; i < ca.size(); ++i) {
-            const PrunedCell &x = ca[i], &y = cb[i];
-            bool same = (x.tape == PrunedCell::kFarField) == (y.tape == PrunedCell::kFarField) &&
-                        std::memcmp(&x.value, &y.value, sizeof(float)) == 0;
-            if (same && x.tape == PrunedCell::kFarField) {
-                same = std::memcmp(&x.bound, &y.bound, sizeof(float)) == 0;
+    for (size_t k = 0; k < std::min(ba.size(), bb.size()) && differing < 5; ++k) {
+        const PrunedGrid::Block &x = ba[k], &y = bb[k];
+        if (x.level != y.level || x.origin.x != y.origin.x || x.origin.y != y.origin.y ||
+            x.origin.z != y.origin.z) {
+            ADD_FAILURE() << "block " << k << " at level " << x.level << " vs " << y.level;
+            ++differing;
+            continue;
+        }
+        const uint32_t f = a.level_factor(x.level);
+        for (uint32_t i = 0; i < f * f * f; ++i) {
+            const PrunedCell &p = a.level_cells(x.level)[x.first + i],
+                             &q = b.level_cells(y.level)[y.first + i];
+            bool same = (p.tape == PrunedCell::kFarField) == (q.tape == PrunedCell::kFarField) &&
+                        std::memcmp(&p.value, &q.value, sizeof(float)) == 0;
+            if (same && p.tape == PrunedCell::kFarField) {
+                same = std::memcmp(&p.bound, &q.bound, sizeof(float)) == 0;
             } else if (same) {
-                const auto ta = a.tape_at(x.tape), tb = b.tape_at(y.tape);
+                const auto ta = a.tape_at(p.tape), tb = b.tape_at(q.tape);
                 same = std::equal(ta.begin(), ta.end(), tb.begin(), tb.end()) &&
-                       a.tape_pool()[x.tape + 1] == b.tape_pool()[y.tape + 1] &&
-                       (l + 1 == a.level_count() || x.children == y.children);
+                       a.tape_pool()[p.tape + 1] == b.tape_pool()[q.tape + 1];
             }
             if (!same && differing++ < 5)
-                ADD_FAILURE() << "level " << l << " cell " << i << " differs";
+                ADD_FAILURE() << "level " << x.level << " block " << k << " cell " << i
+                              << " differs";
         }
     }
+    EXPECT_EQ(ba.size(), bb.size());
     EXPECT_EQ(differing, 0u);
+    EXPECT_TRUE(same_cells(a, b));
     test::expect_same_prune_stats(a.stats(), b.stats(), what);
 }
 
@@ -172,6 +185,68 @@ TEST(PruneUpdate, RandomEditsEqualAFullPrune) {
     EXPECT_GT(compared, 80u);
     // Edits are local: most updates prune fewer cells than a full prune.
     EXPECT_GT(cheaper, compared / 4);
+}
+
+// Point lookups (PrunedGrid::locate, through the lookup shortcut that update() refreshes) agree:
+// the same deciding level and cell contents at random points and at every cell centre of a
+// coarse lattice.
+void expect_same_lookups(const PrunedGrid& a, const PrunedGrid& b, Rng& r,
+                         const std::string& what) {
+    SCOPED_TRACE(what);
+    const Aabb box = a.aabb();
+    uint32_t differing = 0;
+    for (uint32_t i = 0; i < 4000 && differing < 5; ++i) {
+        const vec3 p(r.uniform(box.min.x, box.max.x), r.uniform(box.min.y, box.max.y),
+                     r.uniform(box.min.z, box.max.z));
+        PrunedGrid::Located x, y;
+        ASSERT_TRUE(a.locate(p, x));
+        ASSERT_TRUE(b.locate(p, y));
+        bool same = x.level == y.level && x.x == y.x && x.y == y.y && x.z == y.z &&
+                    x.far_field() == y.far_field();
+        if (same && x.far_field()) {
+            same = std::memcmp(&x.cell->bound, &y.cell->bound, sizeof(float)) == 0;
+        } else if (same) {
+            const auto ta = a.tape_at(x.cell->tape), tb = b.tape_at(y.cell->tape);
+            same = std::equal(ta.begin(), ta.end(), tb.begin(), tb.end());
+        }
+        if (!same && differing++ < 5)
+            ADD_FAILURE() << "lookup at (" << p.x << ", " << p.y << ", " << p.z << ") differs";
+    }
+}
+
+// A session of edits, each applied in place to the previous result (update(std::move(g), ...)):
+// large moves make cells change between near and far field (blocks freed and reused, the arrays
+// laid out afresh when garbage piles up); every step equals a full prune, lookups included.
+TEST(PruneUpdate, ASessionOfEditsInPlace) {
+    for (uint32_t i = 0; i < 3; ++i) {
+        test::RandomSceneSpec spec;
+        spec.primitives = 12 + 8 * i;
+        spec.tree = test::TreeShape(i % 4);
+        const auto scene = std::make_shared<Scene>(test::random_scene(900 + i, spec));
+        PruneOptions o;
+        o.resolution = 64;
+        o.coarse_tapes = true;
+        PrunedGrid g = prune(scene, o);
+        std::shared_ptr<const Scene> current = scene;
+        Rng r(77 + i);
+        const float extent = math::length(scene->aabb.max - scene->aabb.min);
+        for (uint32_t step = 0; step < 25; ++step) {
+            const uint32_t p = std::min(uint32_t(r.uniform() * float(current->primitive_count())),
+                                        current->primitive_count() - 1);
+            const float d = extent * (step % 3 == 0 ? 0.2f : 0.02f);
+            auto next = std::make_shared<const Scene>(
+                moved_primitive(*current, p, test::random_direction(r) * d));
+            const SceneEdit edit = scene_edit(*current, *next);
+            g = update(std::move(g), next, edit);
+            current = next;
+            const std::string what =
+                "scene " + std::to_string(i) + ", edit " + std::to_string(step);
+            const PrunedGrid full = prune(*current, o);
+            expect_same_grid(g, full, what);
+            expect_same_lookups(g, full, r, what);
+            ASSERT_EQ(&g.scene(), current.get());
+        }
+    }
 }
 
 TEST(PruneUpdate, NoEditCopiesEverything) {

@@ -141,6 +141,7 @@ struct CellView {
 };
 
 struct SceneEdit;
+class GridUpdate;
 
 class PrunedGrid {
   public:
@@ -254,12 +255,26 @@ class PrunedGrid {
   private:
     friend PrunedGrid prune(const Scene&, const PruneOptions&);
     friend PrunedGrid prune(std::shared_ptr<const Scene>, const PruneOptions&);
-    friend PrunedGrid update(const PrunedGrid&, const Scene&, const SceneEdit&);
+    friend class GridUpdate;              // prune_update.cpp: edits a grid in place
     std::shared_ptr<const Scene> owner_;  // set by the shared-ownership prune(); else empty
     struct Level {
         uint32_t res = 0;     // cells per axis of the whole level
         uint32_t factor = 0;  // cells per axis of one block (level 0: res)
         std::vector<PrunedCell> cells;
+        Level() = default;
+        // A copy keeps the spare capacity update() reserves for the blocks edits append.
+        Level(const Level& o)
+            : res(o.res),
+              factor(o.factor),
+              pow2(o.pow2),
+              shift(o.shift),
+              factor_bits(o.factor_bits) {
+            cells.reserve(o.cells.capacity());
+            cells = o.cells;
+        }
+        Level(Level&&) = default;
+        Level& operator=(const Level&) = default;
+        Level& operator=(Level&&) = default;
         // When finest-cells-per-cell and factor are powers of two, lookups use shifts.
         bool pow2 = false;
         uint32_t shift = 0, factor_bits = 0;
@@ -290,6 +305,7 @@ class PrunedGrid {
         Pool& operator=(Pool other) noexcept;
         ~Pool();
         void append(std::span<const uint32_t> words);  // grows the capacity by half at least
+        void reserve(size_t words);                    // capacity for at least `words`
         void shrink_to_fit();
     };
     Pool pool_;
@@ -303,6 +319,19 @@ class PrunedGrid {
     void build_shortcut();
     float lipschitz_ = 1;  // of the root: bounds the far-field constants
     PruneStats stats_;
+    // Kept by update() (prune_update.cpp), so that statistics follow an edit without a walk of
+    // the whole grid: the finest level's counts, with histograms of tape lengths and primitive
+    // counts for the maxima. Edits leave unreachable cells and tapes behind; the sizes of the
+    // last compact layout tell when to lay the grid out afresh.
+    struct Census {
+        bool valid = false;
+        uint64_t near = 0, tape_sum = 0, prim_sum = 0, prim_sq_sum = 0, far_finest = 0;
+        std::vector<uint64_t> tape_hist, prim_hist;
+    };
+    Census census_;
+    uint64_t compact_cells_ = 0, compact_words_ = 0;
+    // Per level, blocks left unreachable by edits, which update() fills again before it appends.
+    std::vector<std::vector<uint32_t>> free_blocks_;
 };
 
 PrunedGrid prune(const Scene& scene, const PruneOptions& options = {});
@@ -409,24 +438,33 @@ struct SceneEdit {
 // tree (a different node count, children or kinds of node), or their AABBs differ.
 SceneEdit scene_edit(const Scene& before, const Scene& after);
 
-// The pruned grid of `edited`, re-pruning only the blocks an edit can reach and copying every
-// other cell, tape and constant from `old`. The result is identical, cell for cell, tape word for
-// tape word and constant for constant, to prune(edited, old.options()). Why: a cell's result
-// depends only on its parent's tape words and the data of the nodes those words name. So a block
-// of children is copied where its parent's new tape equals its old tape word for word and names
-// no edited node (nor does any tape below it, each being a subset of its parent's); every other
-// block goes through prune_level_step again, from the coarsest level down. An edit that changes
-// the root's Lipschitz bound (used by every far-field cell) prunes everything again.
+// The pruned grid of `edited`, re-pruning only the blocks an edit can reach and keeping every
+// other cell, tape and constant. The result holds the same cells as prune(edited,
+// old.options()): cell for cell, tape word for tape word, constant for constant, and the same
+// statistics (same_cells compares the cells; the arrays' layout may differ). Why it is exact: a
+// cell's result depends only on its parent's tape words and the data of the nodes those words
+// name. So from the coarsest level down, a block of children is kept where its parent's new
+// tape equals its old tape word for word and names no edited node (nor does any tape below it,
+// each being a subset of its parent's); every other block goes through prune_level_step again,
+// in place (or appended, for a parent that was far-field), and a parent that became far-field
+// leaves its old subtree unreachable. An edit that changes the root's Lipschitz bound (used by
+// every far-field cell) prunes everything again. When unreachable cells and tapes pile up
+// (more than half of the arrays), the grid is laid out afresh.
 // `old` must have been built with PruneOptions::coarse_tapes (it needs the coarse cells' own
 // tapes: std::invalid_argument otherwise), and `edit` must name every changed node (see
-// scene_edit). `edited` must outlive the result. stats().prune_ms is the update's time;
-// cells_pruned and tape_words_visited count its own work.
+// scene_edit). stats().prune_ms is the update's time; cells_pruned and tape_words_visited count
+// its own work.
+// The rvalue overloads reuse old's storage (an editor's loop: no copy of the grid); the others
+// copy `old` first. `edited` must outlive the result, unless passed as a shared_ptr, which the
+// result then keeps alive.
+PrunedGrid update(PrunedGrid&& old, const Scene& edited, const SceneEdit& edit);
+PrunedGrid update(PrunedGrid&& old, std::shared_ptr<const Scene> edited, const SceneEdit& edit);
 PrunedGrid update(const PrunedGrid& old, const Scene& edited, const SceneEdit& edit);
 PrunedGrid update(const PrunedGrid& old, const Scene& edited);  // edit = scene_edit(old, edited)
 
-// Whether two grids hold the same cells: per level, the same far-field cells with the same
-// constants, the same near-field cells with the same tape words, and the same values and
-// children (the pools' layout may differ).
+// Whether two grids hold the same cells: the same hierarchy (which cells are far-field, which
+// have children), the same constants, values and tape words at every cell. The layouts of the
+// cell arrays and tape pools may differ (update() leaves unreachable cells behind).
 bool same_cells(const PrunedGrid& a, const PrunedGrid& b);
 
 // `scene` with primitive `primitive` (an index into scene.params) moved by `offset` in world

@@ -42,9 +42,10 @@ std::vector<uint32_t> grid_levels(uint32_t resolution, uint32_t factor, bool hie
     return levels;
 }
 
-PrunedGrid::Pool::Pool(const Pool& other) : size(other.size), capacity(other.size) {
-    if (size == 0) return;
-    data = static_cast<uint32_t*>(std::malloc(size * sizeof(uint32_t)));
+// A copy keeps the spare capacity (update() reserves some for the tapes edits append).
+PrunedGrid::Pool::Pool(const Pool& other) : size(other.size), capacity(other.capacity) {
+    if (capacity == 0) return;
+    data = static_cast<uint32_t*>(std::malloc(capacity * sizeof(uint32_t)));
     if (!data) throw std::bad_alloc();
     std::memcpy(data, other.data, size * sizeof(uint32_t));
 }
@@ -76,6 +77,14 @@ void PrunedGrid::Pool::append(std::span<const uint32_t> words) {
     }
     std::memcpy(data + size, words.data(), words.size_bytes());
     size += words.size();
+}
+
+void PrunedGrid::Pool::reserve(size_t words) {
+    if (words <= capacity) return;
+    void* p = std::realloc(data, words * sizeof(uint32_t));
+    if (!p) throw std::bad_alloc();
+    data = static_cast<uint32_t*>(p);
+    capacity = words;
 }
 
 void PrunedGrid::Pool::shrink_to_fit() {

@@ -1,7 +1,8 @@
-// prune_update.cpp — incremental re-pruning after an edit (prune.hpp, `update`): from the
-// coarsest level down, a block of children is copied from the old grid where its parent's tape
-// is unchanged and names no edited node, and pruned again by the level step (prune_level.hpp)
-// everywhere else. The result equals a from-scratch prune() cell for cell.
+// prune_update.cpp — incremental re-pruning after an edit (prune.hpp, `update`), in place: from
+// the coarsest level down, a block of children is kept where its parent's tape is unchanged and
+// names no edited node, and pruned again by the level step (prune_level.hpp) where it stood
+// everywhere else. The statistics follow the changed cells (PrunedGrid::Census). The result
+// equals a from-scratch prune() cell for cell.
 #include <algorithm>
 #include <chrono>
 #include <cstring>
@@ -35,14 +36,6 @@ bool node_changed(const Scene& a, const Scene& b, uint32_t n) {
     return !same_bytes(a.params[p], b.params[p]) || !same_bytes(a.bound[p], b.bound[p]);
 }
 
-// Where a block of the level being made comes from: pruned from a parent tape (held in the
-// previous level's word buffer), or copied from the old grid's block starting at old cell
-// `old_first`.
-struct BlockSource {
-    ParentBlock parent;
-    uint32_t old_first = PrunedCell::kFarField;  // kFarField: prune it
-};
-
 }  // namespace
 
 SceneEdit scene_edit(const Scene& before, const Scene& after) {
@@ -60,16 +53,145 @@ SceneEdit scene_edit(const Scene& before, const Scene& after) {
     return e;
 }
 
-PrunedGrid update(const PrunedGrid& old, const Scene& edited) {
-    return update(old, edited, scene_edit(old.scene(), edited));
+// The edit of a grid in place (a friend of PrunedGrid).
+class GridUpdate {
+  public:
+    // `owner`: the edited scene when shared (kept alive by the grid), else null.
+    static void run(PrunedGrid& g, const Scene& sc, const SceneEdit& edit,
+                    std::shared_ptr<const Scene> owner);
+
+  private:
+    using Census = PrunedGrid::Census;
+    // A block of the level being made that is pruned again: its parent (tape in the pool, by
+    // offset: the pool grows) and where its cells are; `fresh`: appended, no old cells there.
+    struct Job {
+        CellCoord origin;
+        uint32_t tape = 0;  // offset of the parent's tape header in the pool
+        uint32_t first = 0;
+        bool fresh = false;
+    };
+    static void add(Census& c, uint32_t length, uint32_t prims, int sign);
+    static void take_census(const PrunedGrid& g, Census& c);
+    static void forget_subtree(PrunedGrid& g, uint32_t level, uint32_t first);
+    static void compact(PrunedGrid& g);
+    static void refresh_shortcut(PrunedGrid& g, uint32_t level, CellCoord at);
+};
+
+void GridUpdate::add(Census& c, uint32_t length, uint32_t prims, int sign) {
+    if (c.tape_hist.size() <= length) c.tape_hist.resize(length + 1);
+    if (c.prim_hist.size() <= prims) c.prim_hist.resize(prims + 1);
+    const uint64_t u = uint64_t(int64_t(sign));  // +1 or 2^64 - 1: modular sums
+    c.near += u;
+    c.tape_sum += u * length;
+    c.prim_sum += u * prims;
+    c.prim_sq_sum += u * prims * prims;
+    c.tape_hist[length] += u;
+    c.prim_hist[prims] += u;
 }
 
-PrunedGrid update(const PrunedGrid& old, const Scene& sc, const SceneEdit& edit) {
+// The counts of a grid as prune() made it (or as update() left it): one walk of its blocks.
+void GridUpdate::take_census(const PrunedGrid& g, Census& c) {
+    c = Census{};
+    const uint32_t last = g.level_count() - 1, N = g.resolution();
+    g.for_each_block([&](const PrunedGrid::Block& b) {
+        const uint32_t f = g.level_factor(b.level);
+        const uint64_t below = N / g.level_resolution(b.level);
+        const PrunedCell* cells = g.levels_[b.level].cells.data() + b.first;
+        for (uint32_t i = 0; i < f * f * f; ++i) {
+            if (cells[i].tape == PrunedCell::kFarField)
+                c.far_finest += below * below * below;
+            else if (b.level == last)
+                add(c, g.pool_.data[cells[i].tape], g.pool_.data[cells[i].tape + 1], 1);
+        }
+    });
+    c.valid = true;
+}
+
+// Takes the subtree under a near-field cell (its child block at `level`, cell `first`) out of
+// the census, and its blocks into the free lists: the cell became far-field.
+void GridUpdate::forget_subtree(PrunedGrid& g, uint32_t level, uint32_t first) {
+    const uint32_t last = g.level_count() - 1, N = g.resolution();
+    Census& c = g.census_;
+    std::vector<std::pair<uint32_t, uint32_t>> stack{{level, first}};
+    while (!stack.empty()) {
+        const auto [l, at] = stack.back();
+        stack.pop_back();
+        g.free_blocks_[l].push_back(at);
+        const uint32_t f = g.level_factor(l);
+        const uint64_t below = N / g.level_resolution(l);
+        const PrunedCell* cells = g.levels_[l].cells.data() + at;
+        for (uint32_t i = 0; i < f * f * f; ++i) {
+            if (cells[i].tape == PrunedCell::kFarField)
+                c.far_finest -= below * below * below;
+            else if (l == last)
+                add(c, g.pool_.data[cells[i].tape], g.pool_.data[cells[i].tape + 1], -1);
+            else
+                stack.push_back({l + 1, cells[i].children});
+        }
+    }
+}
+
+// Lays the grid out as prune() does: reachable blocks only, children in their parents' order,
+// tapes copied into a new pool.
+void GridUpdate::compact(PrunedGrid& g) {
+    PrunedGrid::Pool pool;
+    pool.append(std::span(g.pool_.data, 2 + g.pool_.data[0]));  // the full tree's tape
+    std::vector<uint32_t> blocks{0};  // this level's blocks: first cells in the old arrays
+    for (uint32_t li = 0; li < g.level_count(); ++li) {
+        PrunedGrid::Level& level = g.levels_[li];
+        const bool finest = li + 1 == g.level_count();
+        const uint32_t f = level.factor, per_block = f * f * f;
+        const uint32_t nf = finest ? 0 : g.levels_[li + 1].factor;
+        std::vector<PrunedCell> cells(size_t(per_block) * blocks.size());
+        std::vector<uint32_t> next;
+        for (size_t b = 0; b < blocks.size(); ++b)
+            for (uint32_t i = 0; i < per_block; ++i) {
+                PrunedCell c = level.cells[blocks[b] + i];
+                if (c.tape != PrunedCell::kFarField) {
+                    const uint32_t* header = g.pool_.data + c.tape;
+                    c.tape = uint32_t(pool.size);
+                    pool.append(std::span(header, 2 + header[0]));
+                    if (!finest) {
+                        next.push_back(c.children);
+                        c.children = uint32_t((next.size() - 1) * nf * nf * nf);
+                    }
+                }
+                cells[b * per_block + i] = c;
+            }
+        level.cells.swap(cells);
+        blocks.swap(next);
+    }
+    pool.shrink_to_fit();
+    g.pool_ = std::move(pool);
+    g.shortcut_.clear();
+    g.build_shortcut();
+    g.free_blocks_.assign(g.level_count(), {});
+    g.compact_words_ = g.pool_.size;
+    g.compact_cells_ = 0;
+    for (const PrunedGrid::Level& l : g.levels_) g.compact_cells_ += l.cells.size();
+}
+
+// The lookup shortcut's entries under cell `at` of level `level` (whose far-field state or
+// children changed).
+void GridUpdate::refresh_shortcut(PrunedGrid& g, uint32_t level, CellCoord at) {
+    if (g.shortcut_.empty() || level >= g.shortcut_level_) return;
+    const uint32_t S = g.shortcut_level_, r = g.levels_[S].res;
+    const uint32_t span = r / g.levels_[level].res, scale = g.resolution() / r;
+    for (uint32_t z = at.z * span; z < (at.z + 1) * span; ++z)
+        for (uint32_t y = at.y * span; y < (at.y + 1) * span; ++y)
+            for (uint32_t x = at.x * span; x < (at.x + 1) * span; ++x) {
+                const PrunedGrid::CellRef c = g.descend(x * scale, y * scale, z * scale, S);
+                g.shortcut_[(size_t(z) * r + y) * r + x] = c.level << 27 | c.index;
+            }
+}
+
+void GridUpdate::run(PrunedGrid& g, const Scene& sc, const SceneEdit& edit,
+                     std::shared_ptr<const Scene> owner) {
     const auto t0 = std::chrono::steady_clock::now();
-    const PruneOptions& opt = old.options();
+    const PruneOptions& opt = g.options_;
     if (!opt.coarse_tapes)
         throw std::invalid_argument("update needs a grid pruned with PruneOptions::coarse_tapes");
-    const Scene& before = old.scene();
+    const Scene& before = *g.scene_;
     if (before.size() != sc.size() || !same_bytes(before.aabb, sc.aabb))
         throw std::invalid_argument("update: the edited scene is not the same tree");
     std::vector<uint8_t> dirty(sc.size(), 0);
@@ -79,177 +201,200 @@ PrunedGrid update(const PrunedGrid& old, const Scene& sc, const SceneEdit& edit)
     }
     // Every far-field cell's value reach uses the root's bound.
     if (before.lipschitz[before.root()] != sc.lipschitz[sc.root()]) {
-        PrunedGrid g = prune(sc, opt);
-        return g;
+        g = owner ? prune(std::move(owner), opt) : prune(sc, opt);
+        return;
     }
     const auto clean = [&](std::span<const uint32_t> tape) {
         for (const uint32_t w : tape)
             if (dirty[math::tape_node(w)]) return false;
         return true;
     };
-
-    PrunedGrid g;
+    if (!g.census_.valid) take_census(g, g.census_);
+    g.free_blocks_.resize(g.level_count());
+    // Room for what edits append (blocks under cells that became near-field, changed tapes),
+    // so that growing, which copies a whole level, is rare. Copies of the grid keep it.
+    for (PrunedGrid::Level& l : g.levels_)
+        if (l.cells.capacity() < l.cells.size() + l.cells.size() / 16)
+            l.cells.reserve(l.cells.size() + l.cells.size() / 8);
+    if (g.pool_.capacity < g.pool_.size + g.pool_.size / 16)
+        g.pool_.reserve(g.pool_.size + g.pool_.size / 8);
+    if (g.compact_words_ == 0) {
+        g.compact_words_ = g.pool_.size;
+        for (const PrunedGrid::Level& l : g.levels_) g.compact_cells_ += l.cells.size();
+    }
     g.scene_ = &sc;
-    g.options_ = opt;
-    g.lipschitz_ = old.lipschitz_;
-    g.cell_size_ = old.cell_size_;
-    g.inv_cell_size_ = old.inv_cell_size_;
-    g.level_size_ = old.level_size_;
-    std::vector<uint32_t> root{sc.size(), sc.primitive_count()};
-    root.insert(root.end(), sc.full_tape.begin(), sc.full_tape.end());
-    g.pool_.append(root);
+    g.owner_ = std::move(owner);
+    Census& census = g.census_;
     PruneStats& st = g.stats_;
-    st.grid = old.stats_.grid;
-    st.cells = old.stats_.cells;
-    st.levels = old.stats_.levels;
-    const uint32_t N = old.resolution();
+    st.cells_pruned = 0;
+    st.tape_words_visited = 0;
+    const uint32_t N = g.resolution();
 
     tbb::enumerable_thread_specific<CellScratch> scratch;
-    LevelChunk sums;  // the finest level's counts, copied cells included
-    uint64_t far_finest = 0;
-    // The previous level's tapes ([length, primitives, words...]) for this level's pruned
-    // blocks, and this level's; a cell's `tape` holds an offset into `words` until placed.
-    std::vector<uint32_t> prev_words = root, words;
-    std::vector<BlockSource> blocks{{{{0, 0, 0}, sc.size(), prev_words.data() + 2}}};
-    for (uint32_t li = 0; li < old.levels_.size(); ++li) {
-        const PrunedGrid::Level& old_level = old.levels_[li];
-        const bool finest = li + 1 == old.levels_.size();
-        PrunedGrid::Level level;
-        level.res = old_level.res;
-        level.factor = old_level.factor;
-        level.pow2 = old_level.pow2;
-        level.shift = old_level.shift;
-        level.factor_bits = old_level.factor_bits;
-        const uint32_t f = level.factor;
-        const uint64_t per_block = uint64_t(f) * f * f;
-        level.cells.resize(per_block * blocks.size());
-        // Per cell: whether its tape equals the old grid's and names no edited node, and then
-        // the old cell it equals.
-        std::vector<uint32_t> same_as_old(level.cells.size(), PrunedCell::kFarField);
+    // Level 0 is one block under the full tree's tape (pool offset 0), which names every node.
+    std::vector<Job> jobs{{{0, 0, 0}, 0, 0, false}};
+    // Cells of levels above the shortcut's whose far-field state changed.
+    std::vector<std::pair<uint32_t, CellCoord>> flipped;
+    for (uint32_t li = 0; li < g.level_count() && !jobs.empty(); ++li) {
+        PrunedGrid::Level& level = g.levels_[li];
+        const bool finest = li + 1 == g.level_count();
+        const uint32_t f = level.factor, per_block = f * f * f;
+        const uint64_t below = N / level.res, below3 = below * below * below;
         const LevelGeometry geo = level_geometry(sc, opt, level.res, f, finest, kPruneChunkCells);
-        // The blocks to prune again, in parallel (each into its own chunk), with the check of
-        // their near-field cells against the old grid; then every block's tapes in order.
-        std::vector<uint64_t> pruned;
-        for (uint64_t b = 0; b < blocks.size(); ++b)
-            if (blocks[b].old_first == PrunedCell::kFarField) pruned.push_back(b);
-        std::vector<LevelChunk> outs(pruned.size());
+        // Prune each job's block where it stands, keeping its old cells to compare with.
+        std::vector<PrunedCell> old_cells(size_t(per_block) * jobs.size());
+        std::vector<LevelChunk> outs(jobs.size());
         ParallelOptions po;
         po.threads = opt.threads;
-        parallel_for<PruneCancelled>(pruned.size(), po, [&](uint64_t k) {
-            const uint64_t b = pruned[k];
-            const BlockSource& src = blocks[b];
+        parallel_for<PruneCancelled>(jobs.size(), po, [&](uint64_t j) {
+            const Job& job = jobs[j];
             const std::span<PrunedCell> cells =
-                std::span(level.cells).subspan(b * per_block, per_block);
-            LevelChunk& out = outs[k];
-            prune_level_step(sc, opt, geo, std::span(&src.parent, 1), cells, scratch.local(), out);
-            for (uint32_t local = 0; local < per_block; ++local) {
-                const PrunedCell& c = cells[local];
-                if (c.tape == PrunedCell::kFarField) continue;
-                const std::span<const uint32_t> t = tape_words(out.words.data() + c.tape);
-                if (!clean(t)) continue;
-                // The old grid's cell at the same place, if it has one at this level.
-                const CellCoord at = block_cell(src.parent.origin, f, local);
-                const uint32_t scale = N / level.res;
-                const PrunedGrid::CellRef ref =
-                    old.descend(at.x * scale, at.y * scale, at.z * scale, li);
-                if (ref.level != li) continue;
-                const PrunedCell& oc = old_level.cells[ref.index];
-                if (oc.tape == PrunedCell::kFarField) continue;
-                const std::span<const uint32_t> ot = old.tape_at(oc.tape);
-                if (std::equal(t.begin(), t.end(), ot.begin(), ot.end()))
-                    same_as_old[b * per_block + local] = ref.index;
-            }
+                std::span(level.cells).subspan(job.first, per_block);
+            if (!job.fresh)
+                std::copy(cells.begin(), cells.end(), old_cells.begin() + j * per_block);
+            const uint32_t* header = g.pool_.data + job.tape;
+            const ParentBlock parent{job.origin, header[0], header + 2};
+            prune_level_step(sc, opt, geo, std::span(&parent, 1), cells, scratch.local(), outs[j]);
         });
-        words.clear();
-        size_t next_pruned = 0;
-        for (uint64_t b = 0; b < blocks.size(); ++b) {
-            const std::span<PrunedCell> cells =
-                std::span(level.cells).subspan(b * per_block, per_block);
-            const BlockSource& src = blocks[b];
-            if (src.old_first != PrunedCell::kFarField) {
-                // Copied: the same parent tape gives the same cells, tapes and constants.
-                for (uint32_t local = 0; local < per_block; ++local) {
-                    PrunedCell c = old_level.cells[src.old_first + local];
-                    if (c.tape != PrunedCell::kFarField) {
-                        const uint32_t* header = old.tape_pool().data() + c.tape;
-                        c.tape = uint32_t(words.size());
-                        words.insert(words.end(), header, header + 2 + header[0]);
-                        same_as_old[b * per_block + local] = src.old_first + local;
-                    }
-                    cells[local] = c;
-                }
-                continue;
-            }
-            const LevelChunk& out = outs[next_pruned++];
+
+        // In order: the census, the new tapes into the pool, and the next level's jobs.
+        std::vector<Job> next;
+        const uint32_t nf = finest ? 0 : g.levels_[li + 1].factor;
+        uint64_t appended = finest ? 0 : g.levels_[li + 1].cells.size();
+        for (size_t j = 0; j < jobs.size(); ++j) {
+            const Job& job = jobs[j];
+            const LevelChunk& out = outs[j];
             st.cells_pruned += out.pruned;
             st.tape_words_visited += out.words_visited;
-            for (PrunedCell& c : cells) {
-                if (c.tape == PrunedCell::kFarField) continue;
+            for (uint32_t local = 0; local < per_block; ++local) {
+                PrunedCell& c = level.cells[job.first + local];
+                const PrunedCell* o = job.fresh ? nullptr : &old_cells[j * per_block + local];
+                const bool was_near = o && o->tape != PrunedCell::kFarField;
+                const bool near = c.tape != PrunedCell::kFarField;
+                if (o && !was_near) census.far_finest -= below3;
+                if (was_near && finest)
+                    add(census, g.pool_.data[o->tape], g.pool_.data[o->tape + 1], -1);
+                if (was_near && !near && !finest) forget_subtree(g, li + 1, o->children);
+                if (!job.fresh && was_near != near)
+                    flipped.push_back({li, block_cell(job.origin, f, local)});
+                if (!near) {
+                    census.far_finest += below3;
+                    continue;
+                }
                 const uint32_t* header = out.words.data() + c.tape;
-                c.tape = uint32_t(words.size());
-                words.insert(words.end(), header, header + 2 + header[0]);
+                const std::span<const uint32_t> tape = tape_words(header);
+                const bool same =
+                    was_near && std::ranges::equal(tape, tape_words(g.pool_.data + o->tape));
+                if (same) {
+                    c.tape = o->tape;
+                } else {
+                    if (g.pool_.size + 2 + header[0] >= PrunedCell::kFarField)
+                        throw std::length_error("tape pool exceeds 2^32 - 1 words");
+                    c.tape = uint32_t(g.pool_.size);
+                    g.pool_.append(std::span(header, 2 + header[0]));
+                }
+                if (finest) {
+                    add(census, header[0], header[1], 1);
+                    continue;
+                }
+                const CellCoord at = block_cell(job.origin, f, local);
+                const CellCoord origin{at.x * nf, at.y * nf, at.z * nf};
+                if (was_near) {
+                    c.children = o->children;
+                    if (!same || !clean(tape)) next.push_back({origin, c.tape, c.children, false});
+                } else {
+                    std::vector<uint32_t>& free = g.free_blocks_[li + 1];
+                    if (!free.empty()) {
+                        c.children = free.back();
+                        free.pop_back();
+                    } else {
+                        c.children = uint32_t(appended);
+                        appended += uint64_t(nf) * nf * nf;
+                    }
+                    next.push_back({origin, c.tape, c.children, true});
+                }
             }
         }
-
-        // Place the tapes in the pool, count, and make the next level's blocks.
-        const uint64_t base = g.pool_.size;
-        g.pool_.append(words);
-        std::vector<BlockSource> next;
-        const uint32_t nf = finest ? 0 : old.levels_[li + 1].factor;
-        const uint64_t below = N / level.res;
-        for (uint64_t i = 0; i < level.cells.size(); ++i) {
-            PrunedCell& c = level.cells[i];
-            if (c.tape == PrunedCell::kFarField) {
-                far_finest += below * below * below;
-                continue;
-            }
-            const uint32_t* header = words.data() + c.tape;
-            if (finest) {
-                const uint32_t len = header[0], prims = header[1];
-                ++sums.near;
-                sums.tape_sum += len;
-                sums.tape_max = std::max(sums.tape_max, len);
-                sums.prim_sum += prims;
-                sums.prim_sq_sum += uint64_t(prims) * prims;
-                sums.prim_max = std::max(sums.prim_max, prims);
-            } else {
-                const CellCoord at =
-                    block_cell(blocks[i / per_block].parent.origin, f, uint32_t(i % per_block));
-                BlockSource s;
-                s.parent = {{at.x * nf, at.y * nf, at.z * nf}, header[0], header + 2};
-                if (same_as_old[i] != PrunedCell::kFarField)
-                    s.old_first = old_level.cells[same_as_old[i]].children;
-                c.children = uint32_t(next.size() * nf * nf * nf);
-                next.push_back(s);
-            }
-            c.tape = uint32_t(base + c.tape);
+        if (!finest) {
+            std::vector<PrunedCell>& below_cells = g.levels_[li + 1].cells;
+            if (appended >= PrunedCell::kFarField)
+                throw std::length_error("a level exceeds 2^32 - 1 cells");
+            if (appended > below_cells.capacity()) below_cells.reserve(appended + appended / 4);
+            below_cells.resize(appended);
         }
-        // The next level's parents point into `words`: keep it as prev_words.
-        prev_words.swap(words);
-        blocks.swap(next);
-        g.levels_.push_back(std::move(level));
+        jobs.swap(next);
     }
-    g.pool_.shrink_to_fit();
-    g.build_shortcut();
-    add_chunk_stats(sums, st);
-    finish_prune_stats(st, st.active_avg, st.active_std, st.tape_avg, far_finest);
+    for (const auto& [l, at] : flipped) refresh_shortcut(g, l, at);
+
+    uint64_t cells = 0;
+    for (const PrunedGrid::Level& l : g.levels_) cells += l.cells.size();
+    if (g.pool_.size > 2 * g.compact_words_ || cells > 2 * g.compact_cells_) compact(g);
+
+    st.near_field_cells = census.near;
+    st.tape_max = 0;
+    for (size_t i = census.tape_hist.size(); i-- > 0;)
+        if (census.tape_hist[i]) {
+            st.tape_max = uint32_t(i);
+            break;
+        }
+    st.active_max = 0;
+    for (size_t i = census.prim_hist.size(); i-- > 0;)
+        if (census.prim_hist[i]) {
+            st.active_max = uint32_t(i);
+            break;
+        }
+    finish_prune_stats(st, double(census.prim_sum), double(census.prim_sq_sum),
+                       double(census.tape_sum), census.far_finest);
     st.tape_bytes = uint64_t(g.pool_.capacity) * sizeof(uint32_t);
     for (const PrunedGrid::Level& l : g.levels_)
         st.tape_bytes += uint64_t(l.cells.capacity()) * sizeof(PrunedCell);
     st.prune_peak_bytes = st.tape_bytes;
     st.prune_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+PrunedGrid update(PrunedGrid&& old, const Scene& edited, const SceneEdit& edit) {
+    PrunedGrid g = std::move(old);
+    GridUpdate::run(g, edited, edit, nullptr);
     return g;
 }
 
+PrunedGrid update(PrunedGrid&& old, std::shared_ptr<const Scene> edited, const SceneEdit& edit) {
+    if (!edited) throw std::invalid_argument("update: null scene");
+    PrunedGrid g = std::move(old);
+    const Scene& scene = *edited;
+    GridUpdate::run(g, scene, edit, std::move(edited));
+    return g;
+}
+
+PrunedGrid update(const PrunedGrid& old, const Scene& edited, const SceneEdit& edit) {
+    return update(PrunedGrid(old), edited, edit);
+}
+
+PrunedGrid update(const PrunedGrid& old, const Scene& edited) {
+    return update(PrunedGrid(old), edited, scene_edit(old.scene(), edited));
+}
+
 bool same_cells(const PrunedGrid& a, const PrunedGrid& b) {
-    if (a.level_count() != b.level_count()) return false;
-    for (uint32_t l = 0; l < a.level_count(); ++l) {
-        const auto ca = a.level_cells(l), cb = b.level_cells(l);
-        if (ca.size() != cb.size()) return false;
-        const bool finest = l + 1 == a.level_count();
-        for (size_t i = 0; i < ca.size(); ++i) {
-            const PrunedCell &x = ca[i], &y = cb[i];
+    if (a.level_count() != b.level_count() || a.resolution() != b.resolution()) return false;
+    for (uint32_t l = 0; l < a.level_count(); ++l)
+        if (a.level_factor(l) != b.level_factor(l)) return false;
+    // The two hierarchies in step: pairs of blocks (level, first cell in a, first cell in b).
+    struct Pair {
+        uint32_t level, first_a, first_b;
+    };
+    std::vector<Pair> stack{{0, 0, 0}};
+    while (!stack.empty()) {
+        const Pair p = stack.back();
+        stack.pop_back();
+        const bool finest = p.level + 1 == a.level_count();
+        const uint32_t f = a.level_factor(p.level);
+        const auto ca = a.level_cells(p.level), cb = b.level_cells(p.level);
+        if (uint64_t(p.first_a) + f * f * f > ca.size() ||
+            uint64_t(p.first_b) + f * f * f > cb.size())
+            return false;
+        for (uint32_t i = 0; i < f * f * f; ++i) {
+            const PrunedCell &x = ca[p.first_a + i], &y = cb[p.first_b + i];
             const bool far = x.tape == PrunedCell::kFarField;
             if (far != (y.tape == PrunedCell::kFarField) || !same_bytes(x.value, y.value))
                 return false;
@@ -258,10 +403,10 @@ bool same_cells(const PrunedGrid& a, const PrunedGrid& b) {
                 continue;
             }
             const auto ta = a.tape_at(x.tape), tb = b.tape_at(y.tape);
-            if (!std::equal(ta.begin(), ta.end(), tb.begin(), tb.end()) ||
-                a.tape_pool()[x.tape + 1] != b.tape_pool()[y.tape + 1] ||
-                (!finest && x.children != y.children))
+            if (!std::ranges::equal(ta, tb) ||
+                a.tape_pool()[x.tape + 1] != b.tape_pool()[y.tape + 1])
                 return false;
+            if (!finest) stack.push_back({p.level + 1, x.children, y.children});
         }
     }
     return true;
