@@ -24,6 +24,13 @@ float eval_tape(const Scene& scene, std::span<const uint32_t> tape, vec3 p, floa
 vec3 eval_tape_color(const Scene& scene, std::span<const uint32_t> tape, vec3 p, float* stack,
                      vec3* color_stack);
 
+// The primitive (index into the scene's per-primitive arrays) that decides the value at p, as
+// the tape decides: at each operator, the operand with the larger blend weight
+// (operator_weight_b), i.e. the one the hard min / max picks, or the nearer one within a smooth
+// blend. Stacks must hold scene.max_stack entries each.
+uint32_t eval_tape_winner(const Scene& scene, std::span<const uint32_t> tape, vec3 p, float* stack,
+                          uint32_t* winner_stack);
+
 // The full tree's value at p (allocates its stack; use eval_points for many points).
 float eval_point(const Scene& scene, vec3 p);
 

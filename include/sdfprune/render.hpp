@@ -43,6 +43,10 @@ struct RenderOptions {
     // Heatmap scale maximum (node evaluations per pixel); 0 = the image's own maximum.
     double heatmap_max = 0;
     std::function<void(double)> progress;  // called from the calling thread, fraction done
+    // Shaded and normals views: tints the pixels where this primitive (an index into the
+    // scene's per-primitive arrays) decides the surface (eval_tape_winner); -1: none. The
+    // Vulkan renderer ignores it.
+    int64_t highlight_primitive = -1;
 };
 
 struct Image {
@@ -64,7 +68,21 @@ Image render(const PrunedGrid& grid, const RenderOptions& options, RenderStats* 
 Image render_naive(const Scene& scene, const RenderOptions& options,
                    RenderStats* stats = nullptr);
 
+// The primary ray through the centre of pixel (x, y) of the image `options` describe (its size
+// and camera), traced on the pruned grid: whether it hits the surface, where, and the primitive
+// that decides the surface there (eval_tape_winner on the hit cell's tape). Throws
+// std::invalid_argument for a pixel outside the image.
+struct PickResult {
+    bool hit = false;
+    vec3 point;
+    float t = 0;             // distance along the ray
+    uint32_t primitive = 0;  // valid when hit
+};
+PickResult pick(const PrunedGrid& grid, const RenderOptions& options, uint32_t x, uint32_t y);
+
 // Writes a PNG (8-bit RGB) atomically; throws IoError.
 void write_png(const Image& image, const std::string& path);
+// The PNG file's bytes, in memory; zlib `level` 0-9 (1: fast, for interactive frames).
+std::vector<uint8_t> encode_png(const Image& image, int level = 6);
 
 }  // namespace sdfprune

@@ -59,6 +59,32 @@ vec3 eval_tape_color(const Scene& sc, std::span<const uint32_t> tape, vec3 p, fl
     return color_stack[0];
 }
 
+uint32_t eval_tape_winner(const Scene& sc, std::span<const uint32_t> tape, vec3 p, float* stack,
+                          uint32_t* winner_stack) {
+    uint32_t top = 0;
+    for (const uint32_t w : tape) {
+        const uint32_t n = math::tape_node(w);
+        const uint32_t k = sc.kind[n];
+        float v;
+        uint32_t winner;
+        if (k < math::kPrimitiveKindCount) {
+            v = math::eval_primitive(k, sc.params[sc.primitive[n]], p);
+            winner = sc.primitive[n];
+        } else {
+            --top;
+            const float b = stack[top], a = stack[top - 1];
+            const float s = math::operator_s(k);
+            v = math::apply_operator(s, sc.blend[n], a, b);
+            winner = math::operator_weight_b(s, sc.blend[n], a, b) > 0.5f ? winner_stack[top]
+                                                                          : winner_stack[top - 1];
+            --top;
+        }
+        stack[top] = math::tape_negated(w) ? -v : v;
+        winner_stack[top++] = winner;
+    }
+    return winner_stack[0];
+}
+
 float eval_point(const Scene& sc, vec3 p) {
     std::vector<float> stack(sc.max_stack);
     return eval_tape(sc, sc.full_tape, p, stack.data());

@@ -21,8 +21,11 @@ vec3 background(float v) {
 vec3 heat_color(double value, double top) {
     const double t = top > 0 ? std::clamp(std::log1p(value) / std::log1p(top), 0.0, 1.0) : 0.0;
     // Black -> purple -> red -> orange -> pale yellow.
-    static const vec3 stops[5] = {{0.0f, 0.0f, 0.04f}, {0.33f, 0.06f, 0.5f}, {0.8f, 0.18f, 0.3f},
-                                  {0.98f, 0.55f, 0.04f}, {1.0f, 1.0f, 0.62f}};
+    static const vec3 stops[5] = {{0.0f, 0.0f, 0.04f},
+                                  {0.33f, 0.06f, 0.5f},
+                                  {0.8f, 0.18f, 0.3f},
+                                  {0.98f, 0.55f, 0.04f},
+                                  {1.0f, 1.0f, 0.62f}};
     const double x = t * 4;
     const int i = std::min(int(x), 3);
     const float f = float(x - i);
@@ -42,17 +45,19 @@ void to_rgb8(const std::vector<vec3>& color, Image& img) {
     }();
     for (size_t i = 0; i < color.size(); ++i)
         for (int c = 0; c < 3; ++c)
-            img.rgb[3 * i + c] =
-                curve[size_t(std::clamp(color[i][c], 0.0f, 1.0f) * kSteps + 0.5f)];
+            img.rgb[3 * i + c] = curve[size_t(std::clamp(color[i][c], 0.0f, 1.0f) * kSteps + 0.5f)];
 }
 
 namespace {
 
 std::string compact_number(double v) {
     char buf[32];
-    if (v >= 1e6) std::snprintf(buf, sizeof buf, "%.1fM", v / 1e6);
-    else if (v >= 1e4) std::snprintf(buf, sizeof buf, "%.0fk", v / 1e3);
-    else std::snprintf(buf, sizeof buf, "%.0f", v);
+    if (v >= 1e6)
+        std::snprintf(buf, sizeof buf, "%.1fM", v / 1e6);
+    else if (v >= 1e4)
+        std::snprintf(buf, sizeof buf, "%.0fk", v / 1e3);
+    else
+        std::snprintf(buf, sizeof buf, "%.0f", v);
     return buf;
 }
 
@@ -63,7 +68,8 @@ void draw_heatmap_legend(Image& img, double top) {
     using draw::text;
     const int scale = std::max(1, int(img.height) / 270);
     const int bar_w = 60 * scale, bar_h = 6 * scale, pad = 4 * scale;
-    const int x0 = int(img.width) - bar_w - 6 * pad, y0 = int(img.height) - bar_h - 12 * scale - 3 * pad;
+    const int x0 = int(img.width) - bar_w - 6 * pad,
+              y0 = int(img.height) - bar_h - 12 * scale - 3 * pad;
     fill(img, x0 - pad, y0 - pad, bar_w + 2 * pad, bar_h + 12 * scale + 3 * pad, vec3(0.08f));
     for (int x = 0; x < bar_w; ++x) {
         const double value = std::expm1(double(x) / (bar_w - 1) * std::log1p(top));
@@ -77,7 +83,8 @@ void draw_heatmap_legend(Image& img, double top) {
     const std::string hi = compact_number(top);
     text(img, x0 + bar_w - int(hi.size()) * 4 * scale, ty, scale, hi, white);
     const std::string label = "node evals/pixel";
-    text(img, x0 + (bar_w - int(label.size()) * 4 * scale) / 2, ty + 6 * scale, scale, label, white);
+    text(img, x0 + (bar_w - int(label.size()) * 4 * scale) / 2, ty + 6 * scale, scale, label,
+         white);
 }
 
 void write_png(const Image& img, const std::string& path) {
@@ -101,6 +108,34 @@ void write_png(const Image& img, const std::string& path) {
         png_destroy_write_struct(&png, &info);
         if (std::fclose(f) != 0) throw IoError(path + ": write failed");
     });
+}
+
+namespace {
+void append_png_bytes(png_structp png, png_bytep data, png_size_t length) {
+    auto* out = static_cast<std::vector<uint8_t>*>(png_get_io_ptr(png));
+    out->insert(out->end(), data, data + length);
+}
+void flush_nothing(png_structp) {}
+}  // namespace
+
+std::vector<uint8_t> encode_png(const Image& img, int level) {
+    std::vector<uint8_t> out;
+    png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
+    png_infop info = png ? png_create_info_struct(png) : nullptr;
+    if (!png || !info || setjmp(png_jmpbuf(png))) {
+        png_destroy_write_struct(&png, &info);
+        throw IoError("PNG encoding failed");
+    }
+    png_set_write_fn(png, &out, append_png_bytes, flush_nothing);
+    png_set_compression_level(png, std::clamp(level, 0, 9));
+    png_set_IHDR(png, info, img.width, img.height, 8, PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE,
+                 PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+    png_write_info(png, info);
+    for (uint32_t y = 0; y < img.height; ++y)
+        png_write_row(png, img.rgb.data() + size_t(y) * img.width * 3);
+    png_write_end(png, nullptr);
+    png_destroy_write_struct(&png, &info);
+    return out;
 }
 
 }  // namespace sdfprune

@@ -19,6 +19,8 @@ struct CameraFrame {
     float normal_h = 0;  // step of the tetrahedron-stencil gradient
 };
 CameraFrame camera_frame(const Scene& scene, const RenderOptions& options);
+// The unit direction of the primary ray through the centre of pixel (x, y) of a W×H image.
+vec3 pixel_direction(const CameraFrame& frame, uint32_t W, uint32_t H, uint32_t x, uint32_t y);
 
 // The last step of every tracer: the 8-bit image from the pixels' linear colors (or, for the
 // heatmap, from their node evaluations, with a legend) and the statistics.

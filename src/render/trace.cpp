@@ -149,6 +149,12 @@ float march(const Field& field, const TraceContext& ctx, vec3 o, vec3 dir, float
 
 }  // namespace
 
+vec3 pixel_direction(const CameraFrame& f, uint32_t W, uint32_t H, uint32_t x, uint32_t y) {
+    const float u = (2.0f * (float(x) + 0.5f) / float(W) - 1.0f) * f.tan_half * f.aspect;
+    const float v = (1.0f - 2.0f * (float(y) + 0.5f) / float(H)) * f.tan_half;
+    return normalize(f.forward + f.right * u + f.up * v);
+}
+
 CameraFrame camera_frame(const Scene& sc, const RenderOptions& opt) {
     const Camera& cam = opt.camera;
     CameraFrame f;
@@ -176,8 +182,8 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
     const TraceContext ctx{sc, 1.0f / sc.lipschitz[sc.root()], sc.aabb.min, sc.aabb.max};
     const Camera& cam = opt.camera;
     const CameraFrame frame = camera_frame(sc, opt);
-    const vec3 forward = frame.forward, right = frame.right, up = frame.up, light = frame.light;
-    const float tan_half = frame.tan_half, aspect = frame.aspect, normal_h = frame.normal_h;
+    const vec3 light = frame.light;
+    const float tan_half = frame.tan_half, normal_h = frame.normal_h;
 
     std::atomic<uint64_t> total_steps{0}, total_evals{0}, hits{0};
     // Square tiles rather than rows: neighbouring rays visit the same cells and tapes.
@@ -190,17 +196,18 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
         const uint32_t tile = uint32_t(chunk);
         thread_local std::vector<float> stack;
         thread_local std::vector<vec3> color_stack;
+        thread_local std::vector<uint32_t> winner_stack;
         stack.resize(sc.max_stack);
         color_stack.resize(sc.max_stack);
+        if (opt.highlight_primitive >= 0) winner_stack.resize(sc.max_stack);
         Counters sum;
         uint64_t tile_hits = 0;
         const uint32_t x0 = tile % tiles_x * kTile, y0 = tile / tiles_x * kTile;
         for (uint32_t y = y0; y < std::min(H, y0 + kTile); ++y)
             for (uint32_t x = x0; x < std::min(W, x0 + kTile); ++x) {
                 Counters c;
-                const float u = (2.0f * (float(x) + 0.5f) / float(W) - 1.0f) * tan_half * aspect;
                 const float v = (1.0f - 2.0f * (float(y) + 0.5f) / float(H)) * tan_half;
-                const vec3 dir = normalize(forward + right * u + up * v);
+                const vec3 dir = pixel_direction(frame, W, H, x, y);
                 const vec3 inv(1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z);
                 float t0, t1;
                 vec3 out = background(v / tan_half);
@@ -235,6 +242,10 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
                                   : albedo * (0.22f + 0.78f * lit) +
                                         vec3(0.06f) *
                                             std::pow(std::max(0.0f, math::dot(n, -dir)), 8.0f);
+                        if (opt.highlight_primitive >= 0 &&
+                            eval_tape_winner(sc, tape, p, stack.data(), winner_stack.data()) ==
+                                uint64_t(opt.highlight_primitive))
+                            out = out * 0.45f + vec3(1.0f, 0.5f, 0.08f) * 0.55f;
                     }
                 }
                 const size_t i = size_t(y) * W + x;
@@ -287,6 +298,32 @@ Image finish_image(const RenderOptions& opt, std::vector<vec3>& color,
 Image render(const PrunedGrid& grid, const RenderOptions& options, RenderStats* stats) {
     const Scene& sc = grid.scene();
     return trace_image(PrunedField{grid}, sc, options, stats);
+}
+
+PickResult pick(const PrunedGrid& grid, const RenderOptions& opt, uint32_t x, uint32_t y) {
+    if (x >= opt.width || y >= opt.height)
+        throw std::invalid_argument("pick: pixel (" + std::to_string(x) + ", " + std::to_string(y) +
+                                    ") lies outside the image");
+    const Scene& sc = grid.scene();
+    const TraceContext ctx{sc, 1.0f / sc.lipschitz[sc.root()], sc.aabb.min, sc.aabb.max};
+    const CameraFrame frame = camera_frame(sc, opt);
+    const vec3 eye = opt.camera.eye, dir = pixel_direction(frame, opt.width, opt.height, x, y);
+    const vec3 inv(1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z);
+    std::vector<float> stack(sc.max_stack);
+    std::vector<uint32_t> winners(sc.max_stack);
+    PickResult r;
+    float t0, t1;
+    Counters c;
+    if (!ray_box(eye, inv, ctx.aabb_lo, ctx.aabb_hi, t0, t1)) return r;
+    const PrunedField field{grid};
+    const float t = march(field, ctx, eye, dir, t0, t1, 1024, stack.data(), c);
+    if (t < 0) return r;
+    r.hit = true;
+    r.t = t;
+    r.point = eye + dir * t;
+    r.primitive =
+        eval_tape_winner(sc, field.tape_at(r.point), r.point, stack.data(), winners.data());
+    return r;
 }
 
 Image render_naive(const Scene& scene, const RenderOptions& options, RenderStats* stats) {
