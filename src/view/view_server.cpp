@@ -62,12 +62,18 @@ float in_range(const std::string& name, float v, float lo, float hi) {
 }
 
 std::string fields_json(const PrimitiveFields& f) {
-    std::string out = "{\"primitive\":" + std::to_string(f.primitive) +
-                      ",\"node\":" + std::to_string(f.node) + ",\"kind\":" + quoted(f.kind) +
-                      ",\"fields\":[";
-    for (size_t i = 0; i < f.fields.size(); ++i)
-        out += (i ? "," : "") + std::string("{\"name\":") + quoted(f.fields[i].first) +
-               ",\"value\":" + number(f.fields[i].second) + "}";
+    std::string out = "{\"primitive\":" + std::to_string(f.primitive);
+    out += ",\"node\":" + std::to_string(f.node);
+    out += ",\"kind\":" + quoted(f.kind);
+    out += ",\"fields\":[";
+    for (size_t i = 0; i < f.fields.size(); ++i) {
+        if (i) out += ',';
+        out += "{\"name\":";
+        out += quoted(f.fields[i].first);
+        out += ",\"value\":";
+        out += number(f.fields[i].second);
+        out += '}';
+    }
     return out + "]}";
 }
 
