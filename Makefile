@@ -16,8 +16,11 @@ PYENV = $(BUILD)/pyenv
 .PHONY: setup build python test run bench sanitize fuzz format clean
 
 # Installs every system dependency (as root, non-interactive); does nothing when all are present.
+# Node.js and npm (for the browser tests' playwright-core) come from Debian when not on PATH.
 setup:
-	@missing=$$(for p in $(PACKAGES) $(EXTRA_PACKAGES); do dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed' || echo $$p; done); \
+	@extra="$(EXTRA_PACKAGES)"; command -v node >/dev/null && command -v npm >/dev/null || \
+	  extra="$$extra nodejs npm"; \
+	missing=$$(for p in $(PACKAGES) $$extra; do dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed' || echo $$p; done); \
 	if [ -n "$$missing" ]; then \
 	  echo "make setup: installing$$(echo $$missing | sed 's/^/ /')"; \
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
@@ -37,11 +40,13 @@ python: build
 	SDFPRUNE_BUILD_DIR=$(abspath $(BUILD)) CMAKE_BUILD_PARALLEL_LEVEL=$(JOBS) \
 	  $(PYENV)/bin/pip install --no-build-isolation --no-deps -q .
 
-# ctest, then the Python suite (run even when ctest fails, so both summaries show).
+# ctest, then the Python suite, then the viewer in headless Chromium (each runs even when an
+# earlier one fails, so every summary shows).
 test: build python
 	@status=0; (cd $(BUILD) && ctest --output-on-failure -j $(JOBS)) || status=1; \
 	SDFPRUNE_CLI=$(abspath $(BUILD))/sdfprune $(PYENV)/bin/python -m pytest python/tests -q \
-	  -p no:cacheprovider || status=1; exit $$status
+	  -p no:cacheprovider || status=1; \
+	./tests/browser/run.sh $(BUILD) || status=1; exit $$status
 
 run: build
 	./tools/run_demo.sh $(BUILD)

@@ -44,7 +44,8 @@ async function pump() {
   view.dirty = false;
   view.busy = true;
   try {
-    const res = await fetch('/api/frame?' + frameQuery(size));
+    const query = frameQuery(size);
+    const res = await fetch('/api/frame?' + query);
     if (!res.ok) { showStatus((await res.json()).error); return; }
     const blob = await res.blob();
     const h = (k) => res.headers.get('X-Sdfprune-' + k);
@@ -67,6 +68,7 @@ async function pump() {
     frame.dataset.height = size.h;
     frame.dataset.version = h('Version');
     frame.dataset.camera = JSON.stringify(cam);
+    frame.dataset.query = query.toString();  // everything the frame shows, for tests
     frame.dataset.full = view.full ? '1' : '0';
     showFigures();
     showStatus('');
@@ -117,6 +119,12 @@ async function pollScene() {
     $('redo').disabled = !scene.can_redo;
     if (scene.version !== view.version) {
       const first = view.version === 0;
+      if (first) {  // the server's grid (sdfprune view --grid) is the default choice
+        const grid = $('grid');
+        if (![...grid.options].some((o) => o.value === String(scene.grid)))
+          grid.add(new Option(String(scene.grid)));
+        grid.value = String(scene.grid);
+      }
       view.version = scene.version;
       if (!first && view.selection >= 0) await showEditor(view.selection);
       changed();
@@ -293,5 +301,4 @@ document.addEventListener('keydown', (e) => {
 });
 for (const id of ['shading', 'shadows', 'grid', 'mode']) $(id).addEventListener('change', changed);
 
-$('grid').value = '256';
 pollScene();

@@ -27,6 +27,8 @@ struct Camera {
 // AABB's bounding sphere to fit the view).
 Camera orbit_camera(const Aabb& aabb, float yaw_degrees, float pitch_degrees, float distance,
                     float fov_degrees, const vec3* target = nullptr);
+// The distance orbit_camera uses: `distance`, or when it is <= 0 the one that fits the AABB.
+float orbit_distance(const Aabb& aabb, float distance, float fov_degrees);
 
 enum class Shading {
     kShaded,   // albedo from the primitives' colors, diffuse light, hard shadow, ambient

@@ -16,14 +16,18 @@
 
 namespace sdfprune {
 
+float orbit_distance(const Aabb& aabb, float distance, float fov) {
+    if (distance > 0) return distance;
+    const float radius = math::length(aabb.max - aabb.min) * 0.5f;
+    return radius / std::sin(fov * std::numbers::pi_v<float> / 360.0f) * 0.8f;
+}
+
 Camera orbit_camera(const Aabb& aabb, float yaw, float pitch, float distance, float fov,
                     const vec3* target) {
     Camera c;
     c.fov_degrees = fov;
     c.target = target ? *target : (aabb.min + aabb.max) * 0.5f;
-    const float radius = math::length(aabb.max - aabb.min) * 0.5f;
-    if (!(distance > 0))
-        distance = radius / std::sin(fov * std::numbers::pi_v<float> / 360.0f) * 0.8f;
+    distance = orbit_distance(aabb, distance, fov);
     const float y = yaw * std::numbers::pi_v<float> / 180,
                 p = pitch * std::numbers::pi_v<float> / 180;
     c.eye = c.target +

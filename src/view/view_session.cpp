@@ -110,7 +110,7 @@ Frame Session::render(const FrameRequest& r) {
     ro.highlight_primitive = r.highlight;
     Frame f;
     f.version = s->version;
-    f.distance = math::length(ro.camera.eye - ro.camera.target);
+    f.distance = orbit_distance(sc.aabb, r.distance, r.fov);
     f.target = ro.camera.target;
     if (r.naive) {
         f.image = render_naive(sc, ro, &f.render);
