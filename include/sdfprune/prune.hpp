@@ -334,6 +334,52 @@ class PrunedGrid {
     std::vector<std::vector<uint32_t>> free_blocks_;
 };
 
+// The lookups every query makes, inline: a tracer makes one per step.
+[[gnu::always_inline]] inline bool PrunedGrid::cell_index(vec3 p, uint32_t& ix, uint32_t& iy,
+                                                          uint32_t& iz) const {
+    // The closed box itself decides (q · 1/size can round past N on the max faces).
+    const vec3 lo = scene_->aabb.min, hi = scene_->aabb.max;
+    if (!(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z))
+        return false;
+    const uint32_t last = resolution() - 1;
+    ix = std::min(uint32_t((p.x - lo.x) * inv_cell_size_.x), last);
+    iy = std::min(uint32_t((p.y - lo.y) * inv_cell_size_.y), last);
+    iz = std::min(uint32_t((p.z - lo.z) * inv_cell_size_.z), last);
+    return true;
+}
+
+[[gnu::always_inline]] inline bool PrunedGrid::locate(vec3 p, Located& out) const {
+    uint32_t ix, iy, iz;
+    if (!cell_index(p, ix, iy, iz)) return false;
+    if (!shortcut_.empty()) {
+        // The shortcut holds descend's result down to the level above the finest: at most one
+        // step of it is left. Every level is pow2 here.
+        const Level& s = levels_[shortcut_level_];
+        const uint32_t entry =
+            shortcut_[(size_t(iz >> s.shift) * s.res + (iy >> s.shift)) * s.res + (ix >> s.shift)];
+        uint32_t level = entry >> 27;
+        const PrunedCell* c = &levels_[level].cells[entry & ((1u << 27) - 1)];
+        if (c->tape != PrunedCell::kFarField) {
+            const Level& f = levels_[++level];
+            const uint32_t m = f.factor - 1, b = f.factor_bits, sh = f.shift;
+            c = &f.cells[c->children +
+                         (((((iz >> sh) & m) << b | ((iy >> sh) & m)) << b) | ((ix >> sh) & m))];
+        }
+        const uint32_t shift = levels_[level].shift;
+        out = {level, ix >> shift, iy >> shift, iz >> shift, c};
+        return true;
+    }
+    const CellRef at = descend(ix, iy, iz, level_count() - 1);
+    const Level& l = levels_[at.level];
+    if (l.pow2) {
+        out = {at.level, ix >> l.shift, iy >> l.shift, iz >> l.shift, &l.cells[at.index]};
+    } else {
+        const uint32_t scale = resolution() / l.res;
+        out = {at.level, ix / scale, iy / scale, iz / scale, &l.cells[at.index]};
+    }
+    return true;
+}
+
 PrunedGrid prune(const Scene& scene, const PruneOptions& options = {});
 // The same, sharing ownership of an immutable scene: the grid (and its copies) keep it alive,
 // so it may be dropped by the caller (language bindings rely on this). Throws

@@ -12,21 +12,6 @@
 
 namespace sdfprune {
 
-bool PrunedGrid::cell_index(vec3 p, uint32_t& ix, uint32_t& iy, uint32_t& iz) const {
-    const uint32_t N = resolution();
-    const vec3 q = p - scene_->aabb.min;
-    uint32_t idx[3];
-    for (int a = 0; a < 3; ++a) {
-        // The closed box itself decides (q · 1/size can round past N on the max faces).
-        if (!(p[a] >= scene_->aabb.min[a]) || !(p[a] <= scene_->aabb.max[a])) return false;
-        idx[a] = std::min(uint32_t(q[a] * inv_cell_size_[a]), N - 1);
-    }
-    ix = idx[0];
-    iy = idx[1];
-    iz = idx[2];
-    return true;
-}
-
 vec3 PrunedGrid::cell_center(uint32_t ix, uint32_t iy, uint32_t iz) const {
     return scene_->aabb.min +
            vec3(float(ix) + 0.5f, float(iy) + 0.5f, float(iz) + 0.5f) * cell_size_;
@@ -82,36 +67,6 @@ void PrunedGrid::build_shortcut() {
                 const CellRef at = descend(x * scale, y * scale, z * scale, S);
                 shortcut_[(size_t(z) * r + y) * r + x] = at.level << 27 | at.index;
             }
-}
-
-bool PrunedGrid::locate(vec3 p, Located& out) const {
-    uint32_t ix, iy, iz;
-    if (!cell_index(p, ix, iy, iz)) return false;
-    if (!shortcut_.empty()) {
-        // The shortcut holds descend's result down to the level above the finest: at most one
-        // step of it is left. Every level is pow2 here.
-        const Level& s = levels_[shortcut_level_];
-        const uint32_t sx = ix >> s.shift, sy = iy >> s.shift, sz = iz >> s.shift;
-        const uint32_t entry = shortcut_[(size_t(sz) * s.res + sy) * s.res + sx];
-        CellRef at{entry >> 27, entry & ((1u << 27) - 1)};
-        const PrunedCell* c = &levels_[at.level].cells[at.index];
-        if (c->tape != PrunedCell::kFarField) {
-            at = block_cell_at(shortcut_level_ + 1, c->children, ix, iy, iz);
-            c = &levels_[at.level].cells[at.index];
-        }
-        const uint32_t shift = levels_[at.level].shift;
-        out = {at.level, ix >> shift, iy >> shift, iz >> shift, c};
-        return true;
-    }
-    const CellRef at = descend(ix, iy, iz, level_count() - 1);
-    const Level& l = levels_[at.level];
-    if (l.pow2) {
-        out = {at.level, ix >> l.shift, iy >> l.shift, iz >> l.shift, &l.cells[at.index]};
-    } else {
-        const uint32_t scale = resolution() / l.res;
-        out = {at.level, ix / scale, iy / scale, iz / scale, &l.cells[at.index]};
-    }
-    return true;
 }
 
 float PrunedGrid::eval(vec3 p, float* stack) const {

@@ -96,59 +96,126 @@ struct TraceContext {
     vec3 aabb_lo, aabb_hi;
 };
 
-// Marches o + t·dir over [t0, t1]; returns the hit t or a negative value.
-template <class Field>
-float march(const Field& field, const TraceContext& ctx, vec3 o, vec3 dir, float t0, float t1,
-            uint32_t max_steps, float* stack, Counters& c) {
-    const vec3 inv_dir(1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z);
+// A ray to march over [t0, t1] (its span inside the AABB); `t` receives the hit, or -1.
+struct Ray {
+    vec3 o, dir;
+    float t0, t1;
+    uint32_t max_steps;
+    float t;
+    Counters* counters;  // the pixel's
+};
+
+// One ray in flight. A step is the loop body of a plain sphere tracer; a lane whose step found
+// a near-field cell first only fetches the cell's tape and evaluates it at its next turn.
+struct Lane {
+    Ray* ray = nullptr;
+    vec3 inv_dir;
+    float t = 0;
+    uint32_t step = 0;
+    bool pending = false;  // p is decided by `tape`, fetched: evaluate at the next turn
+    vec3 p;
+    std::span<const uint32_t> tape;
     // The last near-field cell and its tape: consecutive steps near the surface often stay in
     // one cell, and then need no lookup.
     std::span<const uint32_t> near_tape;
-    vec3 near_lo(INFINITY), near_hi(-INFINITY);
-    float t = t0;
-    for (uint32_t step = 0; step < max_steps && t <= t1; ++step) {
-        ++c.steps;
-        // [t0, t1] lies in the AABB: clamp away the rounding that would put p just outside.
-        const vec3 p = math::min(math::max(o + dir * t, ctx.aabb_lo), ctx.aabb_hi);
-        std::span<const uint32_t> tape = ctx.sc.full_tape;
-        if constexpr (std::is_same_v<Field, PrunedField>) {
-            const bool cached = p.x >= near_lo.x && p.y >= near_lo.y && p.z >= near_lo.z &&
-                                p.x <= near_hi.x && p.y <= near_hi.y && p.z <= near_hi.z;
-            PrunedGrid::Located at;
-            if (cached) {
-                tape = near_tape;
-            } else if (field.g.locate(p, at)) {
-                const vec3 size = field.g.level_cell_size(at.level);
-                const vec3 lo = ctx.aabb_lo + vec3(float(at.x), float(at.y), float(at.z)) * size;
-                if (at.far_field()) {
-                    // No surface in this cell: continue from its exit (or by its constant).
-                    float t_exit = INFINITY;
-                    for (int a = 0; a < 3; ++a) {
-                        const float bound = dir[a] > 0 ? lo[a] + size[a] : lo[a];
-                        const float ta = (bound - o[a]) * inv_dir[a];
-                        if (ta == ta) t_exit = std::min(t_exit, ta);  // skips 0·inf
+    vec3 near_lo{INFINITY}, near_hi{-INFINITY};
+};
+
+// Marches `rays`, kLanes at a time, each lane taking one step in turn. A step of the pruned
+// field is bound by memory (the cell, then its tape, in a structure of tens of MB): the lookup of
+// one lane's next cell and the fetch of its tape are started (prefetched) a turn ahead, so that
+// the other lanes' steps run while they arrive. Every ray takes exactly the steps and values a
+// ray marched alone would: only their order in time differs.
+template <class Field>
+void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, float* stack) {
+    constexpr bool kPruned = std::is_same_v<Field, PrunedField>;
+    constexpr uint32_t kLanes = kPruned ? 8 : 1;
+    Lane lanes[kLanes];
+    uint32_t active = 0;
+    size_t next = 0;
+    const auto start = [&](Lane& l) {
+        Ray& r = rays[next++];
+        l = Lane{};
+        l.ray = &r;
+        l.inv_dir = vec3(1.0f / r.dir.x, 1.0f / r.dir.y, 1.0f / r.dir.z);
+        l.t = r.t0;
+        r.t = -1;
+    };
+    while (active < kLanes && next < rays.size()) start(lanes[active++]);
+    // One step of lane l; false when its ray is done (hit, left the AABB or out of steps).
+    const auto advance = [&](Lane& l) -> bool {
+        Ray& r = *l.ray;
+        Counters& c = *r.counters;
+        if (!l.pending) {
+            if (l.step >= r.max_steps || !(l.t <= r.t1)) return false;
+            ++l.step;
+            ++c.steps;
+            // [t0, t1] lies in the AABB: clamp away the rounding that would put p just outside.
+            l.p = math::min(math::max(r.o + r.dir * l.t, ctx.aabb_lo), ctx.aabb_hi);
+            l.tape = ctx.sc.full_tape;
+            if constexpr (kPruned) {
+                const vec3 p = l.p;
+                const bool cached = p.x >= l.near_lo.x && p.y >= l.near_lo.y &&
+                                    p.z >= l.near_lo.z && p.x <= l.near_hi.x &&
+                                    p.y <= l.near_hi.y && p.z <= l.near_hi.z;
+                PrunedGrid::Located at;
+                if (cached) {
+                    l.tape = l.near_tape;
+                } else if (field.g.locate(p, at)) {
+                    const vec3 size = field.g.level_cell_size(at.level);
+                    const vec3 lo =
+                        ctx.aabb_lo + vec3(float(at.x), float(at.y), float(at.z)) * size;
+                    if (at.far_field()) {
+                        // No surface in this cell: continue from its exit (or by its constant).
+                        float t_exit = INFINITY;
+                        for (int a = 0; a < 3; ++a) {
+                            const float bound = r.dir[a] > 0 ? lo[a] + size[a] : lo[a];
+                            const float ta = (bound - r.o[a]) * l.inv_dir[a];
+                            if (ta == ta) t_exit = std::min(t_exit, ta);  // skips 0·inf
+                        }
+                        // |f(p)| >= |f(centre)| - L·|p - centre|: often far beyond the cell.
+                        const float from_centre = std::fabs(at.cell->value) * ctx.inv_lipschitz -
+                                                  math::length(p - (lo + size * 0.5f));
+                        const float step =
+                            std::max(std::fabs(at.cell->bound) * ctx.inv_lipschitz, from_centre);
+                        const float tiny = 1e-4f * std::min({size.x, size.y, size.z});
+                        l.t = std::max(l.t + step, t_exit + tiny);
+                        return true;
                     }
-                    // |f(p)| >= |f(centre)| - L·|p - centre|: often far beyond the cell.
-                    const float from_centre = std::fabs(at.cell->value) * ctx.inv_lipschitz -
-                                              math::length(p - (lo + size * 0.5f));
-                    const float step =
-                        std::max(std::fabs(at.cell->bound) * ctx.inv_lipschitz, from_centre);
-                    const float tiny = 1e-4f * std::min({size.x, size.y, size.z});
-                    t = std::max(t + step, t_exit + tiny);
-                    continue;
+                    l.tape = field.g.tape_at(at.cell->tape);
+                    l.near_tape = l.tape;
+                    l.near_lo = lo;
+                    l.near_hi = lo + size;
+                    if (kLanes > 1) {
+                        // The tape is likely not in cache: evaluate it at the next turn.
+                        __builtin_prefetch(l.tape.data());
+                        l.pending = true;
+                        return true;
+                    }
                 }
-                tape = field.g.tape_at(at.cell->tape);
-                near_tape = tape;
-                near_lo = lo;
-                near_hi = lo + size;
             }
         }
-        c.evals += tape.size();
-        const float d = eval_tape(ctx.sc, tape, p, stack);
-        if (d < 5e-4f * std::min(1.0f, t)) return t;
-        t += d * ctx.inv_lipschitz;
+        l.pending = false;
+        c.evals += l.tape.size();
+        const float d = eval_tape(ctx.sc, l.tape, l.p, stack);
+        if (d < 5e-4f * std::min(1.0f, l.t)) {
+            r.t = l.t;
+            return false;
+        }
+        l.t += d * ctx.inv_lipschitz;
+        return true;
+    };
+    while (active > 0) {
+        for (uint32_t i = 0; i < active;) {
+            if (advance(lanes[i])) {
+                ++i;
+            } else if (next < rays.size()) {
+                start(lanes[i++]);
+            } else {
+                lanes[i] = lanes[--active];
+            }
+        }
     }
-    return -1;
 }
 
 }  // namespace
@@ -195,6 +262,20 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
     const uint32_t tiles_x = (W + kTile - 1) / kTile, tiles_y = (H + kTile - 1) / kTile;
     const uint32_t tiles = tiles_x * tiles_y;
 
+    // What a hit pixel's colour needs once its shadow ray is known.
+    struct Hit {
+        uint32_t pixel;
+        vec3 dir, n, albedo;
+        float lit;
+        bool highlight;
+    };
+    struct TileScratch {
+        Counters counters[kTile * kTile];
+        Ray rays[kTile * kTile], shadow_rays[kTile * kTile];
+        uint32_t ray_pixel[kTile * kTile];
+        vec3 out[kTile * kTile];
+        Hit hits[kTile * kTile];
+    };
     // One chunk per tile.
     const auto trace_tile = [&](uint64_t chunk) {
         const uint32_t tile = uint32_t(chunk);
@@ -204,60 +285,91 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
         stack.resize(sc.max_stack);
         color_stack.resize(sc.max_stack);
         if (opt.highlight_primitive >= 0) winner_stack.resize(sc.max_stack);
-        Counters sum;
-        uint64_t tile_hits = 0;
+        // Three passes over the tile: its primary rays, marched together; the hits' normals
+        // and colours; their shadow rays, marched together.
         const uint32_t x0 = tile % tiles_x * kTile, y0 = tile / tiles_x * kTile;
-        for (uint32_t y = y0; y < std::min(H, y0 + kTile); ++y)
-            for (uint32_t x = x0; x < std::min(W, x0 + kTile); ++x) {
-                Counters c;
-                const float v = (1.0f - 2.0f * (float(y) + 0.5f) / float(H)) * tan_half;
-                const vec3 dir = pixel_direction(frame, W, H, x, y);
-                const vec3 inv(1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z);
-                float t0, t1;
-                vec3 out = background(v / tan_half);
-                if (ray_box(cam.eye, inv, ctx.aabb_lo, ctx.aabb_hi, t0, t1)) {
-                    const float t = march(field, ctx, cam.eye, dir, t0, t1, 1024, stack.data(), c);
-                    if (t >= 0) {
-                        ++tile_hits;
-                        const vec3 p = cam.eye + dir * t;
-                        const std::span<const uint32_t> tape = field.tape_at(p);
-                        // Tetrahedron-stencil gradient.
-                        const vec3 k[4] = {{1, -1, -1}, {-1, -1, 1}, {-1, 1, -1}, {1, 1, 1}};
-                        vec3 n(0.0f);
-                        for (const vec3& ki : k)
-                            n = n + ki * field.value(p + ki * normal_h, tape, stack.data(), c);
-                        const float len = math::length(n);
-                        n = len > 0 ? n / len : -dir;
-                        c.evals += tape.size();
-                        const vec3 albedo =
-                            eval_tape_color(sc, tape, p, stack.data(), color_stack.data());
-                        float lit = std::max(0.0f, math::dot(n, light));
-                        if (opt.shadows && lit > 0) {
-                            const vec3 so = p + n * (4.0f * normal_h);
-                            const vec3 sinv(1.0f / light.x, 1.0f / light.y, 1.0f / light.z);
-                            float s0, s1;
-                            if (ray_box(so, sinv, ctx.aabb_lo, ctx.aabb_hi, s0, s1) &&
-                                march(field, ctx, so, light, s0 + normal_h, s1, 512, stack.data(),
-                                      c) >= 0)
-                                lit = 0;
-                        }
-                        out = opt.shading == Shading::kNormals
-                                  ? n * 0.5f + 0.5f
-                                  : albedo * (0.22f + 0.78f * lit) +
-                                        vec3(0.06f) *
-                                            std::pow(std::max(0.0f, math::dot(n, -dir)), 8.0f);
-                        if (opt.highlight_primitive >= 0 &&
+        const uint32_t w = std::min(W, x0 + kTile) - x0, h = std::min(H, y0 + kTile) - y0;
+        // Per-thread scratch for the tile's rays (a few tens of KB: not on the stack, and not
+        // cleared per tile, except the counters).
+        thread_local TileScratch scratch;
+        Counters* counters = scratch.counters;
+        std::fill_n(counters, h * w, Counters{});
+        Ray* rays = scratch.rays;
+        uint32_t* ray_pixel = scratch.ray_pixel;
+        vec3* out = scratch.out;
+        uint32_t n_rays = 0;
+        for (uint32_t j = 0; j < h * w; ++j) {
+            const uint32_t x = x0 + j % w, y = y0 + j / w;
+            const float v = (1.0f - 2.0f * (float(y) + 0.5f) / float(H)) * tan_half;
+            out[j] = background(v / tan_half);
+            const vec3 dir = pixel_direction(frame, W, H, x, y);
+            const vec3 inv(1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z);
+            float t0, t1;
+            if (!ray_box(cam.eye, inv, ctx.aabb_lo, ctx.aabb_hi, t0, t1)) continue;
+            rays[n_rays] = {cam.eye, dir, t0, t1, 1024, -1, &counters[j]};
+            ray_pixel[n_rays++] = j;
+        }
+        march(field, ctx, std::span(rays, n_rays), stack.data());
+
+        Hit* hits_of_tile = scratch.hits;
+        Ray* shadow_rays = scratch.shadow_rays;
+        uint32_t n_hits = 0, n_shadow = 0;
+        for (uint32_t r = 0; r < n_rays; ++r) {
+            if (rays[r].t < 0) continue;
+            const uint32_t j = ray_pixel[r];
+            Counters& c = counters[j];
+            const vec3 dir = rays[r].dir, p = cam.eye + dir * rays[r].t;
+            const std::span<const uint32_t> tape = field.tape_at(p);
+            // Tetrahedron-stencil gradient.
+            const vec3 k[4] = {{1, -1, -1}, {-1, -1, 1}, {-1, 1, -1}, {1, 1, 1}};
+            vec3 n(0.0f);
+            for (const vec3& ki : k)
+                n = n + ki * field.value(p + ki * normal_h, tape, stack.data(), c);
+            const float len = math::length(n);
+            n = len > 0 ? n / len : -dir;
+            c.evals += tape.size();
+            Hit& hit = hits_of_tile[n_hits++];
+            hit = {j,
+                   dir,
+                   n,
+                   eval_tape_color(sc, tape, p, stack.data(), color_stack.data()),
+                   std::max(0.0f, math::dot(n, light)),
+                   false};
+            hit.highlight = opt.highlight_primitive >= 0 &&
                             eval_tape_winner(sc, tape, p, stack.data(), winner_stack.data()) ==
-                                uint64_t(opt.highlight_primitive))
-                            out = out * 0.45f + vec3(1.0f, 0.5f, 0.08f) * 0.55f;
-                    }
-                }
-                const size_t i = size_t(y) * W + x;
-                color[i] = out;
-                evals[i] = uint32_t(std::min<uint64_t>(c.evals, 0xffffffffu));
-                sum.steps += c.steps;
-                sum.evals += c.evals;
+                                uint64_t(opt.highlight_primitive);
+            if (opt.shadows && hit.lit > 0) {
+                const vec3 so = p + n * (4.0f * normal_h);
+                const vec3 sinv(1.0f / light.x, 1.0f / light.y, 1.0f / light.z);
+                float s0, s1;
+                if (ray_box(so, sinv, ctx.aabb_lo, ctx.aabb_hi, s0, s1))
+                    shadow_rays[n_shadow++] = {so, light, s0 + normal_h, s1, 512, -1, &c};
             }
+        }
+        march(field, ctx, std::span(shadow_rays, n_shadow), stack.data());
+        for (uint32_t i = 0, s = 0; i < n_hits; ++i) {
+            Hit& hit = hits_of_tile[i];
+            // Shadow rays were made in the order of the hits that cast them.
+            if (s < n_shadow && shadow_rays[s].counters == &counters[hit.pixel] &&
+                shadow_rays[s++].t >= 0)
+                hit.lit = 0;
+            vec3 o =
+                opt.shading == Shading::kNormals
+                    ? hit.n * 0.5f + 0.5f
+                    : hit.albedo * (0.22f + 0.78f * hit.lit) +
+                          vec3(0.06f) * std::pow(std::max(0.0f, math::dot(hit.n, -hit.dir)), 8.0f);
+            if (hit.highlight) o = o * 0.45f + vec3(1.0f, 0.5f, 0.08f) * 0.55f;
+            out[hit.pixel] = o;
+        }
+        Counters sum;
+        for (uint32_t j = 0; j < h * w; ++j) {
+            const size_t i = size_t(y0 + j / w) * W + x0 + j % w;
+            color[i] = out[j];
+            evals[i] = uint32_t(std::min<uint64_t>(counters[j].evals, 0xffffffffu));
+            sum.steps += counters[j].steps;
+            sum.evals += counters[j].evals;
+        }
+        const uint64_t tile_hits = n_hits;
         total_steps += sum.steps;
         total_evals += sum.evals;
         hits += tile_hits;
@@ -320,7 +432,9 @@ PickResult pick(const PrunedGrid& grid, const RenderOptions& opt, uint32_t x, ui
     Counters c;
     if (!ray_box(eye, inv, ctx.aabb_lo, ctx.aabb_hi, t0, t1)) return r;
     const PrunedField field{grid};
-    const float t = march(field, ctx, eye, dir, t0, t1, 1024, stack.data(), c);
+    Ray ray{eye, dir, t0, t1, 1024, -1, &c};
+    march(field, ctx, std::span(&ray, 1), stack.data());
+    const float t = ray.t;
     if (t < 0) return r;
     r.hit = true;
     r.t = t;

@@ -161,6 +161,9 @@ FrameRequest parse_frame_request(const std::multimap<std::string, std::string>& 
 }
 
 Server::Server(Session& session) : session_(session), http_(std::make_unique<httplib::Server>()) {
+    // Frames go out as headers then body on a kept-alive connection: without TCP_NODELAY,
+    // Nagle's algorithm holds the body until the client's delayed ACK (tens of ms a frame).
+    http_->set_tcp_nodelay(true);
     routes();
 }
 
