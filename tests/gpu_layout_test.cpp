@@ -8,10 +8,9 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
-#include <fstream>
-#include <iterator>
 #include <map>
 #include <set>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -76,20 +75,12 @@ std::string read_string(const uint32_t* words, size_t count) {
     return s;
 }
 
-SpirvModule read_spirv(const std::string& path) {
+SpirvModule read_spirv(std::span<const uint32_t> words, const std::string& path) {
     SpirvModule m;
-    std::ifstream in(path, std::ios::binary);
-    if (!in) {
-        m.error = "cannot open " + path;
+    if (words.size() < 5) {
+        m.error = path + ": not a SPIR-V module (" + std::to_string(words.size()) + " words)";
         return m;
     }
-    std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (bytes.size() < 20 || bytes.size() % 4 != 0) {
-        m.error = path + ": not a SPIR-V module (" + std::to_string(bytes.size()) + " bytes)";
-        return m;
-    }
-    std::vector<uint32_t> words(bytes.size() / 4);
-    std::memcpy(words.data(), bytes.data(), bytes.size());
     if (words[0] != 0x07230203u) {
         m.error = path + ": bad SPIR-V magic number";
         return m;
@@ -371,16 +362,42 @@ void check_wrapper(const SpirvModule& m, const std::string& kernel, uint32_t id)
                       << "one struct at offset 0";
 }
 
-// Where CMake put the unoptimized SPIR-V; none without the GPU backend.
-#ifdef SDFPRUNE_SPV_DIR
-constexpr const char* kSpvDir = SDFPRUNE_SPV_DIR;
+// The kernels' unoptimized SPIR-V, embedded at build time; none without the GPU backend.
+struct EmbeddedKernel {
+    const char* name;
+    std::span<const uint32_t> words;
+};
+#ifdef SDFPRUNE_REFLECT_SPV
+constexpr uint32_t kPruneSpv[] = {
+#include "prune.reflect.spv.inc"
+};
+constexpr uint32_t kExpandSpv[] = {
+#include "expand.reflect.spv.inc"
+};
+constexpr uint32_t kCellInfoSpv[] = {
+#include "cell_info.reflect.spv.inc"
+};
+constexpr uint32_t kTraceSpv[] = {
+#include "trace.reflect.spv.inc"
+};
+constexpr uint32_t kDiscretizeSpv[] = {
+#include "discretize.reflect.spv.inc"
+};
+const EmbeddedKernel kKernels[] = {{"prune", kPruneSpv},
+                                   {"expand", kExpandSpv},
+                                   {"cell_info", kCellInfoSpv},
+                                   {"trace", kTraceSpv},
+                                   {"discretize", kDiscretizeSpv}};
 #else
-constexpr const char* kSpvDir = nullptr;
+const std::vector<EmbeddedKernel> kKernels;
 #endif
 
 void check_kernel(const std::string& kernel) {
-    if (!kSpvDir) GTEST_SKIP() << "built without the Vulkan backend";
-    const SpirvModule m = read_spirv(std::string(kSpvDir) + "/" + kernel + ".reflect.spv");
+    const EmbeddedKernel* found_kernel = nullptr;
+    for (const EmbeddedKernel& k : kKernels)
+        if (kernel == k.name) found_kernel = &k;
+    if (!found_kernel) GTEST_SKIP() << "built without the Vulkan backend";
+    const SpirvModule m = read_spirv(found_kernel->words, kernel + ".reflect.spv");
     ASSERT_EQ(m.error, "");
     ASSERT_FALSE(m.names.empty()) << kernel << ".reflect.spv has no OpName: compiled with -O?";
 
