@@ -280,14 +280,16 @@ class PrunedGrid {
         uint32_t shift = 0, factor_bits = 0;
         // Index within its block of the level cell holding finest cell (ix, iy, iz).
         uint32_t local_index(uint32_t ix, uint32_t iy, uint32_t iz, uint32_t N) const {
-            if (pow2) {
-                const uint32_t m = factor - 1;
-                return ((((iz >> shift) & m) << factor_bits | ((iy >> shift) & m)) << factor_bits) |
-                       ((ix >> shift) & m);
-            }
+            if (pow2) return local_index_pow2(ix, iy, iz);
             const uint32_t scale = N / res;
             return (((iz / scale) % factor) * factor + (iy / scale) % factor) * factor +
                    (ix / scale) % factor;
+        }
+        // The same, for a pow2 level (shifts and masks only).
+        uint32_t local_index_pow2(uint32_t ix, uint32_t iy, uint32_t iz) const {
+            const uint32_t m = factor - 1;
+            return ((((iz >> shift) & m) << factor_bits | ((iy >> shift) & m)) << factor_bits) |
+                   ((ix >> shift) & m);
         }
     };
     const Scene* scene_ = nullptr;
@@ -361,9 +363,7 @@ class PrunedGrid {
         const PrunedCell* c = &levels_[level].cells[entry & ((1u << 27) - 1)];
         if (c->tape != PrunedCell::kFarField) {
             const Level& f = levels_[++level];
-            const uint32_t m = f.factor - 1, b = f.factor_bits, sh = f.shift;
-            c = &f.cells[c->children +
-                         (((((iz >> sh) & m) << b | ((iy >> sh) & m)) << b) | ((ix >> sh) & m))];
+            c = &f.cells[c->children + f.local_index_pow2(ix, iy, iz)];
         }
         const uint32_t shift = levels_[level].shift;
         out = {level, ix >> shift, iy >> shift, iz >> shift, c};

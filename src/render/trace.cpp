@@ -121,11 +121,12 @@ struct Lane {
     vec3 near_lo{INFINITY}, near_hi{-INFINITY};
 };
 
-// Marches `rays`, kLanes at a time, each lane taking one step in turn. A step of the pruned
-// field is bound by memory (the cell, then its tape, in a structure of tens of MB): the lookup of
-// one lane's next cell and the fetch of its tape are started (prefetched) a turn ahead, so that
-// the other lanes' steps run while they arrive. Every ray takes exactly the steps and values a
-// ray marched alone would: only their order in time differs.
+// Marches `rays`, kLanes at a time, each lane taking one step in turn: the steps of different
+// rays are independent, so the processor overlaps one lane's cell lookup (in a structure of tens
+// of MB) with the others' work, and a lane that found a near-field cell prefetches its tape and
+// evaluates it at its next turn (measured on molecule: 8 lanes 11 % faster than 1). Every ray
+// takes exactly the steps and values a ray marched alone would: only their order in time
+// differs.
 template <class Field>
 void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, float* stack) {
     constexpr bool kPruned = std::is_same_v<Field, PrunedField>;
@@ -186,12 +187,10 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
                     l.near_tape = l.tape;
                     l.near_lo = lo;
                     l.near_hi = lo + size;
-                    if (kLanes > 1) {
-                        // The tape is likely not in cache: evaluate it at the next turn.
-                        __builtin_prefetch(l.tape.data());
-                        l.pending = true;
-                        return true;
-                    }
+                    // The tape is likely not in cache: evaluate it at the next turn.
+                    __builtin_prefetch(l.tape.data());
+                    l.pending = true;
+                    return true;
                 }
             }
         }
@@ -268,6 +267,7 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
         vec3 dir, n, albedo;
         float lit;
         bool highlight;
+        int32_t shadow_ray;  // index of its shadow ray, or -1
     };
     struct TileScratch {
         Counters counters[kTile * kTile];
@@ -334,7 +334,8 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
                    n,
                    eval_tape_color(sc, tape, p, stack.data(), color_stack.data()),
                    std::max(0.0f, math::dot(n, light)),
-                   false};
+                   false,
+                   -1};
             hit.highlight = opt.highlight_primitive >= 0 &&
                             eval_tape_winner(sc, tape, p, stack.data(), winner_stack.data()) ==
                                 uint64_t(opt.highlight_primitive);
@@ -342,17 +343,16 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
                 const vec3 so = p + n * (4.0f * normal_h);
                 const vec3 sinv(1.0f / light.x, 1.0f / light.y, 1.0f / light.z);
                 float s0, s1;
-                if (ray_box(so, sinv, ctx.aabb_lo, ctx.aabb_hi, s0, s1))
+                if (ray_box(so, sinv, ctx.aabb_lo, ctx.aabb_hi, s0, s1)) {
+                    hit.shadow_ray = int32_t(n_shadow);
                     shadow_rays[n_shadow++] = {so, light, s0 + normal_h, s1, 512, -1, &c};
+                }
             }
         }
         march(field, ctx, std::span(shadow_rays, n_shadow), stack.data());
-        for (uint32_t i = 0, s = 0; i < n_hits; ++i) {
+        for (uint32_t i = 0; i < n_hits; ++i) {
             Hit& hit = hits_of_tile[i];
-            // Shadow rays were made in the order of the hits that cast them.
-            if (s < n_shadow && shadow_rays[s].counters == &counters[hit.pixel] &&
-                shadow_rays[s++].t >= 0)
-                hit.lit = 0;
+            if (hit.shadow_ray >= 0 && shadow_rays[hit.shadow_ray].t >= 0) hit.lit = 0;
             vec3 o =
                 opt.shading == Shading::kNormals
                     ? hit.n * 0.5f + 0.5f
@@ -369,10 +369,9 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
             sum.steps += counters[j].steps;
             sum.evals += counters[j].evals;
         }
-        const uint64_t tile_hits = n_hits;
         total_steps += sum.steps;
         total_evals += sum.evals;
-        hits += tile_hits;
+        hits += n_hits;
     };
     parallel_for<NotCancellable>(tiles, parallel_options(opt), trace_tile);
 
