@@ -388,6 +388,14 @@ PrunedGrid prune(std::shared_ptr<const Scene> scene, const PruneOptions& options
 
 // ---- the per-cell stages, exposed for tests ------------------------------------------------
 
+// The instruction set that the stages' loops over boxes run on: kAvx2 where the processor has
+// it (x86-64; chosen at start-up), else kBaseline. Both give the same results bit for bit.
+// set_lane_isa is for tests and benchmarks (process-wide; not to be called while pruning);
+// it throws std::invalid_argument for an instruction set the processor lacks.
+enum class LaneIsa { kBaseline, kAvx2 };
+LaneIsa lane_isa();
+void set_lane_isa(LaneIsa isa);
+
 // An axis-aligned cell.
 struct CellBox {
     vec3 centre;

@@ -1,0 +1,84 @@
+// prune_lanes_test.cpp — the pruning stages' loops over boxes run on two instruction sets (the
+// baseline and, on x86-64 processors that have it, AVX2; src/prune/prune_cell.cpp). Both must
+// make the same grids bit for bit: same tapes, same constants, same centre values.
+#include <gtest/gtest.h>
+
+#include "prune_check.hpp"
+#include "sdfprune/io.hpp"
+#include "test_util.hpp"
+
+namespace sdfprune {
+namespace {
+
+// Restores the instruction set in use when a test ends.
+class LaneIsaScope {
+  public:
+    LaneIsaScope() : saved_(lane_isa()) {}
+    ~LaneIsaScope() { set_lane_isa(saved_); }
+
+  private:
+    LaneIsa saved_;
+};
+
+// The same scene pruned on both instruction sets gives the same cells.
+void expect_isas_agree(const Scene& sc, const PruneOptions& o, const std::string& what) {
+    LaneIsaScope scope;
+    set_lane_isa(LaneIsa::kBaseline);
+    const PrunedGrid baseline = prune(sc, o);
+    set_lane_isa(LaneIsa::kAvx2);
+    const PrunedGrid avx2 = prune(sc, o);
+    EXPECT_TRUE(same_cells(baseline, avx2)) << what;
+    EXPECT_EQ(baseline.stats().near_field_cells, avx2.stats().near_field_cells) << what;
+    EXPECT_EQ(baseline.stats().tape_words_visited, avx2.stats().tape_words_visited) << what;
+}
+
+bool has_avx2() {
+    LaneIsaScope scope;
+    try {
+        set_lane_isa(LaneIsa::kAvx2);
+        return true;
+    } catch (const std::invalid_argument&) {
+        return false;
+    }
+}
+
+TEST(PruneLanes, BaselineIsAlwaysAvailable) {
+    LaneIsaScope scope;
+    EXPECT_NO_THROW(set_lane_isa(LaneIsa::kBaseline));
+    EXPECT_EQ(lane_isa(), LaneIsa::kBaseline);
+}
+
+// Random scenes with every primitive kind, operator and placement (similarity maps, non-uniform
+// scales, shears), both cell bounds, refinement 1-3, no hierarchy: each cell of the two grids
+// equal.
+TEST(PruneLanes, Avx2EqualsBaselineOnRandomScenes) {
+    if (!has_avx2()) GTEST_SKIP() << "this processor has no AVX2: only the baseline runs";
+    for (uint32_t i = 0; i < 24; ++i) {
+        test::RandomSceneSpec spec;
+        spec.primitives = 3 + i * 2;
+        spec.tree = test::TreeShape(i % 4);
+        spec.placement = test::Placement(i % 5);
+        spec.smooth_prob = (i % 3) * 0.5f;
+        spec.plane_cut = i % 5 == 3;
+        const Scene sc = test::random_scene(4200 + i, spec);
+        PruneOptions o;
+        o.resolution = i % 2 ? 64 : 48;
+        o.refine = 1 + i % 3;
+        o.bounds = i % 4 == 1 ? CellBounds::kLipschitz : CellBounds::kInterval;
+        o.hierarchy = i % 6 != 5;
+        expect_isas_agree(sc, o, "random scene " + std::to_string(i));
+    }
+}
+
+TEST(PruneLanes, Avx2EqualsBaselineOnReferenceScenes) {
+    if (!has_avx2()) GTEST_SKIP() << "this processor has no AVX2: only the baseline runs";
+    for (const char* file : {"molecule.json", "trees.json"}) {
+        SDFPRUNE_REQUIRE_SCENE(path, file);
+        PruneOptions o;
+        o.resolution = 128;
+        expect_isas_agree(load_scene(path), o, file);
+    }
+}
+
+}  // namespace
+}  // namespace sdfprune
