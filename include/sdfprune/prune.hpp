@@ -408,10 +408,11 @@ struct CellScratch {
     std::vector<float> value, lo, hi;
     std::vector<uint32_t> left, right, decision, stack;
     std::vector<uint8_t> alive, negate;
-    std::vector<uint32_t> octant;    // the tape of the octant being split (prune_level.cpp)
-    std::vector<uint32_t> combined;  // refine_cell: the sub-boxes' common decisions
-    std::vector<uint32_t> refined;   // refine_cell's input tape (prune_level.cpp)
-    std::vector<vec3> sub_boxes;     // refine_cell: the sub-boxes' centres, in visiting order
+    std::vector<uint32_t> octant;     // the tape of the octant being split (prune_level.cpp)
+    std::vector<uint32_t> combined;   // refine_cell: the sub-boxes' common decisions
+    std::vector<uint32_t> refined;    // refine_cell's input tape (prune_level.cpp)
+    std::vector<uint32_t> sub_order;  // refine_cell: the sub-boxes in visiting order ...
+    uint32_t sub_order_of = 0;        // ... for this S
     // refine_cell: per tape entry, the values, ranges and decisions of a batch of sub-boxes
     std::vector<float> lane_value, lane_lo, lane_hi;
     std::vector<uint32_t> lane_decision;

@@ -59,6 +59,13 @@ BoxLanes box_lanes(const vec3* centres, uint32_t count) {
     return c;
 }
 
+// The lanes to compute, as the loops over boxes see them: W = 1, a single box (the loop
+// disappears); W = kBlock, a multiple of kBlock, so vectorized loops need no scalar remainder.
+template <uint32_t W>
+inline uint32_t lanes_of(uint32_t lanes) {
+    return W == 1 ? 1 : lanes & ~(W - 1);
+}
+
 // Where evaluate_boxes writes: per tape entry e and box b, index e · stride + b
 // (stride >= the lanes computed).
 struct LaneArrays {
@@ -69,25 +76,27 @@ struct LaneArrays {
 
 // A primitive of kind kKind at every lane's centre: a loop per kind, so that the kind's
 // distance is inlined whole and vectorizes.
-template <uint32_t kKind>
+template <uint32_t W, uint32_t kKind>
 void primitive_values(const math::PrimitiveParams prm, const BoxLanes& c, float* __restrict v) {
     const float* __restrict x = c.x;
     const float* __restrict y = c.y;
     const float* __restrict z = c.z;
-    for (uint32_t b = 0; b < c.lanes; ++b)
+    for (uint32_t b = 0; b < lanes_of<W>(c.lanes); ++b) {
         v[b] = math::eval_primitive_local(kKind, prm, math::to_local(prm, vec3(x[b], y[b], z[b])));
+    }
 }
 
 // primitive_values for a kind known at run time: direct calls, which evaluate_boxes' callers
 // inline whole (flatten).
-template <uint32_t... kKinds>
+template <uint32_t W, uint32_t... kKinds>
 void primitive_values_of(uint32_t kind, const math::PrimitiveParams& prm, const BoxLanes& c,
                          float* v, std::integer_sequence<uint32_t, kKinds...>) {
-    ((kind == kKinds ? primitive_values<kKinds>(prm, c, v) : void()), ...);
+    ((kind == kKinds ? primitive_values<W, kKinds>(prm, c, v) : void()), ...);
 }
 
 // A primitive's range over each box: the Lipschitz range around its value, tightened by the
 // similarity range where the primitive has one.
+template <uint32_t W>
 void primitive_ranges(const PrimitiveBound pb, const BoxLanes& c, vec3 half, float spread,
                       bool interval, const float* __restrict v, float* __restrict l,
                       float* __restrict h) {
@@ -95,14 +104,14 @@ void primitive_ranges(const PrimitiveBound pb, const BoxLanes& c, vec3 half, flo
     const float* __restrict y = c.y;
     const float* __restrict z = c.z;
     if (interval && pb.scale > 0) {
-        for (uint32_t b = 0; b < c.lanes; ++b) {
+        for (uint32_t b = 0; b < lanes_of<W>(c.lanes); ++b) {
             const vec2 r = math::similarity_range(pb.centre, pb.scale, pb.f0, pb.rho,
                                                   vec3(x[b], y[b], z[b]), half);
             l[b] = std::max(v[b] - spread, r.x);
             h[b] = std::min(v[b] + spread, r.y);
         }
     } else {
-        for (uint32_t b = 0; b < c.lanes; ++b) {
+        for (uint32_t b = 0; b < lanes_of<W>(c.lanes); ++b) {
             l[b] = v[b] - spread;
             h[b] = v[b] + spread;
         }
@@ -113,13 +122,13 @@ void primitive_ranges(const PrimitiveBound pb, const BoxLanes& c, vec3 half, flo
 // value, and the range (a skipped operator's range is its winner's; else the tighter of the
 // Lipschitz range and, with interval bounds, the operator's range over its operands' ranges).
 // Computed for every box and then selected, without branches, so the loop vectorizes.
-template <bool kInterval>
-void decide_boxes(uint32_t count, float sgn, float k, float spread, const float* __restrict va,
+template <uint32_t W, bool kInterval>
+void decide_boxes(uint32_t lanes, float sgn, float k, float spread, const float* __restrict va,
                   const float* __restrict la, const float* __restrict ha,
                   const float* __restrict vb, const float* __restrict lb,
                   const float* __restrict hb, uint32_t* __restrict d, float* __restrict v,
                   float* __restrict l, float* __restrict h) {
-    for (uint32_t b = 0; b < count; ++b) {
+    for (uint32_t b = 0; b < lanes_of<W>(lanes); ++b) {
         const float a_lo = la[b], a_hi = ha[b], b_lo = lb[b], b_hi = hb[b];
         const uint32_t dec = math::prune_decision(sgn, k, a_lo, a_hi, b_lo, b_hi);
         const float val = math::apply_operator(sgn, k, va[b], vb[b]);
@@ -141,9 +150,9 @@ void decide_boxes(uint32_t count, float sgn, float k, float spread, const float*
 // Evaluates `tape` at the centres of the boxes `c` (all of half sizes `half`), bounds every
 // entry over each box and decides every operator in each: entry by entry, across the boxes, so
 // that an entry's operands are fetched once. Also fills s.left and s.right.
-inline void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLanes& c,
-                           vec3 half, float radius, CellBounds bounds, LaneArrays out,
-                           CellScratch& s) {
+template <uint32_t W>
+void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLanes& c, vec3 half,
+                    float radius, CellBounds bounds, LaneArrays out, CellScratch& s) {
     const uint32_t n = uint32_t(tape.size()), lanes = c.lanes;
     const bool interval = bounds == CellBounds::kInterval;
     uint32_t top = 0;
@@ -158,9 +167,10 @@ inline void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, cons
         float* __restrict h = out.hi + at;
         if (kind < math::kPrimitiveKindCount) {
             const uint32_t p = sc.primitive[node];
-            primitive_values_of(kind, sc.params[p], c, v,
-                                std::make_integer_sequence<uint32_t, math::kPrimitiveKindCount>());
-            primitive_ranges(sc.bound[p], c, half, spread, interval, v, l, h);
+            primitive_values_of<W>(
+                kind, sc.params[p], c, v,
+                std::make_integer_sequence<uint32_t, math::kPrimitiveKindCount>());
+            primitive_ranges<W>(sc.bound[p], c, half, spread, interval, v, l, h);
         } else {
             const uint32_t right = s.stack[--top];
             const uint32_t left = s.stack[--top];
@@ -177,12 +187,12 @@ inline void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, cons
             const float* __restrict hb = out.hi + ib;
             uint32_t* __restrict d = out.decision + at;
             if (interval)
-                decide_boxes<true>(lanes, sgn, k, spread, va, la, ha, vb, lb, hb, d, v, l, h);
+                decide_boxes<W, true>(lanes, sgn, k, spread, va, la, ha, vb, lb, hb, d, v, l, h);
             else
-                decide_boxes<false>(lanes, sgn, k, spread, va, la, ha, vb, lb, hb, d, v, l, h);
+                decide_boxes<W, false>(lanes, sgn, k, spread, va, la, ha, vb, lb, hb, d, v, l, h);
         }
         if (math::tape_negated(w))
-            for (uint32_t b = 0; b < lanes; ++b) {
+            for (uint32_t b = 0; b < lanes_of<W>(lanes); ++b) {
                 const float old_lo = l[b];
                 v[b] = -v[b];
                 l[b] = -h[b];
@@ -203,7 +213,10 @@ inline void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, cons
                                                                const BoxLanes& c, vec3 half,
                                                                float radius, CellBounds bounds,
                                                                LaneArrays out, CellScratch& s) {
-    evaluate_lanes(sc, tape, c, half, radius, bounds, out, s);
+    if (c.lanes == 1)
+        evaluate_lanes<1>(sc, tape, c, half, radius, bounds, out, s);
+    else
+        evaluate_lanes<kBlock>(sc, tape, c, half, radius, bounds, out, s);
 }
 #else
 #define SDFPRUNE_AVX2_LANES 0
@@ -212,7 +225,10 @@ inline void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, cons
 [[gnu::flatten]] void evaluate_lanes_baseline(const Scene& sc, std::span<const uint32_t> tape,
                                               const BoxLanes& c, vec3 half, float radius,
                                               CellBounds bounds, LaneArrays out, CellScratch& s) {
-    evaluate_lanes(sc, tape, c, half, radius, bounds, out, s);
+    if (c.lanes == 1)
+        evaluate_lanes<1>(sc, tape, c, half, radius, bounds, out, s);
+    else
+        evaluate_lanes<kBlock>(sc, tape, c, half, radius, bounds, out, s);
 }
 
 LaneIsa best_lane_isa() {
@@ -312,6 +328,33 @@ bool sibling_is_near_field(const Scene& sc, std::span<const uint32_t> tape, uint
                               constant);
 }
 
+namespace {
+
+// The S³ sub-boxes of refine_cell in visiting order, each as i | j << 10 | k << 20 (S <= 1024):
+// the middle and the corners first, where decisions and the far field fail soonest, then the
+// rest. The order changes nothing but when refine_cell may stop. Its first batch is one block
+// (for odd S the middle and 7 corners), where most cells stop (molecule and trees: about 70 %).
+void sub_box_order(uint32_t S, std::vector<uint32_t>& order) {
+    const uint32_t mid = S / 2, last = S - 1;
+    const auto is_corner = [&](uint32_t i, uint32_t j, uint32_t k) {
+        return (i == 0 || i == last) && (j == 0 || j == last) && (k == 0 || k == last);
+    };
+    const auto pack = [](uint32_t i, uint32_t j, uint32_t k) { return i | j << 10 | k << 20; };
+    order.clear();
+    if (!is_corner(mid, mid, mid)) order.push_back(pack(mid, mid, mid));
+    for (uint32_t c = 0; c < 8; ++c)
+        order.push_back(pack(c & 1 ? last : 0, c & 2 ? last : 0, c & 4 ? last : 0));
+    for (uint32_t b = 0; b < S * S * S; ++b) {
+        const uint32_t i = b % S, j = b / S % S, k = b / (S * S);
+        if (!is_corner(i, j, k) && !(i == mid && j == mid && k == mid))
+            order.push_back(pack(i, j, k));
+    }
+    // A corner is listed once however small S is (S = 1: the only box; S = 2: all eight).
+    order.erase(std::unique(order.begin(), order.end()), order.end());
+}
+
+}  // namespace
+
 bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box, uint32_t S,
                  CellBounds bounds, bool far_field, float far_field_c, CellScratch& s,
                  float& constant) {
@@ -327,31 +370,31 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
     float lowest = INFINITY, highest = -INFINITY;
     const vec3 sub_half = box.half / float(S);
     const float sub_radius = math::length(sub_half);
-    // The sub-boxes in visiting order: the middle and the corners first, where decisions and
-    // the far field fail soonest, then the rest. The first batch is one block (the middle and
-    // 7 corners for odd S), the rest follow kLanes at a time. The order and the batches change
-    // nothing but when the loop may stop; most cells stop after the first batch (molecule
-    // and trees: about 70 %).
-    const uint32_t mid = S / 2, last = S - 1;
-    const auto is_corner = [&](uint32_t i, uint32_t j, uint32_t k) {
-        return (i == 0 || i == last) && (j == 0 || j == last) && (k == 0 || k == last);
-    };
-    s.sub_boxes.clear();
-    if (!is_corner(mid, mid, mid)) s.sub_boxes.push_back(sub_box_centre(box, S, mid, mid, mid));
-    for (uint32_t c = 0; c < 8; ++c)
-        s.sub_boxes.push_back(
-            sub_box_centre(box, S, c & 1 ? last : 0, c & 2 ? last : 0, c & 4 ? last : 0));
-    for (uint32_t b = 0; b < S * S * S; ++b) {
-        const uint32_t i = b % S, j = b / S % S, k = b / (S * S);
-        if (!is_corner(i, j, k) && !(i == mid && j == mid && k == mid))
-            s.sub_boxes.push_back(sub_box_centre(box, S, i, j, k));
+    if (s.sub_order_of != S) {
+        sub_box_order(S, s.sub_order);
+        s.sub_order_of = S;
     }
+    // Each sub-box's centre as sub_box_centre computes it, with the cell's corner and the
+    // sub-box size computed once.
+    const vec3 corner = box.centre - box.half;
+    const uint32_t total = S * S * S;
     bool first = true;
-    for (size_t at = 0; at < s.sub_boxes.size();) {
-        const size_t batch = at == 0 ? kBlock : kLanes;
-        const uint32_t count = uint32_t(std::min(batch, s.sub_boxes.size() - at));
-        evaluate_boxes(sc, tape, box_lanes(s.sub_boxes.data() + at, count), sub_half, sub_radius,
-                       bounds,
+    for (uint32_t at = 0; at < total;) {
+        // The first batch is one block, the others kLanes (sub_box_order).
+        const uint32_t count = std::min(at == 0 ? kBlock : kLanes, total - at);
+        BoxLanes c;
+        c.lanes = count == 1 ? 1 : (count + kBlock - 1) / kBlock * kBlock;
+        for (uint32_t b = 0; b < c.lanes; ++b) {
+            const uint32_t o = s.sub_order[at + std::min(b, count - 1)];
+            const vec3 p =
+                corner + vec3(float(2 * (o & 1023u) + 1), float(2 * (o >> 10 & 1023u) + 1),
+                              float(2 * (o >> 20) + 1)) *
+                             sub_half;
+            c.x[b] = p.x;
+            c.y[b] = p.y;
+            c.z[b] = p.z;
+        }
+        evaluate_boxes(sc, tape, c, sub_half, sub_radius, bounds,
                        {s.lane_value.data(), s.lane_lo.data(), s.lane_hi.data(),
                         s.lane_decision.data(), kLanes},
                        s);
