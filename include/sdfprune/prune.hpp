@@ -456,9 +456,11 @@ inline float sibling_value(const CellScratch& s, std::span<const uint32_t> tape,
 bool sibling_is_near_field(const Scene& scene, std::span<const uint32_t> tape, uint32_t lane,
                            float radius, float far_field_c, const CellScratch& s, float& constant);
 
-// Stage 3 for lane `lane`.
-uint32_t compact_sibling_tape(const Scene& scene, std::span<const uint32_t> tape, uint32_t lane,
-                              CellScratch& s, std::vector<uint32_t>& out);
+// Stage 3 for the lanes whose bit is set in `lanes` (bit c: lane c < kSiblingLanes), in one
+// sweep of the tape: appends lane c's pruned tape to out[c] and sets prims[c] to its number of
+// primitives (out and prims: kSiblingLanes entries; other lanes' are left alone but prims).
+void compact_siblings(const Scene& scene, std::span<const uint32_t> tape, uint32_t lanes,
+                      CellScratch& s, std::vector<uint32_t>* out, uint32_t* prims);
 
 // Stage 1b, for finest cells with PruneOptions::refine = S > 1, on the tape stage 3 made for the
 // cell: decides every operator over each of the cell's S³ sub-boxes and keeps a decision only

@@ -3,6 +3,7 @@
 // pass that compacts the tape. The math of the tests lives in sdf_math.h.
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <stdexcept>
 #include <utility>
@@ -399,28 +400,34 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
                         s.lane_decision.data(), kLanes},
                        s);
         at += count;
-        // Whether some operator is still decided the same way in every sub-box so far.
+        // Whether some operator is still decided the same way in every sub-box so far. The
+        // lanes past the batch repeat its last sub-box, so they may be folded in too (here and
+        // below), and an operator kept in some sub-box stays kept.
         bool any_decided = false;
         for (uint32_t e = 0; e < n; ++e) {
             if (sc.is_primitive(math::tape_node(tape[e]))) continue;
             const uint32_t* d = s.lane_decision.data() + size_t(e) * kLanes;
-            uint32_t common = first ? d[0] : s.combined[e];
-            for (uint32_t b = 0; b < count; ++b)
-                if (d[b] != common) common = math::kKeepBoth;
-            s.combined[e] = common;
-            any_decided = any_decided || common != math::kKeepBoth;
+            const uint32_t common = first ? d[0] : s.combined[e];
+            if (common == math::kKeepBoth) continue;
+            uint32_t differ = 0;
+            for (uint32_t b = 0; b < c.lanes; ++b) differ |= d[b] ^ common;
+            s.combined[e] = differ == 0 ? common : math::kKeepBoth;
+            any_decided = any_decided || differ == 0;
         }
         first = false;
         // The far-field test of is_near_field on each sub-box's root range, against the whole
-        // cell's clearance.
-        const size_t root = size_t(n - 1) * kLanes;
-        for (uint32_t b = 0; b < count; ++b) {
-            const vec2 range = math::far_field_range(s.lane_value[root + b], s.lane_lo[root + b],
-                                                     s.lane_hi[root + b], L, sub_radius);
-            all_above = all_above && math::clears_above(range.x, clearance);
-            all_below = all_below && math::clears_below(range.y, clearance);
-            lowest = std::min(lowest, range.x);
-            highest = std::max(highest, range.y);
+        // cell's clearance, while every sub-box so far has cleared it.
+        if (all_above || all_below) {
+            const size_t root = size_t(n - 1) * kLanes;
+            for (uint32_t b = 0; b < c.lanes; ++b) {
+                const vec2 range =
+                    math::far_field_range(s.lane_value[root + b], s.lane_lo[root + b],
+                                          s.lane_hi[root + b], L, sub_radius);
+                all_above = all_above && math::clears_above(range.x, clearance);
+                all_below = all_below && math::clears_below(range.y, clearance);
+                lowest = std::min(lowest, range.x);
+                highest = std::max(highest, range.y);
+            }
         }
         if (!any_decided && !all_above && !all_below) break;
     }
@@ -434,50 +441,72 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
 
 namespace {
 
-// Stage 3 with the decision of entry e at decision[e · stride].
-uint32_t compact_with(const Scene& sc, std::span<const uint32_t> tape, const uint32_t* decision,
-                      size_t stride, CellScratch& s, std::vector<uint32_t>& out) {
+// Stage 3 for up to 8 lanes at once (kL: 1, or kSiblingLanes with the decision of entry e in
+// lane c at decision[e · kL + c]), for the lanes in `lanes` (bit c: lane c). One sweep of the
+// tape serves them all: per entry, a byte says in which lanes it is alive (s.alive) and one in
+// which its word is negated (s.negate). Each entry has one parent, which decides it first
+// (parents come after their children: a reverse sweep), so its bytes are set once:
+//   - where the parent keeps both operands, the entry is alive with its own sign;
+//   - where the parent is skipped and the entry wins, it stands in for the parent, taking the
+//     parent's composed sign along (the parent is then not emitted);
+//   - elsewhere it is dead.
+// A forward sweep emits each alive entry's word to the lanes it is alive in, in tape order.
+template <uint32_t kL>
+void compact_lanes(const Scene& sc, std::span<const uint32_t> tape, const uint32_t* decision,
+                   uint32_t lanes, CellScratch& s, std::vector<uint32_t>* out, uint32_t* prims) {
     const uint32_t n = uint32_t(tape.size());
-    std::fill_n(s.alive.begin(), n, uint8_t(0));
-    s.alive[n - 1] = 1;
-    s.negate[n - 1] = math::tape_negated(tape[n - 1]) ? 1 : 0;
-    // Parents come after their children: a reverse sweep decides every parent first.
+    uint8_t* __restrict alive = s.alive.data();
+    uint8_t* __restrict negate = s.negate.data();
+    const auto sign_mask = [&](uint32_t e) { return math::tape_negated(tape[e]) ? 0xffu : 0u; };
+    std::fill_n(alive, n, uint8_t(0));
+    alive[n - 1] = uint8_t(lanes);
+    negate[n - 1] = uint8_t(lanes & sign_mask(n - 1));
     for (uint32_t i = n; i-- > 0;) {
-        if (!s.alive[i] || sc.is_primitive(math::tape_node(tape[i]))) continue;
-        const uint32_t l = s.left[i], r = s.right[i];
-        const uint32_t d = decision[i * stride];
-        if (d == math::kKeepBoth) {
-            s.alive[l] = s.alive[r] = 1;
-            s.negate[l] = math::tape_negated(tape[l]);
-            s.negate[r] = math::tape_negated(tape[r]);
-            continue;
+        const uint32_t here = alive[i];
+        if (here == 0 || sc.is_primitive(math::tape_node(tape[i]))) continue;
+        const uint32_t* d = decision + size_t(i) * kL;
+        uint32_t left_wins = 0, right_wins = 0;
+        for (uint32_t c = 0; c < kL; ++c) {
+            left_wins |= uint32_t(d[c] == math::kLeftWins) << c;
+            right_wins |= uint32_t(d[c] == math::kRightWins) << c;
         }
-        // Skipped: the winner stands in for this operator, taking its composed sign along.
-        const uint32_t win = d == math::kLeftWins ? l : r;
-        s.alive[i] = 2;  // visited but not emitted
-        s.alive[win] = 1;
-        s.negate[win] = s.negate[i] ^ (math::tape_negated(tape[win]) ? 1 : 0);
+        left_wins &= here;
+        right_wins &= here;
+        const uint32_t keep = here & ~(left_wins | right_wins);
+        const uint32_t l = s.left[i], r = s.right[i];
+        const uint32_t nl = sign_mask(l), nr = sign_mask(r);
+        alive[l] = uint8_t(keep | left_wins);
+        alive[r] = uint8_t(keep | right_wins);
+        negate[l] = uint8_t((keep & nl) | (left_wins & (negate[i] ^ nl)));
+        negate[r] = uint8_t((keep & nr) | (right_wins & (negate[i] ^ nr)));
+        alive[i] = uint8_t(keep);  // from here on: the lanes that emit entry i
     }
-    uint32_t prims = 0;
+    for (uint32_t c = 0; c < kL; ++c) prims[c] = 0;
     for (uint32_t i = 0; i < n; ++i) {
-        if (s.alive[i] != 1) continue;
+        uint32_t emit = alive[i];
+        if (emit == 0) continue;
         const uint32_t node = math::tape_node(tape[i]);
-        prims += sc.is_primitive(node) ? 1 : 0;
-        out.push_back(math::tape_word(node, s.negate[i] != 0));
+        const uint32_t prim = sc.is_primitive(node) ? 1 : 0;
+        for (; emit != 0; emit &= emit - 1) {
+            const uint32_t c = uint32_t(std::countr_zero(emit));
+            out[c].push_back(math::tape_word(node, (negate[i] >> c & 1) != 0));
+            prims[c] += prim;
+        }
     }
-    return prims;
 }
 
 }  // namespace
 
 uint32_t compact_tape(const Scene& sc, std::span<const uint32_t> tape, CellScratch& s,
                       std::vector<uint32_t>& out) {
-    return compact_with(sc, tape, s.decision.data(), 1, s, out);
+    uint32_t prims = 0;
+    compact_lanes<1>(sc, tape, s.decision.data(), 1, s, &out, &prims);
+    return prims;
 }
 
-uint32_t compact_sibling_tape(const Scene& sc, std::span<const uint32_t> tape, uint32_t lane,
-                              CellScratch& s, std::vector<uint32_t>& out) {
-    return compact_with(sc, tape, s.sib_decision.data() + lane, kSiblingLanes, s, out);
+void compact_siblings(const Scene& sc, std::span<const uint32_t> tape, uint32_t lanes,
+                      CellScratch& s, std::vector<uint32_t>* out, uint32_t* prims) {
+    compact_lanes<kSiblingLanes>(sc, tape, s.sib_decision.data(), lanes, s, out, prims);
 }
 
 }  // namespace sdfprune

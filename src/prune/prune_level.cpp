@@ -59,14 +59,16 @@ class StepPruner {
         float constant[kSiblingLanes];
         bool far[kSiblingLanes];
         uint32_t prims[kSiblingLanes];
-        // Every lane's compaction before any refinement: refine_cell reuses the entry links.
+        uint32_t near = 0;
         for (uint32_t c = 0; c < count; ++c) {
             constant[c] = 0;
             far[c] = opt_.far_field && !sibling_is_near_field(sc_, parent, c, proto_.radius,
                                                               opt_.far_field_c, s, constant[c]);
             s.cell_tapes[c].clear();
-            prims[c] = far[c] ? 0 : compact_sibling_tape(sc_, parent, c, s, s.cell_tapes[c]);
+            near |= far[c] ? 0u : 1u << c;
         }
+        // Every lane's compaction before any refinement: refine_cell reuses the entry links.
+        compact_siblings(sc_, parent, near, s, s.cell_tapes, prims);
         for (uint32_t c = 0; c < count; ++c)
             store_cell(*cells[c], boxes[c], parent.size(), sibling_value(s, parent, c), far[c],
                        constant[c], s.cell_tapes[c], prims[c]);
@@ -149,14 +151,16 @@ class StepPruner {
         out_.words_visited += 8 * parent.size();
         float ov[8], oconst[8];
         bool ofar[8];
+        uint32_t onear = 0, oprims[8];
         for (uint32_t o = 0; o < 8; ++o) {
             ov[o] = sibling_value(s, parent, o);
             oconst[o] = 0;
             ofar[o] = opt_.far_field && !sibling_is_near_field(sc_, parent, o, oradius,
                                                                opt_.far_field_c, s, oconst[o]);
             s.octants[o].clear();
-            if (!ofar[o]) compact_sibling_tape(sc_, parent, o, s, s.octants[o]);
+            onear |= ofar[o] ? 0u : 1u << o;
         }
+        compact_siblings(sc_, parent, onear, s, s.octants, oprims);
         for (uint32_t o = 0; o < 8; ++o) {
             const uint32_t ox = (o & 1) * hf, oy = ((o >> 1) & 1) * hf, oz = ((o >> 2) & 1) * hf;
             const std::span<const uint32_t> otape = s.octants[o].size() < parent.size()
