@@ -80,5 +80,27 @@ TEST(PruneLanes, Avx2EqualsBaselineOnReferenceScenes) {
     }
 }
 
+// Parent tapes longer than kSiblingMaxTape are pruned one cell at a time (prune_level.cpp): a
+// scene of 40,000 primitives, whose top levels' tapes exceed it, still prunes exactly.
+TEST(PruneLanes, LongParentTapesPruneExactly) {
+    test::RandomSceneSpec spec;
+    spec.primitives = 40000;
+    spec.tree = test::TreeShape::kBalanced;
+    spec.placement = test::Placement::kMixed;
+    spec.smooth_prob = 0.5f;
+    const Scene sc = test::random_scene(4300, spec);
+    ASSERT_GT(sc.full_tape.size(), size_t(kSiblingMaxTape));
+    PruneOptions o;
+    o.resolution = 32;
+    o.factor = 2;  // levels 2, 4, 8, 16, 32: the first split levels start from the full tape
+    const PrunedGrid g = prune(sc, o);
+    test::Failures fail("40,000 primitives, grid 32, factor 2");
+    Rng r(4301);
+    const test::PointStats st =
+        test::check_points(g, test::sample_points(g, r, 500, 1500, 200), fail);
+    EXPECT_EQ(fail.count(), 0u) << fail.context();
+    EXPECT_GT(st.near, 500u);
+}
+
 }  // namespace
 }  // namespace sdfprune

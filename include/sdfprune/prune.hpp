@@ -408,7 +408,6 @@ struct CellScratch {
     std::vector<float> value, lo, hi;
     std::vector<uint32_t> left, right, decision, stack;
     std::vector<uint8_t> alive, negate;
-    std::vector<uint32_t> octant;     // the tape of the octant being split (prune_level.cpp)
     std::vector<uint32_t> combined;   // refine_cell: the sub-boxes' common decisions
     std::vector<uint32_t> refined;    // refine_cell's input tape (prune_level.cpp)
     std::vector<uint32_t> sub_order;  // refine_cell: the sub-boxes in visiting order ...
@@ -424,6 +423,7 @@ struct CellScratch {
     std::vector<uint32_t> cell_tapes[8];
     void reserve(size_t n);
     void reserve_siblings(size_t n);
+    size_t bytes() const;  // memory held (capacities), for PruneStats::prune_peak_bytes
 };
 
 // Stage 1: evaluates `tape` at the cell centre, bounds every entry over the cell and decides
@@ -441,6 +441,10 @@ bool is_near_field(const Scene& scene, std::span<const uint32_t> tape, const Cel
 // operands are fetched once and the arithmetic runs in vector lanes. Each lane's results are
 // those of evaluate_cell, is_near_field and compact_tape for that cell, bit for bit.
 constexpr uint32_t kSiblingLanes = 8;
+// Parent tapes longer than this (only near the root of huge scenes) are evaluated one cell at
+// a time instead: the sibling arrays cost 128 bytes per tape word and thread (256 MB per thread
+// for a 1,000,000-sphere scene's full tape), the one-cell ones 30. Same results either way.
+constexpr uint32_t kSiblingMaxTape = 1u << 16;
 
 // Stage 1 for the boxes centred at centres[0, count) with half sizes `half`.
 // `radius` is the boxes' half-diagonal as the caller computes it (the Lipschitz spread).

@@ -326,8 +326,7 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     st.tape_bytes = pool_bytes();
     for (const PrunedGrid::Level& l : g.levels_) st.tape_bytes += bytes_of(l.cells);
     st.prune_peak_bytes = std::max(buf.peak, st.tape_bytes);
-    for (const CellScratch& s : scratch)
-        st.prune_peak_bytes += bytes_of(s.value) * 3 + bytes_of(s.left) * 4 + bytes_of(s.alive) * 2;
+    for (const CellScratch& s : scratch) st.prune_peak_bytes += s.bytes();
     st.prune_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     return g;

@@ -27,6 +27,24 @@ void CellScratch::reserve_siblings(size_t n) {
     sib_decision.resize(want);
 }
 
+size_t CellScratch::bytes() const {
+    size_t b = 0;
+    const auto add = [&b](const auto& v) { b += v.capacity() * sizeof(v[0]); };
+    for (const auto* v :
+         {&value, &lo, &hi, &lane_value, &lane_lo, &lane_hi, &sib_value, &sib_lo, &sib_hi})
+        add(*v);
+    for (const auto* v : {&left, &right, &decision, &stack, &combined, &refined, &sub_order,
+                          &lane_decision, &sib_decision})
+        add(*v);
+    add(alive);
+    add(negate);
+    for (uint32_t i = 0; i < 8; ++i) {
+        add(octants[i]);
+        add(cell_tapes[i]);
+    }
+    return b;
+}
+
 namespace {
 
 // Sub-boxes evaluated together by refine_cell.

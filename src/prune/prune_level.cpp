@@ -53,6 +53,10 @@ class StepPruner {
     void prune_siblings(PrunedCell* const* cells, const CellBox* boxes, uint32_t count,
                         std::span<const uint32_t> parent) {
         CellScratch& s = s_;
+        if (parent.size() > kSiblingMaxTape) {
+            for (uint32_t c = 0; c < count; ++c) prune_cell(*cells[c], parent, boxes[c]);
+            return;
+        }
         vec3 centres[kSiblingLanes];
         for (uint32_t c = 0; c < count; ++c) centres[c] = boxes[c].centre;
         evaluate_siblings(sc_, parent, centres, count, proto_.half, proto_.radius, opt_.bounds, s);
@@ -147,20 +151,32 @@ class StepPruner {
                                             float(b.origin.z + oz) + 0.5f * float(hf)) *
                                            geo_.cell_size;
         }
-        evaluate_siblings(sc_, parent, ocentre, 8, ohalf, oradius, opt_.bounds, s);
         out_.words_visited += 8 * parent.size();
         float ov[8], oconst[8];
         bool ofar[8];
-        uint32_t onear = 0, oprims[8];
-        for (uint32_t o = 0; o < 8; ++o) {
-            ov[o] = sibling_value(s, parent, o);
-            oconst[o] = 0;
-            ofar[o] = opt_.far_field && !sibling_is_near_field(sc_, parent, o, oradius,
-                                                               opt_.far_field_c, s, oconst[o]);
-            s.octants[o].clear();
-            onear |= ofar[o] ? 0u : 1u << o;
+        if (parent.size() > kSiblingMaxTape) {
+            for (uint32_t o = 0; o < 8; ++o) {
+                const CellBox obox{ocentre[o], ohalf, oradius};
+                ov[o] = evaluate_cell(sc_, parent, obox, opt_.bounds, s);
+                oconst[o] = 0;
+                ofar[o] = opt_.far_field &&
+                          !is_near_field(sc_, parent, obox, opt_.far_field_c, s, oconst[o]);
+                s.octants[o].clear();
+                if (!ofar[o]) compact_tape(sc_, parent, s, s.octants[o]);
+            }
+        } else {
+            evaluate_siblings(sc_, parent, ocentre, 8, ohalf, oradius, opt_.bounds, s);
+            uint32_t onear = 0, oprims[8];
+            for (uint32_t o = 0; o < 8; ++o) {
+                ov[o] = sibling_value(s, parent, o);
+                oconst[o] = 0;
+                ofar[o] = opt_.far_field && !sibling_is_near_field(sc_, parent, o, oradius,
+                                                                   opt_.far_field_c, s, oconst[o]);
+                s.octants[o].clear();
+                onear |= ofar[o] ? 0u : 1u << o;
+            }
+            compact_siblings(sc_, parent, onear, s, s.octants, oprims);
         }
-        compact_siblings(sc_, parent, onear, s, s.octants, oprims);
         for (uint32_t o = 0; o < 8; ++o) {
             const uint32_t ox = (o & 1) * hf, oy = ((o >> 1) & 1) * hf, oz = ((o >> 2) & 1) * hf;
             const std::span<const uint32_t> otape = s.octants[o].size() < parent.size()
