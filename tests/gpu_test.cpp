@@ -119,6 +119,42 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
     expect_same_cells(cpu, gpu, "demo 64³");
 }
 
+// The steps' work shapes (GpuStepShape) follow the hierarchy: per level the octants then the
+// cells from them, then the refinement; jobs are the CPU's cells and octants, every job has a
+// lane, and the busiest lane walks at least one parent tape.
+TEST(Gpu, StepShapesFollowTheLevels) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Scene sc = builtin_scene("demo");
+    PruneOptions o;
+    o.resolution = 64;  // levels 4, 16, 64
+    const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+    const std::vector<gpu::GpuStepShape>& steps = gpu.stats().steps;
+    ASSERT_EQ(steps.size(), 7u);
+    const uint32_t levels[] = {0, 0, 1, 1, 2, 2, 2}, modes[] = {1, 2, 1, 2, 1, 2, 3};
+    uint64_t jobs = 0;
+    for (size_t i = 0; i < steps.size(); ++i) {
+        const gpu::GpuStepShape& st = steps[i];
+        SCOPED_TRACE("step " + std::to_string(i));
+        EXPECT_EQ(st.level, levels[i]);
+        EXPECT_EQ(st.mode, modes[i]);
+        EXPECT_GE(st.dispatches, 1u);
+        EXPECT_GE(st.workgroups, st.dispatches);
+        EXPECT_GT(st.lanes, 0u);
+        EXPECT_LE(st.lanes, st.jobs);
+        EXPECT_GT(st.longest_walk_words, 0u);
+        if (st.mode == 2) jobs += st.jobs;
+    }
+    const PrunedGrid cpu = prune(sc, o);
+    EXPECT_EQ(steps[0].jobs, 8u);     // the root's octants
+    for (uint32_t l = 0; l < 3; ++l)  // a level's cells, as many as the CPU's
+        EXPECT_EQ(steps[2 * l + 1].jobs, cpu.level_cells(l).size()) << "level " << l;
+    EXPECT_EQ(jobs,
+              cpu.level_cells(0).size() + cpu.level_cells(1).size() + cpu.level_cells(2).size());
+    EXPECT_EQ(steps[6].jobs, steps[5].jobs);  // every finest cell is refined
+    // The root's octants walk the full tape: evaluation and compaction, and one more pass.
+    EXPECT_GE(steps[0].longest_walk_words, 3ull * sc.size());
+}
+
 TEST(Gpu, DeepChainPrunes) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     // Right-deep chains: the evaluation stack is as deep as the chain, the tapes are long.

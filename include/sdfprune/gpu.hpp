@@ -15,6 +15,7 @@
 #include <span>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "prune.hpp"
 #include "render.hpp"
@@ -54,9 +55,29 @@ class Device {
 // device memory held at most while pruning, tape_bytes the device bytes of the result.
 // wall_ms adds the host's share (submissions, waits, buffer growth); pool_grows counts the
 // steps redone after the tape pool overflowed and grew.
+// The work shape of one pruning step on the device (a kernel over one level's octants, cells
+// or refinement jobs), to judge the kernel's fit to a GPU without one: how many dispatches and
+// workgroups it took, how many invocations (lanes) had work, and how far the busiest lane walks
+// tapes one word after another.
+struct GpuStepShape {
+    uint32_t level = 0;
+    // 0: cells from their parents' tapes; 1: a block's octants; 2: cells from their octants';
+    // 3: the finest cells' sub-box refinement
+    uint32_t mode = 0;
+    uint32_t dispatches = 0;  // redone steps (the pool grew) included
+    uint64_t workgroups = 0;  // over all dispatches
+    uint64_t jobs = 0;        // cells or octants
+    uint64_t lanes = 0;       // invocations with at least one job
+    // The tape words one lane reads in sequence, at most: its jobs (jobs / lanes, rounded up)
+    // times the passes over a parent tape per job (evaluation, compaction, and one per sub-box
+    // in refinement) times the parents' longest tape. A bound, not a count.
+    uint64_t longest_walk_words = 0;
+};
+
 struct DevicePruneStats : PruneStats {
     double wall_ms = 0;
     uint32_t pool_grows = 0;
+    std::vector<GpuStepShape> steps;  // in the order they ran
 };
 
 // A pruned grid living in device memory; refers to its Scene and Device, which must outlive it.

@@ -114,6 +114,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     const uint32_t flags =
         (opt.far_field ? 1u : 0u) | (opt.bounds == CellBounds::kInterval ? 2u : 0u);
     uint64_t octant_words = 0;  // in use in octant_pool, from earlier steps of this level
+    uint32_t level_index = 0;   // the level being made (for the steps' shapes)
 
     // One step: `jobs` cells or octants from their parents' tapes into `octants`/`cells`.
     // `transient`: new tapes go to the octant pool (the finest cells' tapes before refinement).
@@ -134,6 +135,14 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             ctx.destroy(scratch);
             scratch = ctx.create_buffer(threads * thread_bytes);
         }
+        GpuStepShape shape;
+        shape.level = level_index;
+        shape.mode = mode;
+        shape.jobs = jobs;
+        shape.lanes = std::min<uint64_t>(jobs, threads);
+        shape.longest_walk_words =
+            shape.lanes == 0 ? 0
+                             : (jobs + shape.lanes - 1) / shape.lanes * (evaluations + 2) * max_len;
         for (;;) {
             GpuCounters start{};
             start.pool_used = g.pool_words;
@@ -168,6 +177,8 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                                  {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, &octants,
                                   &cells, &counters, &scratch, &octant_pool},
                                  &push, sizeof(push), threads / kWorkgroupSize);
+                    ++shape.dispatches;
+                    shape.workgroups += threads / kWorkgroupSize;
                 }
             gpu_ms += ctx.submit();
             if (!counter->overflow) break;
@@ -182,11 +193,13 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         }
         g.pool_words = counter->pool_used;
         octant_words = counter->octant_used;
+        st.steps.push_back(shape);
         return *counter;
     };
 
     std::vector<Buffer*> level_cells;
     for (uint32_t li = 0; li < res.size(); ++li) {
+        level_index = li;
         const bool finest = li + 1 == res.size();
         const uint32_t f = li == 0 ? res[0] : res[li] / res[li - 1];
         const uint64_t per_block = uint64_t(f) * f * f;

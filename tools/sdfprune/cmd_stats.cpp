@@ -194,8 +194,21 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                      .add("tape_bytes", s.tape_bytes)
                      .add("tape_words_visited", s.tape_words_visited)
                      .add("peak_rss_bytes", peak_rss_bytes());
-                 if (device)
-                     j.add("device", device->name()).add("wall_ms", device_grid->stats().wall_ms);
+                 if (device) {
+                     std::vector<JsonLine> steps;
+                     for (const gpu::GpuStepShape& st : device_grid->stats().steps)
+                         steps.push_back(JsonLine()
+                                             .add("level", st.level)
+                                             .add("mode", st.mode)
+                                             .add("dispatches", st.dispatches)
+                                             .add("workgroups", st.workgroups)
+                                             .add("jobs", st.jobs)
+                                             .add("lanes", st.lanes)
+                                             .add("longest_walk_words", st.longest_walk_words));
+                     j.add("device", device->name())
+                         .add("wall_ms", device_grid->stats().wall_ms)
+                         .add("gpu_steps", steps);
+                 }
                  if (args->edit_bench > 0)
                      j.add("edit_count", args->edit_bench)
                          .add("edit_full_ms", edits.full_ms)
@@ -221,13 +234,22 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                  100.0 * double(s.near_field_cells) / double(s.cells), s.near_field_prims_avg);
              std::printf("  tape length (near-field)  %.2f nodes avg, %u max (full tree: %u)\n",
                          s.tape_avg, s.tape_max, sc.size());
-             if (device)
+             if (device) {
                  std::printf(
                      "  pruning on %s: %.1f ms GPU (%.1f ms wall), peak %.1f MB device "
                      "memory\n",
                      device->name().c_str(), s.prune_ms, device_grid->stats().wall_ms,
                      double(s.prune_peak_bytes) / 1e6);
-             else
+                 static const char* const kModes[] = {"cells", "octants", "cells from octants",
+                                                      "refinement"};
+                 for (const gpu::GpuStepShape& st : device_grid->stats().steps)
+                     std::printf(
+                         "    level %u %-18s %u dispatches, %llu workgroups, %llu jobs "
+                         "on %llu lanes, longest walk <= %llu words\n",
+                         st.level, kModes[std::min(st.mode, 3u)], st.dispatches,
+                         (unsigned long long)st.workgroups, (unsigned long long)st.jobs,
+                         (unsigned long long)st.lanes, (unsigned long long)st.longest_walk_words);
+             } else
                  std::printf(
                      "  pruning                   %.1f ms, peak %.1f MB in pruning buffers\n",
                      s.prune_ms, double(s.prune_peak_bytes) / 1e6);

@@ -5,13 +5,14 @@
 #include <cstdio>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "sdfprune/scene.hpp"
 
 namespace sdfprune::cli {
 
 class JsonLine {
-public:
+  public:
     JsonLine& add(std::string_view key, double v) {
         key_(key);
         if (!std::isfinite(v)) {
@@ -50,9 +51,17 @@ public:
         s_ += obj.str();
         return *this;
     }
+    // An array of nested objects.
+    JsonLine& add(std::string_view key, const std::vector<JsonLine>& objs) {
+        key_(key);
+        s_ += "[";
+        for (size_t i = 0; i < objs.size(); ++i) s_ += (i ? "," : "") + objs[i].str();
+        s_ += "]";
+        return *this;
+    }
     std::string str() const { return "{" + s_ + "}"; }
 
-private:
+  private:
     void key_(std::string_view k) {
         if (!s_.empty()) s_ += ",";
         quote_(k);
