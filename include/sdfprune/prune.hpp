@@ -154,6 +154,8 @@ class PrunedGrid {
 
     // Finest cell holding p; false when p lies outside the grid (then use the full tree).
     bool cell_index(vec3 p, uint32_t& ix, uint32_t& iy, uint32_t& iz) const;
+    // The same for p known to lie in the closed AABB (a tracer clamps its points to it): no test.
+    void cell_index_inside(vec3 p, uint32_t& ix, uint32_t& iy, uint32_t& iz) const;
     CellView cell(uint32_t ix, uint32_t iy, uint32_t iz) const;
     vec3 cell_center(uint32_t ix, uint32_t iy, uint32_t iz) const;
 
@@ -173,6 +175,8 @@ class PrunedGrid {
         bool far_field() const { return cell->tape == PrunedCell::kFarField; }
     };
     bool locate(vec3 p, Located& out) const;
+    // The same for finest cell (ix, iy, iz) (from cell_index, or a tracer's own clamped index).
+    void locate_cell(uint32_t ix, uint32_t iy, uint32_t iz, Located& out) const;
     // Size of a cell of level `level`.
     vec3 level_cell_size(uint32_t level) const { return level_size_[level]; }
 
@@ -343,16 +347,29 @@ class PrunedGrid {
     const vec3 lo = scene_->aabb.min, hi = scene_->aabb.max;
     if (!(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z))
         return false;
+    cell_index_inside(p, ix, iy, iz);
+    return true;
+}
+
+[[gnu::always_inline]] inline void PrunedGrid::cell_index_inside(vec3 p, uint32_t& ix,
+                                                                 uint32_t& iy,
+                                                                 uint32_t& iz) const {
+    const vec3 lo = scene_->aabb.min;
     const uint32_t last = resolution() - 1;
     ix = std::min(uint32_t((p.x - lo.x) * inv_cell_size_.x), last);
     iy = std::min(uint32_t((p.y - lo.y) * inv_cell_size_.y), last);
     iz = std::min(uint32_t((p.z - lo.z) * inv_cell_size_.z), last);
-    return true;
 }
 
 [[gnu::always_inline]] inline bool PrunedGrid::locate(vec3 p, Located& out) const {
     uint32_t ix, iy, iz;
     if (!cell_index(p, ix, iy, iz)) return false;
+    locate_cell(ix, iy, iz, out);
+    return true;
+}
+
+[[gnu::always_inline]] inline void PrunedGrid::locate_cell(uint32_t ix, uint32_t iy, uint32_t iz,
+                                                           Located& out) const {
     if (!shortcut_.empty()) {
         // The shortcut holds descend's result down to the level above the finest: at most one
         // step of it is left. Every level is pow2 here.
@@ -367,7 +384,7 @@ class PrunedGrid {
         }
         const uint32_t shift = levels_[level].shift;
         out = {level, ix >> shift, iy >> shift, iz >> shift, c};
-        return true;
+        return;
     }
     const CellRef at = descend(ix, iy, iz, level_count() - 1);
     const Level& l = levels_[at.level];
@@ -377,7 +394,6 @@ class PrunedGrid {
         const uint32_t scale = resolution() / l.res;
         out = {at.level, ix / scale, iy / scale, iz / scale, &l.cells[at.index]};
     }
-    return true;
 }
 
 PrunedGrid prune(const Scene& scene, const PruneOptions& options = {});

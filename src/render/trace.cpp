@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <numbers>
+#include <vector>
 
 #include "../core/parallel.hpp"
 #include "render_internal.hpp"
@@ -73,9 +74,24 @@ struct NaiveField {
     std::span<const uint32_t> tape_at(vec3) const { return sc.full_tape; }
 };
 
+// What a far-field step needs of a level of the grid, worked out once per image with the
+// expressions a step would use (so the steps stay bit for bit the same).
+struct LevelGeometry {
+    vec3 size;   // cell size
+    vec3 half;   // size · 0.5: from a cell's corner to its centre
+    float tiny;  // how far past a cell's exit a far-field step lands: 1e-4 · smallest side
+};
+
 // The pruned grid.
 struct PrunedField {
     const PrunedGrid& g;
+    std::vector<LevelGeometry> levels;
+    explicit PrunedField(const PrunedGrid& grid) : g(grid) {
+        for (uint32_t l = 0; l < g.level_count(); ++l) {
+            const vec3 size = g.level_cell_size(l);
+            levels.push_back({size, size * 0.5f, 1e-4f * std::min({size.x, size.y, size.z})});
+        }
+    }
     std::span<const uint32_t> tape_at(vec3 p) const {
         PrunedGrid::Located at;
         if (!g.locate(p, at) || at.far_field()) return g.scene().full_tape;
@@ -110,6 +126,7 @@ struct Ray {
 struct Lane {
     Ray* ray = nullptr;
     vec3 inv_dir;
+    bool up_x = false, up_y = false, up_z = false;  // the ray leaves cells by their upper face
     float t = 0;
     uint32_t step = 0;
     bool pending = false;  // p is decided by `tape`, fetched: evaluate at the next turn
@@ -120,6 +137,25 @@ struct Lane {
     std::span<const uint32_t> near_tape;
     vec3 near_lo{INFINITY}, near_hi{-INFINITY};
 };
+
+// The next t of lane l at p in far-field cell c (corner lo, level geometry geo): no surface
+// is in the cell, so continue from its exit, or by its constant if that is longer.
+float far_field_advance(const Lane& l, vec3 p, vec3 lo, const LevelGeometry& geo,
+                        const PrunedCell& c, float inv_lipschitz) {
+    const vec3 o = l.ray->o;
+    const vec3 exit(l.up_x ? lo.x + geo.size.x : lo.x, l.up_y ? lo.y + geo.size.y : lo.y,
+                    l.up_z ? lo.z + geo.size.z : lo.z);
+    const vec3 t_axis = (exit - o) * l.inv_dir;
+    float t_exit = INFINITY;
+    // NaN (0·inf): the ray runs in the face's plane, which it never leaves.
+    if (t_axis.x == t_axis.x) t_exit = std::min(t_exit, t_axis.x);
+    if (t_axis.y == t_axis.y) t_exit = std::min(t_exit, t_axis.y);
+    if (t_axis.z == t_axis.z) t_exit = std::min(t_exit, t_axis.z);
+    // |f(p)| >= |f(centre)| - L·|p - centre|: often far beyond the cell.
+    const float from_centre = std::fabs(c.value) * inv_lipschitz - math::length(p - (lo + geo.half));
+    const float step = std::max(std::fabs(c.bound) * inv_lipschitz, from_centre);
+    return std::max(l.t + step, t_exit + geo.tiny);
+}
 
 // Marches `rays`, kLanes at a time, each lane taking one step in turn: the steps of different
 // rays are independent, so the processor overlaps one lane's cell lookup (in a structure of tens
@@ -139,6 +175,9 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
         l = Lane{};
         l.ray = &r;
         l.inv_dir = vec3(1.0f / r.dir.x, 1.0f / r.dir.y, 1.0f / r.dir.z);
+        l.up_x = r.dir.x > 0;
+        l.up_y = r.dir.y > 0;
+        l.up_z = r.dir.z > 0;
         l.t = r.t0;
         r.t = -1;
     };
@@ -153,45 +192,37 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
             ++c.steps;
             // [t0, t1] lies in the AABB: clamp away the rounding that would put p just outside.
             l.p = math::min(math::max(r.o + r.dir * l.t, ctx.aabb_lo), ctx.aabb_hi);
-            l.tape = ctx.sc.full_tape;
             if constexpr (kPruned) {
+                // p lies in the grid's box: every lookup finds a cell.
                 const vec3 p = l.p;
                 const bool cached = p.x >= l.near_lo.x && p.y >= l.near_lo.y &&
                                     p.z >= l.near_lo.z && p.x <= l.near_hi.x &&
                                     p.y <= l.near_hi.y && p.z <= l.near_hi.z;
-                PrunedGrid::Located at;
                 if (cached) {
                     l.tape = l.near_tape;
-                } else if (field.g.locate(p, at)) {
-                    const vec3 size = field.g.level_cell_size(at.level);
+                } else {
+                    uint32_t ix, iy, iz;
+                    field.g.cell_index_inside(p, ix, iy, iz);
+                    PrunedGrid::Located at;
+                    field.g.locate_cell(ix, iy, iz, at);
+                    const LevelGeometry& geo = field.levels[at.level];
                     const vec3 lo =
-                        ctx.aabb_lo + vec3(float(at.x), float(at.y), float(at.z)) * size;
+                        ctx.aabb_lo + vec3(float(at.x), float(at.y), float(at.z)) * geo.size;
                     if (at.far_field()) {
-                        // No surface in this cell: continue from its exit (or by its constant).
-                        float t_exit = INFINITY;
-                        for (int a = 0; a < 3; ++a) {
-                            const float bound = r.dir[a] > 0 ? lo[a] + size[a] : lo[a];
-                            const float ta = (bound - r.o[a]) * l.inv_dir[a];
-                            if (ta == ta) t_exit = std::min(t_exit, ta);  // skips 0·inf
-                        }
-                        // |f(p)| >= |f(centre)| - L·|p - centre|: often far beyond the cell.
-                        const float from_centre = std::fabs(at.cell->value) * ctx.inv_lipschitz -
-                                                  math::length(p - (lo + size * 0.5f));
-                        const float step =
-                            std::max(std::fabs(at.cell->bound) * ctx.inv_lipschitz, from_centre);
-                        const float tiny = 1e-4f * std::min({size.x, size.y, size.z});
-                        l.t = std::max(l.t + step, t_exit + tiny);
+                        l.t = far_field_advance(l, p, lo, geo, *at.cell, ctx.inv_lipschitz);
                         return true;
                     }
                     l.tape = field.g.tape_at(at.cell->tape);
                     l.near_tape = l.tape;
                     l.near_lo = lo;
-                    l.near_hi = lo + size;
+                    l.near_hi = lo + geo.size;
                     // The tape is likely not in cache: evaluate it at the next turn.
                     __builtin_prefetch(l.tape.data());
                     l.pending = true;
                     return true;
                 }
+            } else {
+                l.tape = ctx.sc.full_tape;
             }
         }
         l.pending = false;
@@ -412,7 +443,7 @@ Image finish_image(const RenderOptions& opt, std::vector<vec3>& color,
 
 Image render(const PrunedGrid& grid, const RenderOptions& options, RenderStats* stats) {
     const Scene& sc = grid.scene();
-    return trace_image(PrunedField{grid}, sc, options, stats);
+    return trace_image(PrunedField(grid), sc, options, stats);
 }
 
 PickResult pick(const PrunedGrid& grid, const RenderOptions& opt, uint32_t x, uint32_t y) {
@@ -430,7 +461,7 @@ PickResult pick(const PrunedGrid& grid, const RenderOptions& opt, uint32_t x, ui
     float t0, t1;
     Counters c;
     if (!ray_box(eye, inv, ctx.aabb_lo, ctx.aabb_hi, t0, t1)) return r;
-    const PrunedField field{grid};
+    const PrunedField field(grid);
     Ray ray{eye, dir, t0, t1, 1024, -1, &c};
     march(field, ctx, std::span(&ray, 1), stack.data());
     const float t = ray.t;
