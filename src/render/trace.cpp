@@ -154,18 +154,28 @@ struct Ray {
     Counters* counters;  // the pixel's
 };
 
-// One ray in flight. A step is the loop body of a plain sphere tracer; a lane whose step found
-// a near-field cell first only fetches the cell's tape and evaluates it at its next turn.
+// One ray in flight. A step of a plain sphere tracer is split in two halves, taken at two turns
+// of the lane (see march): the first finds the point and what decides it (the cached near-field
+// cell, or the grid cell, whose address it prefetches); the second reads that cell or evaluates
+// that tape and moves t.
 // Points and directions are held as float4 (x, y, z, unused): see float4's comment.
 struct Lane {
+    enum class Next : uint8_t {
+        kCell,  // read `cell` (prefetched): a far-field step, or fetch its tape
+        kEval,  // evaluate `tape` (prefetched) at p
+    };
     Ray* ray = nullptr;
     float4 o, dir, inv_dir;
     int4 up;  // all ones on the axes where the ray leaves cells by their upper face
     float t = 0;
     uint32_t step = 0;
-    bool pending = false;  // p is decided by `tape`, fetched: evaluate at the next turn
+    Next next = Next::kEval;
     float4 p;
     std::span<const uint32_t> tape;
+    // kCell: the grid cell deciding p, its level's geometry and its corner
+    const PrunedCell* cell = nullptr;
+    const LevelGeometry* geo = nullptr;
+    float4 lo;
     // The last near-field cell and its tape: consecutive steps near the surface often stay in
     // one cell, and then need no lookup.
     std::span<const uint32_t> near_tape;
@@ -196,12 +206,13 @@ float far_field_advance(const Lane& l, float4 p, float4 lo, const LevelGeometry&
     return std::max(l.t + step, t_exit + geo.tiny);
 }
 
-// Marches `rays`, kLanes at a time, each lane taking one step in turn: the steps of different
-// rays are independent, so the processor overlaps one lane's cell lookup (in a structure of tens
-// of MB) with the others' work, and a lane that found a near-field cell prefetches its tape and
-// evaluates it at its next turn (measured on molecule: 8 lanes 11 % faster than 1). Every ray
-// takes exactly the steps and values a ray marched alone would: only their order in time
-// differs.
+// Marches `rays`, kLanes at a time, each lane taking half a step in turn: the steps of
+// different rays are independent, so while one lane waits for memory the others work. A step's
+// first half finds its point's cell in the grid (tens of MB, mostly out of cache) and prefetches
+// it, or the cell's tape; its second half, at the lane's next turn, finds them in cache
+// (measured on molecule: the finest level's cell load held a third of the tracer's time when
+// read at once). Every ray takes exactly the steps and values a ray marched alone would: only
+// their order in time differs.
 template <class Field>
 void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, float* stack) {
     constexpr bool kPruned = std::is_same_v<Field, PrunedField>;
@@ -210,58 +221,72 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
     uint32_t active = 0;
     size_t next = 0;
     const float4 aabb_lo = load4(ctx.aabb_lo), aabb_hi = load4(ctx.aabb_hi);
+    const auto finish = [&](Lane& l) {
+        l.ray->counters->steps += l.step;
+        l.ray->counters->evals += l.evals;
+        return false;
+    };
+    // The first half of lane l's next step; false when its ray is done (left the AABB or out
+    // of steps).
+    const auto begin_step = [&](Lane& l) -> bool {
+        if (l.step >= l.ray->max_steps || !(l.t <= l.ray->t1)) return finish(l);
+        ++l.step;
+        // [t0, t1] lies in the AABB: clamp away the rounding that would put p just outside.
+        l.p = min4(max4(l.o + l.dir * l.t, aabb_lo), aabb_hi);
+        l.next = Lane::Next::kEval;
+        if constexpr (kPruned) {
+            if (in_box(l.p, l.near_lo, l.near_hi)) {
+                l.tape = l.near_tape;
+                return true;
+            }
+            // p lies in the grid's box: every lookup finds a cell.
+            PrunedGrid::Located at;
+            field.locate_inside(l.p, at);
+            __builtin_prefetch(at.cell);
+            l.next = Lane::Next::kCell;
+            l.cell = at.cell;
+            l.geo = &field.levels[at.level];
+            l.lo = aabb_lo + float4{float(at.x), float(at.y), float(at.z), 0} * l.geo->size;
+        } else {
+            l.tape = ctx.sc.full_tape;
+        }
+        return true;
+    };
     const auto start = [&](Lane& l) {
         Ray& r = rays[next++];
-        l = Lane{};
         l.ray = &r;
         l.o = load4(r.o);
         l.dir = load4(r.dir);
         l.inv_dir = load4(vec3(1.0f / r.dir.x, 1.0f / r.dir.y, 1.0f / r.dir.z));
         l.up = l.dir > 0;
         l.t = r.t0;
+        l.step = 0;
+        l.near_lo = splat(INFINITY);
+        l.near_hi = splat(-INFINITY);
+        l.evals = 0;
         r.t = -1;
+        return begin_step(l);
     };
-    const auto finish = [&](Lane& l) {
-        l.ray->counters->steps += l.step;
-        l.ray->counters->evals += l.evals;
-        return false;
-    };
-    while (active < kLanes && next < rays.size()) start(lanes[active++]);
-    // One step of lane l; false when its ray is done (hit, left the AABB or out of steps).
+    // The second half of lane l's step, and the first half of its next one; false when its ray
+    // is done (hit, left the AABB or out of steps).
     const auto advance = [&](Lane& l) -> bool {
-        if (!l.pending) {
-            if (l.step >= l.ray->max_steps || !(l.t <= l.ray->t1)) return finish(l);
-            ++l.step;
-            // [t0, t1] lies in the AABB: clamp away the rounding that would put p just outside.
-            l.p = min4(max4(l.o + l.dir * l.t, aabb_lo), aabb_hi);
-            if constexpr (kPruned) {
-                if (in_box(l.p, l.near_lo, l.near_hi)) {
-                    l.tape = l.near_tape;
-                } else {
-                    // p lies in the grid's box: every lookup finds a cell.
-                    PrunedGrid::Located at;
-                    field.locate_inside(l.p, at);
-                    const LevelGeometry& geo = field.levels[at.level];
-                    const float4 lo =
-                        aabb_lo + float4{float(at.x), float(at.y), float(at.z), 0} * geo.size;
-                    if (at.far_field()) {
-                        l.t = far_field_advance(l, l.p, lo, geo, *at.cell, ctx.inv_lipschitz);
-                        return true;
-                    }
-                    l.tape = field.g.tape_at(at.cell->tape);
-                    l.near_tape = l.tape;
-                    l.near_lo = lo;
-                    l.near_hi = lo + geo.size;
-                    // The tape is likely not in cache: evaluate it at the next turn.
-                    __builtin_prefetch(l.tape.data());
-                    l.pending = true;
-                    return true;
+        if constexpr (kPruned) {
+            if (l.next == Lane::Next::kCell) {
+                const PrunedCell& c = *l.cell;
+                if (c.tape == PrunedCell::kFarField) {
+                    l.t = far_field_advance(l, l.p, l.lo, *l.geo, c, ctx.inv_lipschitz);
+                    return begin_step(l);
                 }
-            } else {
-                l.tape = ctx.sc.full_tape;
+                l.tape = field.g.tape_at(c.tape);
+                l.near_tape = l.tape;
+                l.near_lo = l.lo;
+                l.near_hi = l.lo + l.geo->size;
+                // The tape is likely not in cache: evaluate it at the next turn.
+                __builtin_prefetch(l.tape.data());
+                l.next = Lane::Next::kEval;
+                return true;
             }
         }
-        l.pending = false;
         l.evals += l.tape.size();
         const float d = eval_tape(ctx.sc, l.tape, vec3(l.p[0], l.p[1], l.p[2]), stack);
         if (d < 5e-4f * std::min(1.0f, l.t)) {
@@ -269,17 +294,20 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
             return finish(l);
         }
         l.t += d * ctx.inv_lipschitz;
-        return true;
+        return begin_step(l);
     };
+    // A lane whose ray is done takes the next ray, or the last active lane's place.
+    const auto refill = [&](uint32_t i) {
+        while (next < rays.size())
+            if (start(lanes[i])) return true;
+        lanes[i] = lanes[--active];
+        return false;
+    };
+    while (active < kLanes && next < rays.size())
+        if (start(lanes[active])) ++active;
     while (active > 0) {
         for (uint32_t i = 0; i < active;) {
-            if (advance(lanes[i])) {
-                ++i;
-            } else if (next < rays.size()) {
-                start(lanes[i++]);
-            } else {
-                lanes[i] = lanes[--active];
-            }
+            if (advance(lanes[i]) || refill(i)) ++i;
         }
     }
 }
