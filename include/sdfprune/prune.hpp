@@ -149,6 +149,7 @@ class PrunedGrid {
     const Aabb& aabb() const { return scene_->aabb; }
     uint32_t resolution() const { return levels_.back().res; }
     vec3 cell_size() const { return cell_size_; }
+    vec3 inv_cell_size() const { return inv_cell_size_; }  // what cell_index multiplies by
     const PruneStats& stats() const { return stats_; }
     const PruneOptions& options() const { return options_; }
 
@@ -179,6 +180,23 @@ class PrunedGrid {
     void locate_cell(uint32_t ix, uint32_t iy, uint32_t iz, Located& out) const;
     // Size of a cell of level `level`.
     vec3 level_cell_size(uint32_t level) const { return level_size_[level]; }
+
+    // locate_cell's walk in stages of one memory read each, for a tracer that interleaves the
+    // lookups of several rays and prefetches what each names next (most of the structure is
+    // out of cache): walk_begin names the first word to read, each walk_step reads the word
+    // named and names the next, until the deciding cell (then read, so in cache) is reached.
+    // walk_located gives locate_cell's answer.
+    struct Walk {
+        uint32_t ix = 0, iy = 0, iz = 0;      // the finest cell looked up
+        uint32_t level = 0;                   // of `cell`
+        const uint32_t* entry = nullptr;      // the shortcut's entry to read next, if any
+        const PrunedCell* cell = nullptr;     // else the cell to read next, or the deciding one
+        const void* next() const { return entry ? static_cast<const void*>(entry) : cell; }
+    };
+    Walk walk_begin(uint32_t ix, uint32_t iy, uint32_t iz) const;
+    // Reads what w names; true when w.cell is the deciding cell, false when w names a new word.
+    bool walk_step(Walk& w) const;
+    Located walk_located(const Walk& w) const;
 
     // The far-field constant of finest cell (ix, iy, iz) lying in far-field cell `c` of level
     // `level`: the tighter of c.bound and the Lipschitz bound from c's centre value.
@@ -394,6 +412,45 @@ class PrunedGrid {
         const uint32_t scale = resolution() / l.res;
         out = {at.level, ix / scale, iy / scale, iz / scale, &l.cells[at.index]};
     }
+}
+
+[[gnu::always_inline]] inline PrunedGrid::Walk PrunedGrid::walk_begin(uint32_t ix, uint32_t iy,
+                                                                      uint32_t iz) const {
+    Walk w;
+    w.ix = ix;
+    w.iy = iy;
+    w.iz = iz;
+    if (!shortcut_.empty()) {
+        const Level& s = levels_[shortcut_level_];
+        w.entry =
+            &shortcut_[(size_t(iz >> s.shift) * s.res + (iy >> s.shift)) * s.res + (ix >> s.shift)];
+    } else {
+        w.cell = &levels_[0].cells[levels_[0].local_index(ix, iy, iz, resolution())];
+    }
+    return w;
+}
+
+[[gnu::always_inline]] inline bool PrunedGrid::walk_step(Walk& w) const {
+    if (w.entry) {
+        // descend's result down to the shortcut's level (see locate_cell)
+        const uint32_t entry = *w.entry;
+        w.entry = nullptr;
+        w.level = entry >> 27;
+        w.cell = &levels_[w.level].cells[entry & ((1u << 27) - 1)];
+        return false;
+    }
+    // (the address of the finest level rather than the level count: a size() divides)
+    if (w.cell->tape == PrunedCell::kFarField || &levels_[w.level] == &levels_.back()) return true;
+    const Level& f = levels_[++w.level];
+    w.cell = &f.cells[w.cell->children + f.local_index(w.ix, w.iy, w.iz, resolution())];
+    return false;
+}
+
+[[gnu::always_inline]] inline PrunedGrid::Located PrunedGrid::walk_located(const Walk& w) const {
+    const Level& l = levels_[w.level];
+    if (l.pow2) return {w.level, w.ix >> l.shift, w.iy >> l.shift, w.iz >> l.shift, w.cell};
+    const uint32_t scale = resolution() / l.res;
+    return {w.level, w.ix / scale, w.iy / scale, w.iz / scale, w.cell};
 }
 
 PrunedGrid prune(const Scene& scene, const PruneOptions& options = {});

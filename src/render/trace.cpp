@@ -112,18 +112,26 @@ struct LevelGeometry {
 struct PrunedField {
     const PrunedGrid& g;
     std::vector<LevelGeometry> levels;
-    explicit PrunedField(const PrunedGrid& grid) : g(grid) {
+    // PrunedGrid::cell_index's terms: the grid's corner, 1 / cell size, the last index
+    float4 grid_lo, inv_cell, last_index;
+    explicit PrunedField(const PrunedGrid& grid)
+        : g(grid),
+          grid_lo(load4(grid.aabb().min)),
+          inv_cell(load4(grid.inv_cell_size())),
+          last_index(splat(float(grid.resolution() - 1))) {
         for (uint32_t l = 0; l < g.level_count(); ++l) {
             const vec3 size = g.level_cell_size(l);
             levels.push_back({load4(size), load4(size * 0.5f),
                               1e-4f * std::min({size.x, size.y, size.z})});
         }
     }
-    // locate() for a point in the grid's closed box.
-    void locate_inside(float4 p, PrunedGrid::Located& at) const {
-        uint32_t ix, iy, iz;
-        g.cell_index_inside(vec3(p[0], p[1], p[2]), ix, iy, iz);
-        g.locate_cell(ix, iy, iz, at);
+    // The walk to the cell deciding a point in the grid's closed box. Its finest cell is
+    // PrunedGrid::cell_index's, min(uint(x), last) for x = (p - corner) / size, computed as
+    // uint(min(x, last)): the same for x >= 0 (and resolutions below 2^24), in a few vector
+    // instructions.
+    PrunedGrid::Walk walk_begin(float4 p) const {
+        const int4 i = __builtin_convertvector(min4((p - grid_lo) * inv_cell, last_index), int4);
+        return g.walk_begin(uint32_t(i[0]), uint32_t(i[1]), uint32_t(i[2]));
     }
     std::span<const uint32_t> tape_at(vec3 p) const {
         PrunedGrid::Located at;
@@ -161,7 +169,8 @@ struct Ray {
 // Points and directions are held as float4 (x, y, z, unused): see float4's comment.
 struct Lane {
     enum class Next : uint8_t {
-        kCell,  // read `cell` (prefetched): a far-field step, or fetch its tape
+        kWalk,  // read what `walk` names (prefetched): the lookup's next word, or the deciding
+                // cell: then a far-field step, or fetch its tape
         kEval,  // evaluate `tape` (prefetched) at p
     };
     Ray* ray = nullptr;
@@ -172,10 +181,7 @@ struct Lane {
     Next next = Next::kEval;
     float4 p;
     std::span<const uint32_t> tape;
-    // kCell: the grid cell deciding p, its level's geometry and its corner
-    const PrunedCell* cell = nullptr;
-    const LevelGeometry* geo = nullptr;
-    float4 lo;
+    PrunedGrid::Walk walk;  // kWalk: the lookup of p's cell
     // The last near-field cell and its tape: consecutive steps near the surface often stay in
     // one cell, and then need no lookup.
     std::span<const uint32_t> near_tape;
@@ -240,13 +246,9 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
                 return true;
             }
             // p lies in the grid's box: every lookup finds a cell.
-            PrunedGrid::Located at;
-            field.locate_inside(l.p, at);
-            __builtin_prefetch(at.cell);
-            l.next = Lane::Next::kCell;
-            l.cell = at.cell;
-            l.geo = &field.levels[at.level];
-            l.lo = aabb_lo + float4{float(at.x), float(at.y), float(at.z), 0} * l.geo->size;
+            l.walk = field.walk_begin(l.p);
+            __builtin_prefetch(l.walk.next());
+            l.next = Lane::Next::kWalk;
         } else {
             l.tape = ctx.sc.full_tape;
         }
@@ -271,16 +273,27 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
     // is done (hit, left the AABB or out of steps).
     const auto advance = [&](Lane& l) -> bool {
         if constexpr (kPruned) {
-            if (l.next == Lane::Next::kCell) {
-                const PrunedCell& c = *l.cell;
-                if (c.tape == PrunedCell::kFarField) {
-                    l.t = far_field_advance(l, l.p, l.lo, *l.geo, c, ctx.inv_lipschitz);
+            if (l.next == Lane::Next::kWalk) {
+                bool found = field.g.walk_step(l.walk);
+                // The shortcut's entry names a cell of the coarse levels, often in cache: read
+                // it now rather than at another turn.
+                if (!found && l.walk.level + 1 < field.g.level_count()) found = field.g.walk_step(l.walk);
+                if (!found) {
+                    __builtin_prefetch(l.walk.next());
+                    return true;
+                }
+                const PrunedGrid::Located at = field.g.walk_located(l.walk);
+                const LevelGeometry& geo = field.levels[at.level];
+                const float4 lo =
+                    aabb_lo + float4{float(at.x), float(at.y), float(at.z), 0} * geo.size;
+                if (at.far_field()) {
+                    l.t = far_field_advance(l, l.p, lo, geo, *at.cell, ctx.inv_lipschitz);
                     return begin_step(l);
                 }
-                l.tape = field.g.tape_at(c.tape);
+                l.tape = field.g.tape_at(at.cell->tape);
                 l.near_tape = l.tape;
-                l.near_lo = l.lo;
-                l.near_hi = l.lo + l.geo->size;
+                l.near_lo = lo;
+                l.near_hi = lo + geo.size;
                 // The tape is likely not in cache: evaluate it at the next turn.
                 __builtin_prefetch(l.tape.data());
                 l.next = Lane::Next::kEval;
