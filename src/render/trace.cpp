@@ -224,7 +224,6 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
     constexpr bool kPruned = std::is_same_v<Field, PrunedField>;
     constexpr uint32_t kLanes = kPruned ? 8 : 1;
     Lane lanes[kLanes];
-    uint32_t active = 0;
     size_t next = 0;
     const float4 aabb_lo = load4(ctx.aabb_lo), aabb_hi = load4(ctx.aabb_hi);
     const auto finish = [&](Lane& l) {
@@ -274,10 +273,11 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
     const auto advance = [&](Lane& l) -> bool {
         if constexpr (kPruned) {
             if (l.next == Lane::Next::kWalk) {
+                const bool at_entry = l.walk.entry != nullptr;
                 bool found = field.g.walk_step(l.walk);
                 // The shortcut's entry names a cell of the coarse levels, often in cache: read
                 // it now rather than at another turn.
-                if (!found && l.walk.level + 1 < field.g.level_count()) found = field.g.walk_step(l.walk);
+                if (!found && at_entry) found = field.g.walk_step(l.walk);
                 if (!found) {
                     __builtin_prefetch(l.walk.next());
                     return true;
@@ -310,17 +310,18 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
         return begin_step(l);
     };
     // A lane whose ray is done takes the next ray, or the last active lane's place.
-    const auto refill = [&](uint32_t i) {
+    Lane* end = lanes;
+    const auto refill = [&](Lane& l) {
         while (next < rays.size())
-            if (start(lanes[i])) return true;
-        lanes[i] = lanes[--active];
+            if (start(l)) return true;
+        l = *--end;
         return false;
     };
-    while (active < kLanes && next < rays.size())
-        if (start(lanes[active])) ++active;
-    while (active > 0) {
-        for (uint32_t i = 0; i < active;) {
-            if (advance(lanes[i]) || refill(i)) ++i;
+    while (end < lanes + kLanes && next < rays.size())
+        if (start(*end)) ++end;
+    while (end > lanes) {
+        for (Lane* l = lanes; l < end;) {
+            if (advance(*l) || refill(*l)) ++l;
         }
     }
 }
