@@ -155,8 +155,6 @@ class PrunedGrid {
 
     // Finest cell holding p; false when p lies outside the grid (then use the full tree).
     bool cell_index(vec3 p, uint32_t& ix, uint32_t& iy, uint32_t& iz) const;
-    // The same for p known to lie in the closed AABB (a tracer clamps its points to it): no test.
-    void cell_index_inside(vec3 p, uint32_t& ix, uint32_t& iy, uint32_t& iz) const;
     CellView cell(uint32_t ix, uint32_t iy, uint32_t iz) const;
     vec3 cell_center(uint32_t ix, uint32_t iy, uint32_t iz) const;
 
@@ -365,18 +363,11 @@ class PrunedGrid {
     const vec3 lo = scene_->aabb.min, hi = scene_->aabb.max;
     if (!(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z))
         return false;
-    cell_index_inside(p, ix, iy, iz);
-    return true;
-}
-
-[[gnu::always_inline]] inline void PrunedGrid::cell_index_inside(vec3 p, uint32_t& ix,
-                                                                 uint32_t& iy,
-                                                                 uint32_t& iz) const {
-    const vec3 lo = scene_->aabb.min;
     const uint32_t last = resolution() - 1;
     ix = std::min(uint32_t((p.x - lo.x) * inv_cell_size_.x), last);
     iy = std::min(uint32_t((p.y - lo.y) * inv_cell_size_.y), last);
     iz = std::min(uint32_t((p.z - lo.z) * inv_cell_size_.z), last);
+    return true;
 }
 
 [[gnu::always_inline]] inline bool PrunedGrid::locate(vec3 p, Located& out) const {
