@@ -1,6 +1,7 @@
 // prune_level_test.cpp — the level step (src/prune/prune_level.hpp) on a subset of a level's
 // blocks makes the same cells as the full prune(); the hierarchy walk (PrunedGrid::descend,
-// for_each_block) finds the cells the children links lead to.
+// for_each_block) finds the cells the children links lead to, and the point lookups
+// (locate_cell, the staged walk) find descend's.
 #include <gtest/gtest.h>
 
 #include "prune_check.hpp"
@@ -178,6 +179,41 @@ TEST(PrunedGridWalk, DescendAndBlocksMatchTheLinks) {
         });
         EXPECT_EQ(blocks, blocks_by_hand + 1);  // level 0's block and one per near-field parent
         EXPECT_EQ(finest_covered, uint64_t(N) * N * N);
+    }
+}
+
+// locate_cell (through the lookup shortcut on pow2 grids) and the staged walk a tracer uses
+// (walk_begin, walk_step, walk_located) find descend's cell for every finest cell, the walk
+// naming at most one word per level (and the shortcut's entry).
+TEST(PrunedGridWalk, LocateAndStagedWalkMatchDescend) {
+    test::RandomSceneSpec spec;
+    spec.primitives = 40;
+    const Scene sc = test::random_scene(3001, spec);
+    for (const uint32_t factor : {4u, 3u}) {
+        PruneOptions o;
+        o.factor = factor;
+        o.resolution = factor == 4 ? 64 : 54;
+        const PrunedGrid g = prune(sc, o);
+        const uint32_t N = g.resolution(), last = g.level_count() - 1;
+        for (uint32_t z = 0; z < N; ++z)
+            for (uint32_t y = 0; y < N; ++y)
+                for (uint32_t x = 0; x < N; ++x) {
+                    const PrunedGrid::CellRef at = g.descend(x, y, z, last);
+                    const PrunedCell* cell = &g.level_cells(at.level)[at.index];
+                    const uint32_t scale = N / g.level_resolution(at.level);
+                    PrunedGrid::Located loc;
+                    g.locate_cell(x, y, z, loc);
+                    PrunedGrid::Walk w = g.walk_begin(x, y, z);
+                    uint32_t reads = 1;
+                    while (!g.walk_step(w)) ASSERT_LE(++reads, g.level_count() + 1);
+                    for (const PrunedGrid::Located& l : {loc, g.walk_located(w)}) {
+                        ASSERT_EQ(l.level, at.level);
+                        ASSERT_EQ(l.cell, cell);
+                        ASSERT_EQ(l.x, x / scale);
+                        ASSERT_EQ(l.y, y / scale);
+                        ASSERT_EQ(l.z, z / scale);
+                    }
+                }
     }
 }
 

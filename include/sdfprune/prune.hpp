@@ -149,6 +149,7 @@ class PrunedGrid {
     const Aabb& aabb() const { return scene_->aabb; }
     uint32_t resolution() const { return levels_.back().res; }
     vec3 cell_size() const { return cell_size_; }
+    vec3 inv_cell_size() const { return inv_cell_size_; }  // what cell_index multiplies by
     const PruneStats& stats() const { return stats_; }
     const PruneOptions& options() const { return options_; }
 
@@ -173,8 +174,27 @@ class PrunedGrid {
         bool far_field() const { return cell->tape == PrunedCell::kFarField; }
     };
     bool locate(vec3 p, Located& out) const;
+    // The same for finest cell (ix, iy, iz) (from cell_index, or a tracer's own clamped index).
+    void locate_cell(uint32_t ix, uint32_t iy, uint32_t iz, Located& out) const;
     // Size of a cell of level `level`.
     vec3 level_cell_size(uint32_t level) const { return level_size_[level]; }
+
+    // locate_cell's walk in stages of one memory read each, for a tracer that interleaves the
+    // lookups of several rays and prefetches what each names next (most of the structure is
+    // out of cache): walk_begin names the first word to read, each walk_step reads the word
+    // named and names the next, until the deciding cell (then read, so in cache) is reached.
+    // walk_located gives locate_cell's answer.
+    struct Walk {
+        uint32_t ix = 0, iy = 0, iz = 0;      // the finest cell looked up
+        uint32_t level = 0;                   // of `cell`
+        const uint32_t* entry = nullptr;      // the shortcut's entry to read next, if any
+        const PrunedCell* cell = nullptr;     // else the cell to read next, or the deciding one
+        const void* next() const { return entry ? static_cast<const void*>(entry) : cell; }
+    };
+    Walk walk_begin(uint32_t ix, uint32_t iy, uint32_t iz) const;
+    // Reads what w names; true when w.cell is the deciding cell, false when w names a new word.
+    bool walk_step(Walk& w) const;
+    Located walk_located(const Walk& w) const;
 
     // The far-field constant of finest cell (ix, iy, iz) lying in far-field cell `c` of level
     // `level`: the tighter of c.bound and the Lipschitz bound from c's centre value.
@@ -353,6 +373,12 @@ class PrunedGrid {
 [[gnu::always_inline]] inline bool PrunedGrid::locate(vec3 p, Located& out) const {
     uint32_t ix, iy, iz;
     if (!cell_index(p, ix, iy, iz)) return false;
+    locate_cell(ix, iy, iz, out);
+    return true;
+}
+
+[[gnu::always_inline]] inline void PrunedGrid::locate_cell(uint32_t ix, uint32_t iy, uint32_t iz,
+                                                           Located& out) const {
     if (!shortcut_.empty()) {
         // The shortcut holds descend's result down to the level above the finest: at most one
         // step of it is left. Every level is pow2 here.
@@ -367,7 +393,7 @@ class PrunedGrid {
         }
         const uint32_t shift = levels_[level].shift;
         out = {level, ix >> shift, iy >> shift, iz >> shift, c};
-        return true;
+        return;
     }
     const CellRef at = descend(ix, iy, iz, level_count() - 1);
     const Level& l = levels_[at.level];
@@ -377,7 +403,45 @@ class PrunedGrid {
         const uint32_t scale = resolution() / l.res;
         out = {at.level, ix / scale, iy / scale, iz / scale, &l.cells[at.index]};
     }
-    return true;
+}
+
+[[gnu::always_inline]] inline PrunedGrid::Walk PrunedGrid::walk_begin(uint32_t ix, uint32_t iy,
+                                                                      uint32_t iz) const {
+    Walk w;
+    w.ix = ix;
+    w.iy = iy;
+    w.iz = iz;
+    if (!shortcut_.empty()) {
+        const Level& s = levels_[shortcut_level_];
+        w.entry =
+            &shortcut_[(size_t(iz >> s.shift) * s.res + (iy >> s.shift)) * s.res + (ix >> s.shift)];
+    } else {
+        w.cell = &levels_[0].cells[levels_[0].local_index(ix, iy, iz, resolution())];
+    }
+    return w;
+}
+
+[[gnu::always_inline]] inline bool PrunedGrid::walk_step(Walk& w) const {
+    if (w.entry) {
+        // descend's result down to the shortcut's level (see locate_cell)
+        const uint32_t entry = *w.entry;
+        w.entry = nullptr;
+        w.level = entry >> 27;
+        w.cell = &levels_[w.level].cells[entry & ((1u << 27) - 1)];
+        return false;
+    }
+    // (the address of the finest level rather than the level count: a size() divides)
+    if (w.cell->tape == PrunedCell::kFarField || &levels_[w.level] == &levels_.back()) return true;
+    const Level& f = levels_[++w.level];
+    w.cell = &f.cells[w.cell->children + f.local_index(w.ix, w.iy, w.iz, resolution())];
+    return false;
+}
+
+[[gnu::always_inline]] inline PrunedGrid::Located PrunedGrid::walk_located(const Walk& w) const {
+    const Level& l = levels_[w.level];
+    if (l.pow2) return {w.level, w.ix >> l.shift, w.iy >> l.shift, w.iz >> l.shift, w.cell};
+    const uint32_t scale = resolution() / l.res;
+    return {w.level, w.ix / scale, w.iy / scale, w.iz / scale, w.cell};
 }
 
 PrunedGrid prune(const Scene& scene, const PruneOptions& options = {});
