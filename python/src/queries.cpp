@@ -489,7 +489,10 @@ void bind_queries(py::module_& m) {
                 throw py::value_error("vertices must be (V, 3) and faces (F, 3)");
             Mesh msh;
             msh.vertices.resize(size_t(v.shape(0)));
-            std::memcpy(msh.vertices.data(), v.data(), size_t(v.size()) * sizeof(float));
+            // vec3 is three floats (glsl_compat.hpp), so the rows copy as they are.
+            static_assert(sizeof(vec3) == 3 * sizeof(float));
+            std::memcpy(static_cast<void*>(msh.vertices.data()), v.data(),
+                        size_t(v.size()) * sizeof(float));
             msh.triangles.assign(f.data(), f.data() + f.size());
             for (uint32_t i : msh.triangles)
                 if (i >= msh.vertices.size()) throw py::value_error("face index out of range");
