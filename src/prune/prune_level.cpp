@@ -6,7 +6,7 @@
 
 #include <algorithm>
 #include <stdexcept>
-#include <unordered_map>
+#include <vector>
 
 namespace sdfprune {
 namespace {
@@ -17,6 +17,44 @@ uint64_t tape_hash(std::span<const uint32_t> tape) {
     for (const uint32_t w : tape) h = (h ^ w) * 0x100000001b3ull;
     return h;
 }
+
+// The tapes stored by one call, by hash: open addressing in one flat array (a chunk stores up
+// to a thousand tapes; a node-based map would allocate once per tape). Like a map from hash to
+// the first tape stored with it: a tape whose hash is taken by a different tape is stored, not
+// found again.
+class StoredTapes {
+  public:
+    // The offset of the tape stored with hash `h`, or inserts `offset` for it and returns it.
+    uint32_t find_or_insert(uint64_t h, uint32_t offset) {
+        if (2 * (size_ + 1) > slots_.size()) grow();
+        const size_t mask = slots_.size() - 1;
+        for (size_t i = size_t(h) & mask;; i = (i + 1) & mask) {
+            Slot& slot = slots_[i];
+            if (slot.offset == kEmpty) {
+                slot = {h, offset};
+                ++size_;
+                return offset;
+            }
+            if (slot.hash == h) return slot.offset;
+        }
+    }
+
+  private:
+    static constexpr uint32_t kEmpty = 0xffffffffu;
+    struct Slot {
+        uint64_t hash = 0;
+        uint32_t offset = kEmpty;
+    };
+    void grow() {
+        std::vector<Slot> old(std::max<size_t>(2 * slots_.size(), 256));
+        old.swap(slots_);
+        size_ = 0;
+        for (const Slot& s : old)
+            if (s.offset != kEmpty) find_or_insert(s.hash, s.offset);
+    }
+    std::vector<Slot> slots_;
+    size_t size_ = 0;
+};
 
 // One call's state: the cells of a range pruned into one LevelChunk.
 class StepPruner {
@@ -114,11 +152,11 @@ class StepPruner {
         out.words[at] = len;
         out.words[at + 1] = prims;
         const std::span<const uint32_t> tape(out.words.data() + at, len + 2);
-        const auto [it, fresh] = stored_.try_emplace(tape_hash(tape), uint32_t(at));
-        if (!fresh && out.words[it->second] == len &&
-            std::equal(tape.begin(), tape.end(), out.words.begin() + it->second)) {
+        const uint32_t same = stored_.find_or_insert(tape_hash(tape), uint32_t(at));
+        if (same != at && out.words[same] == len &&
+            std::equal(tape.begin(), tape.end(), out.words.begin() + same)) {
             out.words.resize(at);
-            cell.tape = it->second;
+            cell.tape = same;
         } else {
             cell.tape = uint32_t(at);
         }
@@ -221,7 +259,7 @@ class StepPruner {
     LevelChunk& out_;
     CellBox proto_;
     // This call's tapes by hash: a tape equal to one already stored is not stored again.
-    std::unordered_map<uint64_t, uint32_t> stored_;
+    StoredTapes stored_;
 };
 
 }  // namespace
