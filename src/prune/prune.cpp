@@ -218,8 +218,20 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     buf.parent_bytes = bytes_of(buf.parents[0]);
     const int workers = opt.threads > 0 ? opt.threads : tbb::this_task_arena::max_concurrency();
 
+    const auto scratch_bytes = [&] {
+        uint64_t b = 0;
+        for (const CellScratch& s : scratch) b += s.bytes();
+        return b;
+    };
+
     for (uint32_t li = 0; li < res.size(); ++li) {
         const bool finest = li + 1 == res.size();
+        // Scratch is sized by the longest tape a thread has walked; near the root of a huge
+        // scene that is millions of words, which the lower levels' short tapes do not need.
+        uint32_t longest = 0;
+        for (const ParentBlock& b : blocks) longest = std::max(longest, b.length);
+        for (CellScratch& s : scratch)
+            if (s.value.size() > 4 * size_t(longest) + 4096) s = CellScratch{};
         PrunedGrid::Level level;
         level.res = res[li];
         level.factor = li == 0 ? res[0] : res[li] / res[li - 1];
@@ -278,8 +290,9 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                 level_bytes += wave_bytes;
                 wave_bytes = 0;
             }
-            buf.peak = std::max(buf.peak, pool_bytes() + buf.parent_bytes + level_bytes +
-                                              wave_bytes + buf.done_cells_bytes + bytes_of(blocks));
+            buf.peak =
+                std::max(buf.peak, pool_bytes() + buf.parent_bytes + level_bytes + wave_bytes +
+                                       buf.done_cells_bytes + bytes_of(blocks) + scratch_bytes());
             if (finest)
                 for (uint32_t c = w0; c < w1; ++c) std::vector<uint32_t>().swap(outs[c].words);
             // Free the parents that no block from the next wave on refers to.
@@ -303,8 +316,9 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                 buf.parent_bytes += bytes_of(outs[c].words);
                 buf.parents.push_back(std::move(outs[c].words));
             }
-            buf.peak = std::max(buf.peak, pool_bytes() + buf.parent_bytes + bytes_of(level.cells) +
-                                              buf.done_cells_bytes + bytes_of(blocks));
+            buf.peak =
+                std::max(buf.peak, pool_bytes() + buf.parent_bytes + bytes_of(level.cells) +
+                                       buf.done_cells_bytes + bytes_of(blocks) + scratch_bytes());
         }
         buf.done_cells_bytes += bytes_of(level.cells);
         const uint32_t scale = N / level.res;
@@ -325,8 +339,7 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     finish_prune_stats(st, st.active_avg, st.active_std, st.tape_avg, far_finest);
     st.tape_bytes = pool_bytes();
     for (const PrunedGrid::Level& l : g.levels_) st.tape_bytes += bytes_of(l.cells);
-    st.prune_peak_bytes = std::max(buf.peak, st.tape_bytes);
-    for (const CellScratch& s : scratch) st.prune_peak_bytes += s.bytes();
+    st.prune_peak_bytes = std::max(buf.peak, st.tape_bytes + scratch_bytes());
     st.prune_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     return g;
