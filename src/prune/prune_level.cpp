@@ -144,7 +144,15 @@ class StepPruner {
                 cell.bound = refined_constant;
                 return;
             }
-            prims = compact_tape(sc_, s.refined, s, out.words);
+            // Compacted again only where some operator was decided over every sub-box: with
+            // none, compaction would give back the tape word for word (most cells).
+            const bool decided =
+                std::any_of(s.decision.begin(), s.decision.begin() + s.refined.size(),
+                            [](uint32_t d) { return d != math::kKeepBoth; });
+            if (decided)
+                prims = compact_tape(sc_, s.refined, s, out.words);
+            else
+                out.words.insert(out.words.end(), compacted.begin(), compacted.end());
         } else {
             out.words.insert(out.words.end(), compacted.begin(), compacted.end());
         }
