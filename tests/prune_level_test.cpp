@@ -4,6 +4,9 @@
 // (locate_cell, the staged walk) find descend's.
 #include <gtest/gtest.h>
 
+#include <memory>
+#include <vector>
+
 #include "prune_check.hpp"
 #include "sdfprune/io.hpp"
 #include "src/prune/prune_level.hpp"
@@ -124,16 +127,25 @@ TEST(PruneLevelStep, SplitNeedsWholeBlocks) {
         EXPECT_TRUE(c.tape == PrunedCell::kFarField || c.tape < out.words.size());
 }
 
-// The walk (PrunedGrid::descend, for_each_block) against the children links followed by hand.
-TEST(PrunedGridWalk, DescendAndBlocksMatchTheLinks) {
+// The grids the walk tests run on: a random scene of 40 primitives pruned with factor 4 at 64
+// (lookups through the shortcut) and with factor 3 at 54 (through descend).
+std::vector<PrunedGrid> walk_test_grids(uint64_t seed) {
     test::RandomSceneSpec spec;
     spec.primitives = 40;
-    const Scene sc = test::random_scene(3000, spec);
+    const auto sc = std::make_shared<const Scene>(test::random_scene(seed, spec));
+    std::vector<PrunedGrid> grids;
     for (const uint32_t factor : {4u, 3u}) {
         PruneOptions o;
         o.factor = factor;
         o.resolution = factor == 4 ? 64 : 54;
-        const PrunedGrid g = prune(sc, o);
+        grids.push_back(prune(sc, o));
+    }
+    return grids;
+}
+
+// The walk (PrunedGrid::descend, for_each_block) against the children links followed by hand.
+TEST(PrunedGridWalk, DescendAndBlocksMatchTheLinks) {
+    for (const PrunedGrid& g : walk_test_grids(3000)) {
         const uint32_t N = g.resolution(), last = g.level_count() - 1;
         // The deciding cell of every finest cell, by hand: far-field cells of every level fill
         // their span, near-field finest cells themselves.
@@ -186,14 +198,7 @@ TEST(PrunedGridWalk, DescendAndBlocksMatchTheLinks) {
 // (walk_begin, walk_step, walk_located) find descend's cell for every finest cell, the walk
 // naming at most one word per level (and the shortcut's entry).
 TEST(PrunedGridWalk, LocateAndStagedWalkMatchDescend) {
-    test::RandomSceneSpec spec;
-    spec.primitives = 40;
-    const Scene sc = test::random_scene(3001, spec);
-    for (const uint32_t factor : {4u, 3u}) {
-        PruneOptions o;
-        o.factor = factor;
-        o.resolution = factor == 4 ? 64 : 54;
-        const PrunedGrid g = prune(sc, o);
+    for (const PrunedGrid& g : walk_test_grids(3001)) {
         const uint32_t N = g.resolution(), last = g.level_count() - 1;
         for (uint32_t z = 0; z < N; ++z)
             for (uint32_t y = 0; y < N; ++y)
