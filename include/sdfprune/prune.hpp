@@ -185,10 +185,10 @@ class PrunedGrid {
     // named and names the next, until the deciding cell (then read, so in cache) is reached.
     // walk_located gives locate_cell's answer.
     struct Walk {
-        uint32_t ix = 0, iy = 0, iz = 0;      // the finest cell looked up
-        uint32_t level = 0;                   // of `cell`
-        const uint32_t* entry = nullptr;      // the shortcut's entry to read next, if any
-        const PrunedCell* cell = nullptr;     // else the cell to read next, or the deciding one
+        uint32_t ix = 0, iy = 0, iz = 0;   // the finest cell looked up
+        uint32_t level = 0;                // of `cell`
+        const uint32_t* entry = nullptr;   // the shortcut's entry to read next, if any
+        const PrunedCell* cell = nullptr;  // else the cell to read next, or the deciding one
         const void* next() const { return entry ? static_cast<const void*>(entry) : cell; }
     };
     Walk walk_begin(uint32_t ix, uint32_t iy, uint32_t iz) const;
@@ -339,6 +339,9 @@ class PrunedGrid {
     std::vector<uint32_t> shortcut_;
     uint32_t shortcut_level_ = 0;
     void build_shortcut();
+    // The Located of finest cell (ix, iy, iz), decided by `cell` of level `level`.
+    Located located_at(uint32_t level, const PrunedCell* cell, uint32_t ix, uint32_t iy,
+                       uint32_t iz) const;
     float lipschitz_ = 1;  // of the root: bounds the far-field constants
     PruneStats stats_;
     // Kept by update() (prune_update.cpp), so that statistics follow an edit without a walk of
@@ -396,13 +399,17 @@ class PrunedGrid {
         return;
     }
     const CellRef at = descend(ix, iy, iz, level_count() - 1);
-    const Level& l = levels_[at.level];
-    if (l.pow2) {
-        out = {at.level, ix >> l.shift, iy >> l.shift, iz >> l.shift, &l.cells[at.index]};
-    } else {
-        const uint32_t scale = resolution() / l.res;
-        out = {at.level, ix / scale, iy / scale, iz / scale, &l.cells[at.index]};
-    }
+    out = located_at(at.level, &levels_[at.level].cells[at.index], ix, iy, iz);
+}
+
+[[gnu::always_inline]] inline PrunedGrid::Located PrunedGrid::located_at(uint32_t level,
+                                                                         const PrunedCell* cell,
+                                                                         uint32_t ix, uint32_t iy,
+                                                                         uint32_t iz) const {
+    const Level& l = levels_[level];
+    if (l.pow2) return {level, ix >> l.shift, iy >> l.shift, iz >> l.shift, cell};
+    const uint32_t scale = resolution() / l.res;
+    return {level, ix / scale, iy / scale, iz / scale, cell};
 }
 
 [[gnu::always_inline]] inline PrunedGrid::Walk PrunedGrid::walk_begin(uint32_t ix, uint32_t iy,
@@ -438,10 +445,7 @@ class PrunedGrid {
 }
 
 [[gnu::always_inline]] inline PrunedGrid::Located PrunedGrid::walk_located(const Walk& w) const {
-    const Level& l = levels_[w.level];
-    if (l.pow2) return {w.level, w.ix >> l.shift, w.iy >> l.shift, w.iz >> l.shift, w.cell};
-    const uint32_t scale = resolution() / l.res;
-    return {w.level, w.ix / scale, w.iy / scale, w.iz / scale, w.cell};
+    return located_at(w.level, w.cell, w.ix, w.iy, w.iz);
 }
 
 PrunedGrid prune(const Scene& scene, const PruneOptions& options = {});
@@ -538,11 +542,14 @@ bool refine_cell(const Scene& scene, std::span<const uint32_t> tape, const CellB
                  uint32_t subdivisions, CellBounds bounds, bool far_field, float far_field_c,
                  CellScratch& s, float& constant);
 
-// The centre of sub-box (i, j, k) of `box` split into S³.
+// The centre of sub-box (i, j, k) of a box with min corner `corner` split into sub-boxes of
+// half sizes `sub_half` ...
+inline vec3 sub_box_centre(vec3 corner, vec3 sub_half, uint32_t i, uint32_t j, uint32_t k) {
+    return corner + vec3(float(2 * i + 1), float(2 * j + 1), float(2 * k + 1)) * sub_half;
+}
+// ... and of `box` split into S³.
 inline vec3 sub_box_centre(const CellBox& box, uint32_t S, uint32_t i, uint32_t j, uint32_t k) {
-    const vec3 sub_half = box.half / float(S);
-    return box.centre - box.half +
-           vec3(float(2 * i + 1), float(2 * j + 1), float(2 * k + 1)) * sub_half;
+    return sub_box_centre(box.centre - box.half, box.half / float(S), i, j, k);
 }
 
 // Stage 3: the top-down pass: keeps active operators with no inactive ancestor and the

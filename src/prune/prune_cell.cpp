@@ -68,9 +68,14 @@ struct BoxLanes {
     uint32_t lanes = 0;  // 1 for a single box, else the boxes rounded up to whole blocks
 };
 
+// The lanes that `count` boxes take: 1 for a single box, else whole blocks.
+uint32_t lanes_for(uint32_t count) {
+    return count == 1 ? 1 : (count + kBlock - 1) / kBlock * kBlock;
+}
+
 BoxLanes box_lanes(const vec3* centres, uint32_t count) {
     BoxLanes c;
-    c.lanes = count == 1 ? 1 : (count + kBlock - 1) / kBlock * kBlock;
+    c.lanes = lanes_for(count);
     for (uint32_t b = 0; b < c.lanes; ++b) {
         const vec3 p = centres[std::min(b, count - 1)];
         c.x[b] = p.x;
@@ -223,6 +228,16 @@ void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLa
     }
 }
 
+// evaluate_lanes for one box (no loops) or for whole blocks.
+inline void evaluate_any_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLanes& c,
+                               vec3 half, float radius, CellBounds bounds, LaneArrays out,
+                               CellScratch& s) {
+    if (c.lanes == 1)
+        evaluate_lanes<1>(sc, tape, c, half, radius, bounds, out, s);
+    else
+        evaluate_lanes<kBlock>(sc, tape, c, half, radius, bounds, out, s);
+}
+
 // evaluate_lanes compiled twice, each with everything it calls inlined (flatten): for the
 // baseline instruction set, and on x86-64 for AVX2 (8 lanes per instruction), chosen at run
 // time. AVX2 without FMA: the same operations, rounded the same way, so both give the same
@@ -234,10 +249,7 @@ void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLa
                                                                const BoxLanes& c, vec3 half,
                                                                float radius, CellBounds bounds,
                                                                LaneArrays out, CellScratch& s) {
-    if (c.lanes == 1)
-        evaluate_lanes<1>(sc, tape, c, half, radius, bounds, out, s);
-    else
-        evaluate_lanes<kBlock>(sc, tape, c, half, radius, bounds, out, s);
+    evaluate_any_lanes(sc, tape, c, half, radius, bounds, out, s);
 }
 #else
 #define SDFPRUNE_AVX2_LANES 0
@@ -246,10 +258,7 @@ void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLa
 [[gnu::flatten]] void evaluate_lanes_baseline(const Scene& sc, std::span<const uint32_t> tape,
                                               const BoxLanes& c, vec3 half, float radius,
                                               CellBounds bounds, LaneArrays out, CellScratch& s) {
-    if (c.lanes == 1)
-        evaluate_lanes<1>(sc, tape, c, half, radius, bounds, out, s);
-    else
-        evaluate_lanes<kBlock>(sc, tape, c, half, radius, bounds, out, s);
+    evaluate_any_lanes(sc, tape, c, half, radius, bounds, out, s);
 }
 
 LaneIsa best_lane_isa() {
@@ -288,8 +297,6 @@ void set_lane_isa(LaneIsa isa) {
         throw std::invalid_argument("set_lane_isa: this processor lacks the instruction set");
     g_lane_isa.store(int(isa), std::memory_order_relaxed);
 }
-
-namespace {}  // namespace
 
 float evaluate_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box,
                     CellBounds bounds, CellScratch& s) {
@@ -395,8 +402,7 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
         sub_box_order(S, s.sub_order);
         s.sub_order_of = S;
     }
-    // Each sub-box's centre as sub_box_centre computes it, with the cell's corner and the
-    // sub-box size computed once.
+    // The sub-boxes' centres from the cell's corner and the sub-box size, computed once.
     const vec3 corner = box.centre - box.half;
     const uint32_t total = S * S * S;
     bool first = true;
@@ -404,13 +410,10 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
         // The first batch is one block, the others kLanes (sub_box_order).
         const uint32_t count = std::min(at == 0 ? kBlock : kLanes, total - at);
         BoxLanes c;
-        c.lanes = count == 1 ? 1 : (count + kBlock - 1) / kBlock * kBlock;
+        c.lanes = lanes_for(count);
         for (uint32_t b = 0; b < c.lanes; ++b) {
             const uint32_t o = s.sub_order[at + std::min(b, count - 1)];
-            const vec3 p =
-                corner + vec3(float(2 * (o & 1023u) + 1), float(2 * (o >> 10 & 1023u) + 1),
-                              float(2 * (o >> 20) + 1)) *
-                             sub_half;
+            const vec3 p = sub_box_centre(corner, sub_half, o & 1023u, o >> 10 & 1023u, o >> 20);
             c.x[b] = p.x;
             c.y[b] = p.y;
             c.z[b] = p.z;

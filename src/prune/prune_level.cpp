@@ -73,17 +73,25 @@ class StepPruner {
         return box;
     }
 
+    // Stages 1-3 on one box (box `box`) from `parent`: its centre value, whether it is
+    // far-field (then its constant), else its compacted tape in `tape` (cleared first); returns
+    // the tape's primitives.
+    uint32_t prune_box(std::span<const uint32_t> parent, const CellBox& box, float& value,
+                       bool& far, float& constant, std::vector<uint32_t>& tape) {
+        CellScratch& s = s_;
+        value = evaluate_cell(sc_, parent, box, opt_.bounds, s);
+        constant = 0;
+        far = opt_.far_field && !is_near_field(sc_, parent, box, opt_.far_field_c, s, constant);
+        tape.clear();
+        return far ? 0 : compact_tape(sc_, parent, s, tape);
+    }
+
     // Prunes `cell` (box `box`) from `parent`, leaving far-field cells without a tape.
     void prune_cell(PrunedCell& cell, std::span<const uint32_t> parent, const CellBox& box) {
-        CellScratch& s = s_;
-        const float value = evaluate_cell(sc_, parent, box, opt_.bounds, s);
-        float constant = 0;
-        const bool far =
-            opt_.far_field && !is_near_field(sc_, parent, box, opt_.far_field_c, s, constant);
-        uint32_t prims = 0;
-        s.cell_tapes[0].clear();
-        if (!far) prims = compact_tape(sc_, parent, s, s.cell_tapes[0]);
-        store_cell(cell, box, parent.size(), value, far, constant, s.cell_tapes[0], prims);
+        float value, constant;
+        bool far;
+        const uint32_t prims = prune_box(parent, box, value, far, constant, s_.cell_tapes[0]);
+        store_cell(cell, box, parent.size(), value, far, constant, s_.cell_tapes[0], prims);
     }
 
     // Prunes `count` <= kSiblingLanes cells of this level from one `parent` in one pass over
@@ -201,15 +209,9 @@ class StepPruner {
         float ov[8], oconst[8];
         bool ofar[8];
         if (parent.size() > kSiblingMaxTape) {
-            for (uint32_t o = 0; o < 8; ++o) {
-                const CellBox obox{ocentre[o], ohalf, oradius};
-                ov[o] = evaluate_cell(sc_, parent, obox, opt_.bounds, s);
-                oconst[o] = 0;
-                ofar[o] = opt_.far_field &&
-                          !is_near_field(sc_, parent, obox, opt_.far_field_c, s, oconst[o]);
-                s.octants[o].clear();
-                if (!ofar[o]) compact_tape(sc_, parent, s, s.octants[o]);
-            }
+            for (uint32_t o = 0; o < 8; ++o)
+                prune_box(parent, {ocentre[o], ohalf, oradius}, ov[o], ofar[o], oconst[o],
+                          s.octants[o]);
         } else {
             evaluate_siblings(sc_, parent, ocentre, 8, ohalf, oradius, opt_.bounds, s);
             uint32_t onear = 0, oprims[8];
