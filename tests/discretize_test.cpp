@@ -427,6 +427,8 @@ TEST(DiscretizeCli, GridFollowsResolution) {
     ASSERT_EQ(r.status, 0) << r.err;
     EXPECT_NE(r.out.find("\"levels\":\"2x8x32x128\""), std::string::npos) << r.out;
     EXPECT_NE(r.out.find("\"grid\":128"), std::string::npos) << r.out;
+    // Each cell is evaluated once: no sub-box refinement unless asked for.
+    EXPECT_NE(r.out.find("\"refine\":1"), std::string::npos) << r.out;
     // An explicit --grid wins; values are the pruned field looked up at each centre.
     r = test::run_cli("discretize builtin:demo -o " + out + " --res 24 --grid 64 --json");
     ASSERT_EQ(r.status, 0) << r.err;
@@ -434,9 +436,16 @@ TEST(DiscretizeCli, GridFollowsResolution) {
     const Scene sc = builtin_scene("demo");
     PruneOptions po;
     po.resolution = 64;
-    const PrunedGrid g = prune(sc, po);
+    po.refine = 1;
     std::vector<float> v(24 * 24 * 24);
-    discretize_pruned(g, 24, v);
+    discretize_pruned(prune(sc, po), 24, v);
+    EXPECT_EQ(read_npy(out).data, v);
+    // An explicit --refine is kept.
+    r = test::run_cli("discretize builtin:demo -o " + out + " --res 24 --grid 64 --refine 3 --json");
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_NE(r.out.find("\"refine\":3"), std::string::npos) << r.out;
+    po.refine = 3;
+    discretize_pruned(prune(sc, po), 24, v);
     EXPECT_EQ(read_npy(out).data, v);
 }
 

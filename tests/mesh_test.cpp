@@ -234,6 +234,27 @@ TEST(MeshShapes, CapsWithAnyPrunedGrid) {
     }
 }
 
+TEST(MeshShapes, GridsWhoseCellsTileTheCubes) {
+    // Cells of 2³, 3³, 4³ and 8³ cubes (their corners taken cell by cell, in vector lanes), a
+    // grid of the cubes, and one that does not tile them: always the naive mesh, caps included.
+    const Scene demo = builtin_scene("demo");
+    const Mesh naive = naive_mesh(demo, 48);
+    SceneBuilder b;
+    const Scene half = b.build(b.sphere(1.0f).translated({0.1f, 0, 0}),
+                               {vec3(-1.5f, -1.5f, 0.0f), vec3(1.5f, 0.7f, 1.5f)});
+    const Mesh naive_half = naive_mesh(half, 48);
+    for (uint32_t grid : {48u, 24u, 16u, 12u, 6u, 20u}) {
+        SCOPED_TRACE("grid " + std::to_string(grid));
+        PruneOptions po;
+        po.resolution = grid;
+        po.refine = 1 + grid % 3;
+        expect_identical(pruned_mesh(demo, 48, po), naive);
+        expect_identical(pruned_mesh(half, 48, po), naive_half);
+    }
+    EXPECT_EQ(default_mesh_grid(48), 24u);
+    EXPECT_EQ(default_mesh_grid(49), 49u);
+}
+
 TEST(MeshShapes, ZeroAtGridCornersCountsAsOutside) {
     // The box's faces lie on grid planes: f == 0 exactly at many corners.
     SceneBuilder b;
@@ -409,7 +430,9 @@ TEST(MeshCli, WritesPlyAndReportsJson) {
         EXPECT_TRUE(d.HasMember(key)) << key;
     EXPECT_EQ(std::string(d["method"].GetString()), "pruned");
     EXPECT_EQ(d["res"].GetDouble(), 32);
-    EXPECT_EQ(d["grid"].GetDouble(), 32) << "the pruned grid follows --res";
+    EXPECT_EQ(d["grid"].GetDouble(), default_mesh_grid(32)) << "the pruned grid follows --res";
+    EXPECT_EQ(d["grid"].GetDouble(), 16);
+    EXPECT_EQ(d["refine"].GetDouble(), 1) << "no refinement for a one-shot query";
     ASSERT_TRUE(std::filesystem::exists(path));
     const std::string s = read_file(path);
     EXPECT_NE(s.find("element face " + std::to_string(int64_t(d["triangles"].GetDouble())) + "\n"),
@@ -431,6 +454,19 @@ TEST(MeshCli, WritesPlyAndReportsJson) {
     ASSERT_TRUE(dg.IsObject()) << g.out;
     EXPECT_EQ(dg["grid"].GetDouble(), 16);
     EXPECT_EQ(dg["triangles"].GetDouble(), d["triangles"].GetDouble());
+    const test::CliResult g32 =
+        test::run_cli("mesh builtin:sphere -o " + path + " --res 32 --grid 32 --json");
+    ASSERT_EQ(g32.status, 0) << g32.err;
+    const rapidjson::Document d32 = last_json_line(g32.out);
+    ASSERT_TRUE(d32.IsObject()) << g32.out;
+    EXPECT_EQ(d32["grid"].GetDouble(), 32);
+    EXPECT_EQ(read_file(path), s) << "the same mesh from any pruning grid";
+    // An odd resolution prunes at itself.
+    const test::CliResult odd = test::run_cli("mesh builtin:sphere -o " + path + " --res 33 --json");
+    ASSERT_EQ(odd.status, 0) << odd.err;
+    const rapidjson::Document dodd = last_json_line(odd.out);
+    ASSERT_TRUE(dodd.IsObject()) << odd.out;
+    EXPECT_EQ(dodd["grid"].GetDouble(), 33);
     std::filesystem::remove(path);
 }
 

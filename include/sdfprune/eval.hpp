@@ -19,6 +19,22 @@ struct EvalOptions {
 // Evaluates `tape` at p. `stack` must hold scene.max_stack floats.
 float eval_tape(const Scene& scene, std::span<const uint32_t> tape, vec3 p, float* stack);
 
+// Points evaluated together by eval_tape_lanes, coordinate by coordinate (structure of arrays).
+inline constexpr uint32_t kEvalLanes = 16;
+struct PointLanes {
+    alignas(32) float x[kEvalLanes];
+    alignas(32) float y[kEvalLanes];
+    alignas(32) float z[kEvalLanes];
+};
+
+// Evaluates `tape` at points 0..count-1 of `points` (count in 1..kEvalLanes) into
+// out[0..count): eval_tape's values bit for bit, computed in vector lanes (AVX2 where the
+// processor has it, see lane_isa() in prune.hpp), so a batch of points sharing a tape costs
+// little more than one. Lanes past `count` are overwritten. `stack` must hold
+// scene.max_stack · kEvalLanes floats.
+void eval_tape_lanes(const Scene& scene, std::span<const uint32_t> tape, PointLanes& points,
+                     uint32_t count, float* out, float* stack);
+
 // The albedo at p: primitives' colors blended through the operators by operator_weight_b, the
 // way smooth operators blend the shapes. Stacks must hold scene.max_stack entries each.
 vec3 eval_tape_color(const Scene& scene, std::span<const uint32_t> tape, vec3 p, float* stack,

@@ -21,6 +21,10 @@ Vec3 = Tuple[float, float, float]
 # Scenes with at most this many nodes answer f(points) with the whole tree by default: it costs
 # about what a lookup in the pruned grid costs, and every value is exact.
 EXACT_NODES = 64
+# Sub-box refinement for queries that evaluate each cell once (discretize, mesh, saving a mesh,
+# .npy or .vdb): off, as in the CLI's discretize and mesh. It spends pruning time to make later
+# queries cheaper, which a single pass over the cells cannot win back.
+ONE_SHOT_REFINE = 1
 Bounds = Tuple[Sequence[float], Sequence[float]]
 
 X = (1.0, 0.0, 0.0)
@@ -332,16 +336,17 @@ class Shape:
         if exact:
             return _core.discretize_scene(self.scene(bounds), int(res), int(threads),
                                           progress_callback(progress, "discretizing"))
-        return self.prune(int(res), bounds=bounds, threads=threads).discretize(
-            res, threads=threads, progress=progress)
+        return self.prune(int(res), bounds=bounds, refine=ONE_SHOT_REFINE,
+                          threads=threads).discretize(res, threads=threads, progress=progress)
 
     def mesh(self, res: int = 256, bounds: Optional[Bounds] = None, *, threads: int = 0,
              progress: Any = None) -> Tuple["np.ndarray", "np.ndarray"]:
         """The surface as (vertices (V, 3) float32, faces (F, 3) uint32): marching tetrahedra on
         res³ cubes over `bounds` (default: the shape's); closed, 2-manifold, faces
         counter-clockwise seen from outside."""
-        return self.prune(int(res), bounds=bounds, threads=threads).mesh(
-            res, threads=threads, progress=progress)
+        res = int(res)
+        return self.prune(_mesh_grid(res), bounds=bounds, refine=ONE_SHOT_REFINE,
+                          threads=threads).mesh(res, threads=threads, progress=progress)
 
     def render(self, width: int = 640, height: int = 360, *, yaw: float = 30, pitch: float = 25,
                distance: Optional[float] = None, fov: float = 40,
@@ -365,7 +370,8 @@ class Shape:
         if ext == ".png":
             grid = self.prune(render_options.pop("grid", 256), bounds=bounds, threads=threads)
         else:
-            grid = self.prune(int(res), bounds=bounds, threads=threads)
+            grid_res = _mesh_grid(int(res)) if ext in _MESH_EXTS else int(res)
+            grid = self.prune(grid_res, bounds=bounds, refine=ONE_SHOT_REFINE, threads=threads)
         grid.save(path, res=res, threads=threads, progress=progress, **render_options)
 
     def _repr_png_(self) -> bytes:
@@ -381,6 +387,12 @@ class Shape:
 
 
 SDF3 = Shape
+
+
+def _mesh_grid(res: int) -> int:
+    """The pruning grid for a mesh at res (the engine's default_mesh_grid); a res out of range
+    is passed on, so that the pruning's own check reports it."""
+    return _core.default_mesh_grid(res) if 1 <= res <= 2048 else res
 
 
 def _blend(k: Any) -> float:

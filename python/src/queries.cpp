@@ -397,6 +397,8 @@ void bind_queries(py::module_& m) {
         if (!path.empty()) return py::int_(msh.triangle_count());
         return mesh_arrays(std::move(msh));
     };
+    m.def("default_mesh_grid", &default_mesh_grid, py::arg("res"),
+          "The pruning grid that meshes at res cubes per axis fastest (res / 2 when even).");
     m.def(
         "mesh_grid",
         [mesh_with](const GridPtr& g, uint32_t res, int threads, const py::object& progress,

@@ -121,15 +121,32 @@ constexpr TetTable make_tet_table() {
 }
 constexpr TetTable kTets = make_tet_table();
 
+// The surface inside a whole cube for one sign case (bit k: cube corner k is inside): its 6
+// tetrahedra's sections in tetrahedron order, the empty ones left out.
+struct CubeCase {
+    uint8_t count = 0;           // sections (at most one per tetrahedron)
+    std::array<TetCase, 6> tet;  // the sections, each with 3 or 4 vertices
+};
+constexpr std::array<CubeCase, 256> make_cube_table() {
+    std::array<CubeCase, 256> table{};
+    for (uint32_t inside = 0; inside < 256; ++inside) {
+        CubeCase& cc = table[inside];
+        for (uint32_t t = 0; t < 6; ++t) {
+            uint32_t m = 0;
+            for (uint32_t k = 0; k < 4; ++k) m |= ((inside >> kTetVertices[t][k]) & 1u) << k;
+            if (kTets[t][m].n != 0) cc.tet[cc.count++] = kTets[t][m];
+        }
+    }
+    return table;
+}
+constexpr std::array<CubeCase, 256> kCubes = make_cube_table();
+
 // ---- bricks of grid corners ------------------------------------------------------------------
 
 constexpr uint32_t kB = 8;  // corners per brick axis
 constexpr uint32_t kBrickCorners = kB * kB * kB;
 constexpr uint64_t kCol0 = 0x0101010101010101ull;  // x = 0 in every row of an xy layer word
-
-// Local index offset of cube corner k (x + 2y + 4z) from the cube's lowest corner, same brick.
-constexpr uint32_t kCornerOffset[8] = {0,      1,          kB,          kB + 1,
-                                       kB* kB, kB* kB + 1, kB* kB + kB, kB* kB + kB + 1};
+constexpr uint64_t kCol7 = kCol0 << (kB - 1);      // x = 7
 
 // Local index of a corner inside its brick: x + 8y + 64z; one uint64 word per z layer.
 constexpr uint32_t local_index(uint32_t x, uint32_t y, uint32_t z) {
@@ -138,11 +155,16 @@ constexpr uint32_t local_index(uint32_t x, uint32_t y, uint32_t z) {
 constexpr bool bit(const uint64_t* words, uint32_t l) {
     return (words[l >> 6] >> (l & 63)) & 1u;
 }
-// Bits set in a 7-bit edge mask (std::popcount may be a library call without -mpopcnt).
-constexpr uint32_t popcount7(uint32_t m) {
-    return (m & 1) + (m >> 1 & 1) + (m >> 2 & 1) + (m >> 3 & 1) + (m >> 4 & 1) + (m >> 5 & 1) +
-           (m >> 6 & 1);
+
+// Bits set in a 7-bit edge mask, by table (std::popcount may be a library call without
+// -mpopcnt).
+constexpr std::array<uint8_t, 128> make_popcount7() {
+    std::array<uint8_t, 128> t{};
+    for (uint32_t m = 0; m < 128; ++m)
+        for (uint32_t b = 0; b < 7; ++b) t[m] = uint8_t(t[m] + ((m >> b) & 1));
+    return t;
 }
+constexpr std::array<uint8_t, 128> kPopcount7 = make_popcount7();
 
 // 8³ grid corners, and the cubes having them as lowest corner. Arrays other than the masks are
 // left uninitialized and written before being read.
@@ -151,13 +173,67 @@ struct Brick {
     uint32_t vbase = 0;               // the brick's first vertex
     uint64_t cand[kB] = {};           // candidate cubes, one word per z layer
     uint64_t need[kB] = {};           // corners to evaluate
-    float value[kBrickCorners];       // needed corners: f, capped on the AABB
-    uint8_t vmask[kBrickCorners];     // needed corners: bit d-1 = the edge along d has a vertex
-    uint16_t voff[kBrickCorners];     // needed corners: first vertex, relative to vbase
-    // Candidate cubes, when cubes are the pruned grid's cells: the cell's tape (its offset in
-    // the tape pool), or kNone for a far-field cell (a cap cube).
+    uint64_t inside[kB] = {};         // needed corners with f < 0 (capped on the AABB)
+    uint64_t has_vertex[kB] = {};     // corners with a vertex on an edge from them
+    // The bricks around this one: offset (dx, dy, dz) in {-1, 0, 1}³ at
+    // (dx + 1) + 3 (dy + 1) + 9 (dz + 1), this brick at 13; null where none is allocated.
+    std::array<const Brick*, 27> near{};
+    float value[kBrickCorners];    // needed corners: f, capped on the AABB
+    // Corners with a vertex (has_vertex): bit d-1 = the edge along d has a vertex; their first
+    // vertex, relative to vbase.
+    uint8_t vmask[kBrickCorners];
+    uint16_t voff[kBrickCorners];
+    // Candidate cubes, when the pruned grid's cells are unions of cubes: the cube's cell's tape
+    // (its offset in the tape pool), or kNone for a far-field cell (a cap cube).
     std::unique_ptr<uint32_t[]> tape;
 };
+
+using BitField = uint64_t (Brick::*)[kB];
+
+constexpr uint32_t near_slot(int dx, int dy, int dz) {
+    return uint32_t((dx + 1) + 3 * (dy + 1) + 9 * (dz + 1));
+}
+
+// Where corner (or cube) l of b lies after a move by (sx, sy, sz), each in {-1, 0, 1}: the
+// brick (null if none) and the local index there.
+struct CornerRef {
+    const Brick* brick;
+    uint32_t local;
+};
+inline CornerRef moved(const Brick& b, uint32_t l, int sx, int sy, int sz) {
+    const bool inner = (l & 7) < kB - 1 && ((l >> 3) & 7) < kB - 1 && (l >> 6) < kB - 1 &&
+                       (l & 7) > 0 && ((l >> 3) & 7) > 0 && (l >> 6) > 0;
+    if (inner) return {&b, uint32_t(int(l) + sx + int(kB) * sy + int(kB * kB) * sz)};
+    const int x = int(l & 7) + sx, y = int((l >> 3) & 7) + sy, z = int(l >> 6) + sz;
+    const int dx = x < 0 ? -1 : x >= int(kB), dy = y < 0 ? -1 : y >= int(kB),
+              dz = z < 0 ? -1 : z >= int(kB);
+    return {b.near[near_slot(dx, dy, dz)], local_index(uint32_t(x), uint32_t(y), uint32_t(z))};
+}
+
+// Layer z of `field` moved by (sx, sy, sz), each in {-1, 0, 1}: bit (x, y) of the result is the
+// field's bit at corner (x + sx, y + sy, z + sz), read from the neighbouring brick where that
+// leaves b (0 where none is allocated). Every stage's neighbourhood test is a few of these.
+inline uint64_t shifted(const Brick& b, BitField field, uint32_t z, int sx, int sy, int sz) {
+    const int zz = int(z) + sz;
+    const int dz = zz < 0 ? -1 : zz >= int(kB);
+    const uint32_t layer = uint32_t(zz - int(kB) * dz);
+    const auto word = [&](int dx, int dy) {
+        const Brick* n = b.near[near_slot(dx, dy, dz)];
+        return n ? (n->*field)[layer] : 0;
+    };
+    const auto along_x = [&](int dy) {  // the row's bits moved by sx
+        const uint64_t w = word(0, dy);
+        if (sx == 0) return w;
+        const uint64_t next = word(sx, dy);
+        return sx > 0 ? ((w >> 1) & ~kCol7) | ((next & kCol0) << (kB - 1))
+                      : ((w << 1) & ~kCol0) | ((next & kCol7) >> (kB - 1));
+    };
+    const uint64_t here = along_x(0);
+    if (sy == 0) return here;
+    const uint64_t next = along_x(sy);
+    return sy > 0 ? (here >> kB) | (next << (kB * (kB - 1)))
+                  : (here << kB) | (next >> (kB * (kB - 1)));
+}
 
 class CornerBricks {
   public:
@@ -165,19 +241,29 @@ class CornerBricks {
         slot_of_.assign(size_t(nb_) * nb_ * nb_, kNone);
     }
 
-    // Stage 1, serial: marks cube (x, y, z) as a candidate and allocates the bricks holding its
-    // corners. `tape` is stored when the bricks keep tapes.
-    void add_candidate(uint32_t x, uint32_t y, uint32_t z, uint32_t tape = kNone) {
-        Brick& b = allocate(x / kB, y / kB, z / kB);
-        const uint32_t l = local_index(x, y, z);
-        b.cand[l >> 6] |= 1ull << (l & 63);
-        if (with_tapes_) b.tape[l] = tape;
-        const uint32_t ex = x % kB == kB - 1, ey = y % kB == kB - 1, ez = z % kB == kB - 1;
+    // Stage 1, serial: marks the cubes [x0, x0 + m) × [y0, y0 + m) × [z0, z0 + m) as
+    // candidates, within one brick (m divides kB, x0, y0, z0 are multiples of m), and allocates
+    // the bricks holding their corners. `tape` is stored when the bricks keep tapes.
+    void add_cubes(uint32_t x0, uint32_t y0, uint32_t z0, uint32_t m, uint32_t tape = kNone) {
+        Brick& b = allocate(x0 / kB, y0 / kB, z0 / kB);
+        const uint32_t lx = x0 % kB, ly = y0 % kB, lz = z0 % kB;
+        uint64_t square = 0;
+        for (uint32_t y = 0; y < m; ++y) square |= ((1ull << m) - 1) << (lx + kB * (ly + y));
+        for (uint32_t z = 0; z < m; ++z) b.cand[lz + z] |= square;
+        if (with_tapes_)
+            for (uint32_t z = 0; z < m; ++z)
+                for (uint32_t y = 0; y < m; ++y)
+                    for (uint32_t x = 0; x < m; ++x)
+                        b.tape[local_index(lx + x, ly + y, lz + z)] = tape;
+        const uint32_t ex = lx + m == kB, ey = ly + m == kB, ez = lz + m == kB;
         if (ex | ey | ez)
             for (uint32_t dz = 0; dz <= ez; ++dz)
                 for (uint32_t dy = 0; dy <= ey; ++dy)
                     for (uint32_t dx = 0; dx <= ex; ++dx)
-                        allocate(x / kB + dx, y / kB + dy, z / kB + dz);
+                        allocate(x0 / kB + dx, y0 / kB + dy, z0 / kB + dz);
+    }
+    void add_candidate(uint32_t x, uint32_t y, uint32_t z, uint32_t tape = kNone) {
+        add_cubes(x, y, z, 1, tape);
     }
     // Stage 1 for the naive method: every cube is a candidate.
     void add_all_cubes() {
@@ -192,65 +278,29 @@ class CornerBricks {
                     for (uint32_t z = 0; z < kB; ++z) b.cand[z] = bz * kB + z < n_ ? layer : 0;
                 }
     }
-    // Ends stage 1: the bricks in brick order (z-major), the order of every later stage.
+    // Ends stage 1: the bricks in brick order (z-major), the order of every later stage, and
+    // each brick's neighbours.
     void finish() {
         order_.clear();
         for (const uint32_t s : slot_of_)
             if (s != kNone) order_.push_back(bricks_[s].get());
+        for (Brick* b : order_)
+            for (int dz = -1; dz <= 1; ++dz)
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const int64_t x = int64_t(b->bx) + dx, y = int64_t(b->by) + dy,
+                                      z = int64_t(b->bz) + dz;
+                        const bool inside = x >= 0 && y >= 0 && z >= 0 && x < nb_ && y < nb_ &&
+                                            z < nb_;
+                        const uint32_t s =
+                            inside ? slot_of_[brick_index(uint32_t(x), uint32_t(y), uint32_t(z))]
+                                   : kNone;
+                        b->near[near_slot(dx, dy, dz)] = s == kNone ? nullptr : bricks_[s].get();
+                    }
     }
     uint32_t count() const { return uint32_t(order_.size()); }
     Brick& operator[](uint32_t i) const { return *order_[i]; }
-
-    // Stage 2 for one brick: a corner is needed iff one of the (up to 8) cubes having it as a
-    // corner is a candidate: the candidate masks dilated by one towards +x, +y, +z.
-    void compute_needed(Brick& b) const {
-        const int bx = int(b.bx), by = int(b.by), bz = int(b.bz);
-        for (uint32_t z = 0; z < kB; ++z)
-            b.need[z] = dilate_xy(bx, by, bz, z) |
-                        (z > 0 ? dilate_xy(bx, by, bz, z - 1) : dilate_xy(bx, by, bz - 1, kB - 1));
-    }
-
-    // The brick holding corner (x, y, z) (coordinates <= n), or null.
-    const Brick* find(uint32_t x, uint32_t y, uint32_t z) const {
-        const uint32_t s = slot_of_[brick_index(x / kB, y / kB, z / kB)];
-        return s == kNone ? nullptr : bricks_[s].get();
-    }
-    // The tape stored with cube (x, y, z) (any integers; bricks keeping tapes): kNone when it is
-    // not a candidate or its cell is far-field.
-    uint32_t cube_tape(int64_t x, int64_t y, int64_t z) const {
-        if (x < 0 || y < 0 || z < 0 || x >= n_ || y >= n_ || z >= n_) return kNone;
-        const Brick* b = find(uint32_t(x), uint32_t(y), uint32_t(z));
-        const uint32_t l = local_index(uint32_t(x), uint32_t(y), uint32_t(z));
-        return b && bit(b->cand, l) ? b->tape[l] : kNone;
-    }
-    // Whether cube (x, y, z) (any integers) is a candidate.
-    bool candidate(int64_t x, int64_t y, int64_t z) const {
-        if (x < 0 || y < 0 || z < 0 || x >= n_ || y >= n_ || z >= n_) return false;
-        const Brick* b = find(uint32_t(x), uint32_t(y), uint32_t(z));
-        return b && bit(b->cand, local_index(uint32_t(x), uint32_t(y), uint32_t(z)));
-    }
-    // Where the 8 corners of cube (x, y, z) are stored, corner k as in kCornerOffset.
-    void cube_corners(uint32_t x, uint32_t y, uint32_t z, const Brick* brick[8],
-                      uint32_t local[8]) const {
-        if (x % kB < kB - 1 && y % kB < kB - 1 && z % kB < kB - 1) {
-            const Brick* b = find(x, y, z);
-            const uint32_t l = local_index(x, y, z);
-            for (uint32_t k = 0; k < 8; ++k) {
-                brick[k] = b;
-                local[k] = l + kCornerOffset[k];
-            }
-            return;
-        }
-        for (uint32_t k = 0; k < 8; ++k) {
-            const uint32_t cx = x + (k & 1), cy = y + ((k >> 1) & 1), cz = z + (k >> 2);
-            brick[k] = find(cx, cy, cz);
-            local[k] = local_index(cx, cy, cz);
-        }
-    }
-    // The vertex on the edge from corner `l` of brick `b` along d (1..7); it must exist.
-    static uint32_t vertex(const Brick& b, uint32_t l, uint32_t d) {
-        return b.vbase + b.voff[l] + popcount7(b.vmask[l] & ((1u << (d - 1)) - 1));
-    }
+    bool with_tapes() const { return with_tapes_; }
 
     uint64_t bytes() const {
         return slot_of_.size() * sizeof(uint32_t) + order_.size() * sizeof(Brick*) +
@@ -274,26 +324,6 @@ class CornerBricks {
         }
         return *bricks_[s];
     }
-    uint64_t cand_word(int bx, int by, int bz, uint32_t z) const {
-        if (bx < 0 || by < 0 || bz < 0) return 0;
-        const uint32_t s = slot_of_[brick_index(uint32_t(bx), uint32_t(by), uint32_t(bz))];
-        return s == kNone ? 0 : bricks_[s]->cand[z];
-    }
-    // Corners (x, y) of layer z of brick (bx, by, bz) that are a corner of a candidate cube of
-    // that same layer: cubes (x, y), (x-1, y), (x, y-1), (x-1, y-1), reaching into the -x/-y
-    // neighbour bricks.
-    uint64_t dilate_xy(int bx, int by, int bz, uint32_t z) const {
-        const uint64_t w00 = cand_word(bx, by, bz, z), w10 = cand_word(bx - 1, by, bz, z);
-        const uint64_t w01 = cand_word(bx, by - 1, bz, z), w11 = cand_word(bx - 1, by - 1, bz, z);
-        const auto sx = [](uint64_t a, uint64_t b) {  // x - 1 -> x, b = the -x neighbour
-            return ((a << 1) & ~kCol0) | ((b >> (kB - 1)) & kCol0);
-        };
-        const auto sy = [](uint64_t a, uint64_t b) {  // y - 1 -> y, b = the -y neighbour
-            return (a << kB) | (b >> (kB * (kB - 1)));
-        };
-        const uint64_t x0 = sx(w00, w10), x1 = sx(w01, w11);
-        return w00 | x0 | sy(w00, w01) | sy(x0, x1);
-    }
 
     uint32_t n_, nb_;
     bool with_tapes_;
@@ -301,6 +331,64 @@ class CornerBricks {
     std::vector<std::unique_ptr<Brick>> bricks_;  // in allocation order
     std::vector<Brick*> order_;                   // in brick order
 };
+
+// Stage 2 for one brick: a corner is needed iff one of the (up to 8) cubes having it as a corner
+// is a candidate: the candidate masks moved by every s in {0, -1}³.
+void compute_needed(Brick& b) {
+    for (uint32_t z = 0; z < kB; ++z) {
+        uint64_t need = 0;
+        for (uint32_t s = 0; s < 8; ++s)
+            need |= shifted(b, &Brick::cand, z, -int(s & 1), -int((s >> 1) & 1), -int(s >> 2));
+        b.need[z] = need;
+    }
+}
+
+// Stage 4a for one brick: which edges from its needed corners carry a vertex (vmask), and each
+// corner's first vertex (voff); returns the brick's vertex count. An edge from corner u along d
+// carries one where both ends are needed, their signs differ, and a candidate cube uses it: a
+// cube u - s for s a subset of the axes d does not move along.
+uint32_t mark_vertex_edges(Brick& b) {
+    uint64_t edges[7][kB];
+    for (uint32_t z = 0; z < kB; ++z) {
+        uint64_t cand_from[8];  // bit u: cube u - s is a candidate, s in {0, 1}³
+        for (uint32_t s = 0; s < 8; ++s)
+            cand_from[s] =
+                shifted(b, &Brick::cand, z, -int(s & 1), -int((s >> 1) & 1), -int(s >> 2));
+        for (uint32_t d = 1; d < 8; ++d) {
+            const int sx = int(d & 1), sy = int((d >> 1) & 1), sz = int(d >> 2);
+            const uint64_t both = b.need[z] & shifted(b, &Brick::need, z, sx, sy, sz);
+            const uint64_t differ = b.inside[z] ^ shifted(b, &Brick::inside, z, sx, sy, sz);
+            const uint32_t free = ~d & 7u;
+            uint64_t used = 0;
+            for (uint32_t s = 0;; s = (s - free) & free) {  // every subset of `free`
+                used |= cand_from[s];
+                if (s == free) break;
+            }
+            edges[d - 1][z] = both & differ & used;
+        }
+    }
+    uint32_t vertices = 0;
+    for (uint32_t word = 0; word < kB; ++word) {
+        uint64_t any = 0;
+        for (uint32_t d = 0; d < 7; ++d) any |= edges[d][word];
+        b.has_vertex[word] = any;
+        for (uint64_t bits = any; bits; bits &= bits - 1) {
+            const uint32_t at = uint32_t(std::countr_zero(bits));
+            uint32_t mask = 0;
+            for (uint32_t d = 0; d < 7; ++d) mask |= uint32_t((edges[d][word] >> at) & 1) << d;
+            const uint32_t l = word * 64 + at;
+            b.vmask[l] = uint8_t(mask);
+            b.voff[l] = uint16_t(vertices);
+            vertices += kPopcount7[mask];
+        }
+    }
+    return vertices;
+}
+
+// The vertex on the edge from corner `l` of brick `b` along d (1..7); it must exist.
+inline uint32_t vertex(const Brick& b, uint32_t l, uint32_t d) {
+    return b.vbase + b.voff[l] + kPopcount7[b.vmask[l] & ((1u << (d - 1)) - 1)];
+}
 
 // Runs fn(i) for i in [0, count) in parallel (one chunk per brick or triangle chunk); checks the
 // cancel flag and reports progress in [lo, hi] from the calling thread.
@@ -347,11 +435,13 @@ void cell_range(uint32_t i, uint32_t g, uint32_t n, uint32_t& lo, uint32_t& hi) 
 
 // Stage 1 for a pruned grid: candidates are the cubes overlapping a near-field cell, and the
 // cubes on the AABB's boundary overlapping an inside far-field cell (the cap, where f < 0
-// meets the AABB: corners on the AABB count as outside).
+// meets the AABB: corners on the AABB count as outside). When the cells are unions of cubes
+// (n a multiple of the grid's resolution), each candidate keeps its cell's tape.
 void add_candidates(const PrunedGrid& grid, uint32_t n, CornerBricks& bricks) {
     const uint32_t g = grid.resolution();
+    const uint32_t m = n % g == 0 ? n / g : 0;  // cubes per cell and axis, 0: not a union
     const auto cubes_of = [&](uint32_t cx, uint32_t cy, uint32_t cz, uint32_t span,
-                              bool boundary_only) {
+                              bool boundary_only, uint32_t tape) {
         uint32_t x0, x1, y0, y1, z0, z1;
         cube_range(cx * span, (cx + 1) * span - 1, g, n, x0, x1);
         cube_range(cy * span, (cy + 1) * span - 1, g, n, y0, y1);
@@ -364,58 +454,31 @@ void add_candidates(const PrunedGrid& grid, uint32_t n, CornerBricks& bricks) {
                     if (x1 == n - 1 && x1 != x0) bricks.add_candidate(x1, y, z);
                     continue;
                 }
-                for (uint32_t x = x0; x <= x1; ++x) bricks.add_candidate(x, y, z);
+                for (uint32_t x = x0; x <= x1; ++x) bricks.add_candidate(x, y, z, tape);
             }
     };
     for_each_cell(
         grid,
         [&](uint32_t cx, uint32_t cy, uint32_t cz, const PrunedCell& c) {
-            if (g == n)
-                bricks.add_candidate(cx, cy, cz, c.tape);
+            if (m != 0 && kB % m == 0)
+                bricks.add_cubes(cx * m, cy * m, cz * m, m, c.tape);
             else
-                cubes_of(cx, cy, cz, 1, false);
+                cubes_of(cx, cy, cz, 1, false, c.tape);
         },
         [&](uint32_t level, uint32_t cx, uint32_t cy, uint32_t cz, const PrunedCell& c) {
             if (!(c.bound < 0.0f)) return;
             const uint32_t span = g / grid.level_resolution(level);
             const uint32_t last = grid.level_resolution(level) - 1;
             if (cx == 0 || cy == 0 || cz == 0 || cx == last || cy == last || cz == last)
-                cubes_of(cx, cy, cz, span, true);
+                cubes_of(cx, cy, cz, span, true, kNone);
         });
 }
 
-// How the pruned version gets a corner's value.
-struct CornerSource {
-    std::span<const uint32_t> tape;  // a near-field cell's tape; empty: the full tree
-    bool far_field = false;          // use `constant` instead of evaluating
-    float constant = 0;
-};
-
-// The tape of a near-field cell holding corner (x, y, z): all of them give the full tree's value
-// bit for bit. When none does and the cells are the cubes, the corner is a corner of the cap:
-// f has the sign of their constant on all of them, so every Kuhn edge from it crosses only
-// towards a capped AABB corner (value 0), where t = 0 or 1 whatever this corner's magnitude:
-// the constant gives the naive mesh. Otherwise the full tree.
-CornerSource corner_source(const PrunedGrid& grid, const CornerBricks& bricks, uint32_t n,
-                           uint32_t x, uint32_t y, uint32_t z) {
-    CornerSource src;
+// A tape for corner (x, y, z) when the grid's cells are not unions of cubes: a near-field cell
+// holding the corner, or (empty) the full tree.
+std::span<const uint32_t> held_tape(const PrunedGrid& grid, uint32_t n, uint32_t x, uint32_t y,
+                                    uint32_t z) {
     const uint32_t g = grid.resolution();
-    if (g == n) {
-        // The holding cells are the cubes having the corner; the near-field ones are the
-        // candidates with a tape.
-        for (uint32_t s = 0; s < 8; ++s) {
-            const uint32_t t = bricks.cube_tape(int64_t(x) - (s & 1), int64_t(y) - (s >> 1 & 1),
-                                                int64_t(z) - (s >> 2));
-            if (t != kNone) {
-                src.tape = grid.tape_at(t);
-                return src;
-            }
-        }
-        src.far_field = true;
-        src.constant =
-            grid.cell(std::min(x, n - 1), std::min(y, n - 1), std::min(z, n - 1)).constant;
-        return src;
-    }
     uint32_t x0, x1, y0, y1, z0, z1;
     cell_range(x, g, n, x0, x1);
     cell_range(y, g, n, y0, y1);
@@ -424,48 +487,125 @@ CornerSource corner_source(const PrunedGrid& grid, const CornerBricks& bricks, u
         for (uint32_t cy = y0; cy <= y1; ++cy)
             for (uint32_t cx = x0; cx <= x1; ++cx) {
                 const CellView c = grid.cell(cx, cy, cz);
-                if (!c.far_field) {
-                    src.tape = c.tape;
-                    return src;
-                }
+                if (!c.far_field) return c.tape;
             }
-    return src;
+    return {};
 }
 
-// Stage 5 for one cube: appends the triangles of its 6 tetrahedra to `out`.
-void polygonize_cube(const CornerBricks& bricks, uint32_t x, uint32_t y, uint32_t z,
-                     const std::vector<vec3>& vertices, std::vector<uint32_t>& out) {
-    const Brick* cb[8];
-    uint32_t cl[8];
-    bricks.cube_corners(x, y, z, cb, cl);
-    uint32_t inside = 0;  // bit k: cube corner k is inside
-    for (uint32_t k = 0; k < 8; ++k)
-        if (cb[k]->value[cl[k]] < 0.0f) inside |= 1u << k;
-    if (inside == 0 || inside == 0xff) return;
-    for (uint32_t t = 0; t < 6; ++t) {
-        uint32_t m = 0;
-        for (uint32_t k = 0; k < 4; ++k) m |= ((inside >> kTetVertices[t][k]) & 1u) << k;
-        const TetCase& tc = kTets[t][m];
-        if (tc.n == 0) continue;
-        uint32_t q[4] = {};
-        for (uint32_t k = 0; k < tc.n; ++k) {
-            const uint8_t lo = tc.lo[k];
-            q[k] = CornerBricks::vertex(*cb[lo], cl[lo], uint32_t(lo ^ tc.hi[k]));
-        }
-        if (tc.n == 3) {
-            out.insert(out.end(), {q[0], q[1], q[2]});
-            continue;
-        }
-        // A quad: split along its shorter diagonal.
-        const auto dist2 = [&](uint32_t a, uint32_t b) {
-            const vec3 e = vertices[a] - vertices[b];
-            return math::dot(e, e);
-        };
-        if (dist2(q[0], q[2]) <= dist2(q[1], q[3]))
-            out.insert(out.end(), {q[0], q[1], q[2], q[0], q[2], q[3]});
-        else
-            out.insert(out.end(), {q[0], q[1], q[3], q[1], q[2], q[3]});
+// Stage 3's batches: needed corners that share a tape, evaluated together in vector lanes.
+class CornerBatch {
+  public:
+    CornerBatch(const Scene& sc, Brick& b, uint32_t n, vec3 origin, vec3 h)
+        : sc_(sc),
+          b_(b),
+          n_(n),
+          origin_(origin),
+          h_(h),
+          on_aabb_(b.bx == 0 || b.by == 0 || b.bz == 0 || (b.bx + 1) * kB > n ||
+                   (b.by + 1) * kB > n || (b.bz + 1) * kB > n) {
+        thread_local std::vector<float> stack;
+        stack.resize(size_t(std::max(sc.max_stack, 1u)) * kEvalLanes);
+        stack_ = stack.data();
     }
+    ~CornerBatch() { flush(); }
+    // Corner l of the brick, with `tape`; the batch is evaluated when full or when the tape
+    // changes.
+    void add(std::span<const uint32_t> tape, uint32_t l) {
+        if (count_ > 0 && (count_ == kEvalLanes || tape.data() != tape_.data() ||
+                           tape.size() != tape_.size()))
+            flush();
+        tape_ = tape;
+        const uint32_t x = b_.bx * kB + (l & 7), y = b_.by * kB + ((l >> 3) & 7),
+                       z = b_.bz * kB + (l >> 6);
+        const vec3 p = origin_ + vec3(float(x), float(y), float(z)) * h_;
+        points_.x[count_] = p.x;
+        points_.y[count_] = p.y;
+        points_.z[count_] = p.z;
+        local_[count_++] = l;
+    }
+    // A corner whose value is known (a cap corner's far-field constant).
+    void set(uint32_t l, float v) { b_.value[l] = capped(l, v); }
+    void flush() {
+        if (count_ == 0) return;
+        float v[kEvalLanes];
+        eval_tape_lanes(sc_, tape_, points_, count_, v, stack_);
+        for (uint32_t i = 0; i < count_; ++i) b_.value[local_[i]] = capped(local_[i], v[i]);
+        evaluated_ += count_;
+        count_ = 0;
+    }
+    uint64_t evaluated() const { return evaluated_; }
+
+  private:
+    // Corners on the AABB count as outside: shapes cut by it are capped.
+    float capped(uint32_t l, float v) const {
+        if (!on_aabb_) return v;
+        const uint32_t x = b_.bx * kB + (l & 7), y = b_.by * kB + ((l >> 3) & 7),
+                       z = b_.bz * kB + (l >> 6);
+        return x == 0 || y == 0 || z == 0 || x == n_ || y == n_ || z == n_ ? std::max(v, 0.0f) : v;
+    }
+
+    const Scene& sc_;
+    Brick& b_;
+    uint32_t n_;
+    vec3 origin_, h_;
+    bool on_aabb_;  // the brick holds corners on the AABB
+    float* stack_;
+    PointLanes points_;
+    uint32_t local_[kEvalLanes];
+    std::span<const uint32_t> tape_;
+    uint32_t count_ = 0;
+    uint64_t evaluated_ = 0;
+};
+
+// Stage 5 for one brick: the triangles of its candidate cubes whose corners differ in sign,
+// appended to `out`; returns the candidate cubes visited.
+uint64_t polygonize_brick(const Brick& b, const std::vector<vec3>& vertices,
+                          std::vector<uint32_t>& out) {
+    uint64_t visited = 0;
+    for (uint32_t z = 0; z < kB; ++z) {
+        if (b.cand[z] == 0) continue;
+        visited += uint64_t(std::popcount(b.cand[z]));
+        uint64_t corner_in[8];  // bit l: corner k of cube l is inside
+        uint64_t all = ~0ull, any = 0;
+        for (uint32_t k = 0; k < 8; ++k) {
+            corner_in[k] = shifted(b, &Brick::inside, z, int(k & 1), int((k >> 1) & 1), int(k >> 2));
+            all &= corner_in[k];
+            any |= corner_in[k];
+        }
+        for (uint64_t bits = b.cand[z] & any & ~all; bits; bits &= bits - 1) {
+            const uint32_t at = uint32_t(std::countr_zero(bits));
+            const uint32_t l = z * 64 + at;
+            uint32_t inside = 0;  // bit k: cube corner k is inside
+            CornerRef c[8];
+            for (uint32_t k = 0; k < 8; ++k) {
+                inside |= uint32_t((corner_in[k] >> at) & 1) << k;
+                c[k] = moved(b, l, int(k & 1), int((k >> 1) & 1), int(k >> 2));
+            }
+            const CubeCase& cc = kCubes[inside];
+            for (uint32_t t = 0; t < cc.count; ++t) {
+                const TetCase& tc = cc.tet[t];
+                uint32_t q[4] = {};
+                for (uint32_t k = 0; k < tc.n; ++k) {
+                    const uint8_t lo = tc.lo[k];
+                    q[k] = vertex(*c[lo].brick, c[lo].local, uint32_t(lo ^ tc.hi[k]));
+                }
+                if (tc.n == 3) {
+                    out.insert(out.end(), {q[0], q[1], q[2]});
+                    continue;
+                }
+                // A quad: split along its shorter diagonal.
+                const auto dist2 = [&](uint32_t a, uint32_t b) {
+                    const vec3 e = vertices[a] - vertices[b];
+                    return math::dot(e, e);
+                };
+                if (dist2(q[0], q[2]) <= dist2(q[1], q[3]))
+                    out.insert(out.end(), {q[0], q[1], q[2], q[0], q[2], q[3]});
+                else
+                    out.insert(out.end(), {q[0], q[1], q[3], q[1], q[2], q[3]});
+            }
+        }
+    }
+    return visited;
 }
 
 Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, MeshStats* stats) {
@@ -480,19 +620,24 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
     const auto corner = [&](uint32_t x, uint32_t y, uint32_t z) {
         return origin + vec3(float(x), float(y), float(z)) * h;
     };
-    // Corners on the AABB count as outside: shapes cut by it are capped.
-    const auto cap = [n](uint32_t x, uint32_t y, uint32_t z, float v) {
-        return x == 0 || y == 0 || z == 0 || x == n || y == n || z == n ? std::max(v, 0.0f) : v;
-    };
 
-    // Stage 1: candidate cubes. When they are the grid's cells, each keeps its cell's tape.
-    CornerBricks bricks(n, grid && grid->resolution() == n);
+    // Stage 1: candidate cubes. When the grid's cells are unions of cubes, each keeps its
+    // cell's tape.
+    const uint32_t g = grid ? grid->resolution() : 0;
+    CornerBricks bricks(n, grid && n % g == 0);
     if (grid)
         add_candidates(*grid, n, bricks);
     else
         bricks.add_all_cubes();
     bricks.finish();
     const uint32_t count = bricks.count();
+    // Stage 3 takes a cell's own cubes together where cells tile the bricks (cell_step cubes
+    // per axis); elsewhere one cube at a time. cell_origins: a layer's cubes named by a cell.
+    const uint32_t cubes_per_cell = bricks.with_tapes() ? n / g : 1;
+    const uint32_t cell_step = kB % cubes_per_cell == 0 ? cubes_per_cell : 1;
+    uint64_t cell_origins = 0;
+    for (uint32_t y = 0; y < kB; y += cell_step)
+        for (uint32_t x = 0; x < kB; x += cell_step) cell_origins |= 1ull << (x + kB * y);
 
     Mesh mesh;
     std::vector<std::vector<uint32_t>> tri_chunks;
@@ -500,78 +645,99 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
     std::atomic<uint64_t> cubes{0}, evaluated{0};
 
     {
-        // Stages 2 and 3: needed corners, each evaluated once.
-        parallel_stage(count, o, 0.0, 0.85, [&](uint32_t i) {
+        // Stage 2: needed corners.
+        parallel_stage(count, o, 0.0, 0.05, [&](uint32_t i) { compute_needed(bricks[i]); });
+
+        // Stage 3: every needed corner evaluated once, in batches sharing a tape.
+        parallel_stage(count, o, 0.05, 0.8, [&](uint32_t i) {
             Brick& b = bricks[i];
-            bricks.compute_needed(b);
-            thread_local std::vector<float> stack;
-            stack.resize(sc.max_stack);
-            uint64_t done = 0;
-            for (uint32_t word = 0; word < kB; ++word) {
-                for (uint64_t bits = b.need[word]; bits; bits &= bits - 1) {
-                    const uint32_t l = word * 64 + uint32_t(std::countr_zero(bits));
-                    const uint32_t x = b.bx * kB + (l & 7), y = b.by * kB + ((l >> 3) & 7),
-                                   z = b.bz * kB + (l >> 6);
-                    std::span<const uint32_t> tape = sc.full_tape;
-                    if (grid) {
-                        const CornerSource src = corner_source(*grid, bricks, n, x, y, z);
-                        if (src.far_field) {
-                            b.value[l] = cap(x, y, z, src.constant);
-                            continue;
+            {
+                CornerBatch batch(sc, b, n, origin, h);
+                if (!grid) {
+                    for (uint32_t word = 0; word < kB; ++word)
+                        for (uint64_t bits = b.need[word]; bits; bits &= bits - 1)
+                            batch.add(sc.full_tape, word * 64 + uint32_t(std::countr_zero(bits)));
+                } else if (!bricks.with_tapes()) {
+                    for (uint32_t word = 0; word < kB; ++word)
+                        for (uint64_t bits = b.need[word]; bits; bits &= bits - 1) {
+                            const uint32_t l = word * 64 + uint32_t(std::countr_zero(bits));
+                            const std::span<const uint32_t> t =
+                                held_tape(*grid, n, b.bx * kB + (l & 7),
+                                          b.by * kB + ((l >> 3) & 7), b.bz * kB + (l >> 6));
+                            batch.add(t.empty() ? std::span<const uint32_t>(sc.full_tape) : t, l);
                         }
-                        if (!src.tape.empty()) tape = src.tape;
+                } else {
+                    // The corners of each near-field cell's own cubes first, cell by cell (a
+                    // cube is named by its lowest corner); then the others, held by cubes of
+                    // other bricks or by cap cubes only. A corner of the cap only, when the
+                    // cells are the cubes: f has the sign of their constant on all of them, so
+                    // every Kuhn edge from it crosses only towards a capped AABB corner (value
+                    // 0), where t = 0 or 1 whatever this corner's magnitude: the constant gives
+                    // the naive mesh. Otherwise the full tree.
+                    uint64_t rest[kB];
+                    std::copy_n(b.need, kB, rest);
+                    for (uint32_t z = 0; z < kB; z += cell_step) {
+                        for (uint64_t bits = b.cand[z] & cell_origins; bits; bits &= bits - 1) {
+                            const uint32_t first = z * 64 + uint32_t(std::countr_zero(bits));
+                            if (b.tape[first] == kNone) continue;
+                            const std::span<const uint32_t> tape = grid->tape_at(b.tape[first]);
+                            for (uint32_t dz = 0; dz < cell_step; ++dz)
+                                for (uint32_t dy = 0; dy < cell_step; ++dy)
+                                    for (uint32_t dx = 0; dx < cell_step; ++dx) {
+                                        const uint32_t l = first + dx + kB * dy + kB * kB * dz;
+                                        batch.add(tape, l);
+                                        rest[l >> 6] &= ~(1ull << (l & 63));
+                                    }
+                        }
                     }
-                    b.value[l] = cap(x, y, z, eval_tape(sc, tape, corner(x, y, z), stack.data()));
-                    ++done;
+                    // A corner held by cube u - s (s in {0, 1}³ \ {0}), the first s as in
+                    // corner_tape; taken a direction at a time, so that a cell's corners stay
+                    // together.
+                    for (uint32_t s = 1; s < 8; ++s) {
+                        const int sx = -int(s & 1), sy = -int((s >> 1) & 1), sz = -int(s >> 2);
+                        for (uint32_t z = 0; z < kB; ++z) {
+                            if (rest[z] == 0) continue;
+                            uint64_t held = rest[z] & shifted(b, &Brick::cand, z, sx, sy, sz);
+                            for (; held; held &= held - 1) {
+                                const uint32_t l = z * 64 + uint32_t(std::countr_zero(held));
+                                const CornerRef c = moved(b, l, sx, sy, sz);
+                                if (c.brick->tape[c.local] == kNone) continue;  // a cap cube
+                                batch.add(grid->tape_at(c.brick->tape[c.local]), l);
+                                rest[z] &= ~(1ull << (l & 63));
+                            }
+                        }
+                    }
+                    // Corners of cap cubes only.
+                    for (uint32_t word = 0; word < kB; ++word)
+                        for (uint64_t bits = rest[word]; bits; bits &= bits - 1) {
+                            const uint32_t l = word * 64 + uint32_t(std::countr_zero(bits));
+                            if (cubes_per_cell != 1) {
+                                batch.add(sc.full_tape, l);
+                                continue;
+                            }
+                            const uint32_t x = b.bx * kB + (l & 7), y = b.by * kB + ((l >> 3) & 7),
+                                           z = b.bz * kB + (l >> 6);
+                            batch.set(l, grid->cell(std::min(x, n - 1), std::min(y, n - 1),
+                                                    std::min(z, n - 1))
+                                             .constant);
+                        }
                 }
+                batch.flush();
+                evaluated += batch.evaluated();
             }
-            evaluated += done;
+            for (uint32_t z = 0; z < kB; ++z) {
+                uint64_t in = 0;
+                for (uint64_t bits = b.need[z]; bits; bits &= bits - 1) {
+                    const uint32_t at = uint32_t(std::countr_zero(bits));
+                    if (b.value[z * 64 + at] < 0.0f) in |= 1ull << at;
+                }
+                b.inside[z] = in;
+            }
         });
 
         // Stage 4a: which edges carry a vertex, numbered within each brick.
-        parallel_stage(count, o, 0.85, 0.9, [&](uint32_t i) {
-            Brick& b = bricks[i];
-            uint32_t vertices = 0;
-            for (uint32_t word = 0; word < kB; ++word) {
-                for (uint64_t bits = b.need[word]; bits; bits &= bits - 1) {
-                    const uint32_t l = word * 64 + uint32_t(std::countr_zero(bits));
-                    const uint32_t x = b.bx * kB + (l & 7), y = b.by * kB + ((l >> 3) & 7),
-                                   z = b.bz * kB + (l >> 6);
-                    const bool in = b.value[l] < 0.0f;
-                    const bool inner = (l & 7) < kB - 1 && ((l >> 3) & 7) < kB - 1 &&
-                                       (l >> 6) < kB - 1;  // its +1 neighbours in this brick
-                    uint8_t mask = 0;
-                    for (uint32_t d = 1; d < 8; ++d) {
-                        const Brick* vb = &b;
-                        uint32_t vl = l + kCornerOffset[d];
-                        if (!inner) {
-                            const uint32_t vx = x + (d & 1), vy = y + ((d >> 1) & 1),
-                                           vz = z + (d >> 2);
-                            if (vx > n || vy > n || vz > n) continue;
-                            vb = bricks.find(vx, vy, vz);
-                            if (!vb) continue;
-                            vl = local_index(vx, vy, vz);
-                        }
-                        if (!bit(vb->need, vl) || (vb->value[vl] < 0.0f) == in) continue;
-                        // Used by a candidate cube? Those holding the edge: (x, y, z) minus
-                        // any subset of the axes the edge does not move along.
-                        const uint32_t free = ~d & 7u;
-                        bool used = false;
-                        for (uint32_t s = 0;; s = (s - free) & free) {
-                            used =
-                                bricks.candidate(int64_t(x) - (s & 1), int64_t(y) - ((s >> 1) & 1),
-                                                 int64_t(z) - (s >> 2));
-                            if (used || s == free) break;
-                        }
-                        if (used) mask |= uint8_t(1u << (d - 1));
-                    }
-                    b.vmask[l] = mask;
-                    b.voff[l] = uint16_t(vertices);
-                    vertices += popcount7(mask);
-                }
-            }
-            b.vbase = vertices;  // the count, until the prefix sum below
-        });
+        parallel_stage(count, o, 0.8, 0.85,
+                       [&](uint32_t i) { bricks[i].vbase = mark_vertex_edges(bricks[i]); });
         uint64_t total = 0;
         for (uint32_t i = 0; i < count; ++i) {
             const uint64_t c = bricks[i].vbase;
@@ -582,12 +748,11 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
         mesh.vertices.resize(total);
 
         // Stage 4b: vertex positions, where f's linear interpolation along the edge is zero.
-        parallel_stage(count, o, 0.9, 0.92, [&](uint32_t i) {
+        parallel_stage(count, o, 0.85, 0.9, [&](uint32_t i) {
             const Brick& b = bricks[i];
             for (uint32_t word = 0; word < kB; ++word) {
-                for (uint64_t bits = b.need[word]; bits; bits &= bits - 1) {
+                for (uint64_t bits = b.has_vertex[word]; bits; bits &= bits - 1) {
                     const uint32_t l = word * 64 + uint32_t(std::countr_zero(bits));
-                    if (!b.vmask[l]) continue;
                     const uint32_t x = b.bx * kB + (l & 7), y = b.by * kB + ((l >> 3) & 7),
                                    z = b.bz * kB + (l >> 6);
                     const float fu = b.value[l];
@@ -595,11 +760,12 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
                     uint32_t id = b.vbase + b.voff[l];
                     for (uint32_t d = 1; d < 8; ++d) {
                         if (!(b.vmask[l] >> (d - 1) & 1)) continue;
-                        const uint32_t vx = x + (d & 1), vy = y + ((d >> 1) & 1), vz = z + (d >> 2);
-                        const float fv = bricks.find(vx, vy, vz)->value[local_index(vx, vy, vz)];
+                        const int dx = int(d & 1), dy = int((d >> 1) & 1), dz = int(d >> 2);
+                        const CornerRef v = moved(b, l, dx, dy, dz);
+                        const float fv = v.brick->value[v.local];
                         const float t =
                             std::clamp(fu / (fu - fv), kMinEdgeFraction, 1.0f - kMinEdgeFraction);
-                        const vec3 pv = corner(vx, vy, vz);
+                        const vec3 pv = corner(x + uint32_t(dx), y + uint32_t(dy), z + uint32_t(dz));
                         mesh.vertices[id++] = pu + (pv - pu) * t;
                     }
                 }
@@ -609,21 +775,10 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
         // Stage 5: triangles, per fixed chunk of bricks, concatenated in order.
         const uint32_t chunks = (count + kChunkBricks - 1) / kChunkBricks;
         tri_chunks.resize(chunks);
-        parallel_stage(chunks, o, 0.92, 0.99, [&](uint32_t c) {
-            std::vector<uint32_t>& out = tri_chunks[c];
+        parallel_stage(chunks, o, 0.9, 0.99, [&](uint32_t c) {
             uint64_t visited = 0;
-            for (uint32_t i = c * kChunkBricks; i < std::min(count, (c + 1) * kChunkBricks); ++i) {
-                const Brick& b = bricks[i];
-                for (uint32_t word = 0; word < kB; ++word) {
-                    for (uint64_t bits = b.cand[word]; bits; bits &= bits - 1) {
-                        const uint32_t l = word * 64 + uint32_t(std::countr_zero(bits));
-                        const uint32_t x = b.bx * kB + (l & 7), y = b.by * kB + ((l >> 3) & 7),
-                                       z = b.bz * kB + (l >> 6);
-                        ++visited;
-                        polygonize_cube(bricks, x, y, z, mesh.vertices, out);
-                    }
-                }
-            }
+            for (uint32_t i = c * kChunkBricks; i < std::min(count, (c + 1) * kChunkBricks); ++i)
+                visited += polygonize_brick(bricks[i], mesh.vertices, tri_chunks[c]);
             cubes += visited;
         });
     }

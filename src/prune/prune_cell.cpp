@@ -10,6 +10,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "../core/lanes.hpp"
 #include "sdfprune/prune.hpp"
 
 namespace sdfprune {
@@ -52,13 +53,11 @@ namespace {
 // Sub-boxes evaluated together by refine_cell.
 constexpr uint32_t kLanes = 32;
 
-// Boxes are evaluated in blocks of kBlock lanes: every loop over boxes runs over structure-of-
-// arrays data to a multiple of kBlock, so that the compiler turns it into vector instructions
-// with no scalar remainder. The lanes past the boxes repeat the last box; nothing reads them.
-// Each lane computes exactly what the scalar code would: the same operations on the same
-// floats, with no reassociation and no fused multiply-add, so the results stay bit for bit
-// those of one box at a time (and of the Vulkan kernels, which share sdf_math.h).
-constexpr uint32_t kBlock = 8;
+// Boxes are evaluated in blocks of lanes::kBlock lanes (lanes.hpp): every loop over boxes runs
+// over structure-of-arrays data to a multiple of the block, with the same results bit for bit as
+// one box at a time. The lanes past the boxes repeat the last box; nothing reads them.
+using lanes::kBlock;
+using lanes::lanes_of;
 
 // The centres of up to kLanes boxes, coordinate by coordinate, and the lanes to compute.
 struct BoxLanes {
@@ -85,13 +84,6 @@ BoxLanes box_lanes(const vec3* centres, uint32_t count) {
     return c;
 }
 
-// The lanes to compute, as the loops over boxes see them: W = 1, a single box (the loop
-// disappears); W = kBlock, a multiple of kBlock, so vectorized loops need no scalar remainder.
-template <uint32_t W>
-inline uint32_t lanes_of(uint32_t lanes) {
-    return W == 1 ? 1 : lanes & ~(W - 1);
-}
-
 // Where evaluate_boxes writes: per tape entry e and box b, index e · stride + b
 // (stride >= the lanes computed).
 struct LaneArrays {
@@ -99,26 +91,6 @@ struct LaneArrays {
     uint32_t* decision;
     uint32_t stride;
 };
-
-// A primitive of kind kKind at every lane's centre: a loop per kind, so that the kind's
-// distance is inlined whole and vectorizes.
-template <uint32_t W, uint32_t kKind>
-void primitive_values(const math::PrimitiveParams prm, const BoxLanes& c, float* __restrict v) {
-    const float* __restrict x = c.x;
-    const float* __restrict y = c.y;
-    const float* __restrict z = c.z;
-    for (uint32_t b = 0; b < lanes_of<W>(c.lanes); ++b) {
-        v[b] = math::eval_primitive_local(kKind, prm, math::to_local(prm, vec3(x[b], y[b], z[b])));
-    }
-}
-
-// primitive_values for a kind known at run time: direct calls, which evaluate_boxes' callers
-// inline whole (flatten).
-template <uint32_t W, uint32_t... kKinds>
-void primitive_values_of(uint32_t kind, const math::PrimitiveParams& prm, const BoxLanes& c,
-                         float* v, std::integer_sequence<uint32_t, kKinds...>) {
-    ((kind == kKinds ? primitive_values<W, kKinds>(prm, c, v) : void()), ...);
-}
 
 // A primitive's range over each box: the Lipschitz range around its value, tightened by the
 // similarity range where the primitive has one.
@@ -193,9 +165,7 @@ void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLa
         float* __restrict h = out.hi + at;
         if (kind < math::kPrimitiveKindCount) {
             const uint32_t p = sc.primitive[node];
-            primitive_values_of<W>(
-                kind, sc.params[p], c, v,
-                std::make_integer_sequence<uint32_t, math::kPrimitiveKindCount>());
+            lanes::primitive_values_any<W>(kind, sc.params[p], c.x, c.y, c.z, c.lanes, v);
             primitive_ranges<W>(sc.bound[p], c, half, spread, interval, v, l, h);
         } else {
             const uint32_t right = s.stack[--top];

@@ -20,6 +20,11 @@ void add_app_options(CLI::App* sub, AppOptions& o) {
     sub->add_flag("--quiet", o.quiet, "no progress bar and no summary line");
 }
 
+void add_one_shot_app_options(CLI::App* sub, AppOptions& o) {
+    o.prune.refine = 1;
+    add_app_options(sub, o);
+}
+
 void add_backend_option(CLI::App* sub, std::string& backend) {
     sub->add_option("--backend", backend,
                     "cpu (default) or vulkan: prune and evaluate on a Vulkan device (the first "

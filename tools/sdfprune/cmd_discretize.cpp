@@ -28,7 +28,7 @@ void add_discretize(CLI::App& app, std::vector<Command>& commands) {
     sub->add_option("SCENE", args->scene, "scene file (.json) or builtin:NAME")->required();
     sub->add_option("-o,--output", args->output, "output file, .npy or .vdb")->required();
     add_res_option(sub, args->res, "cells", 2048u);
-    add_app_options(sub, args->app);
+    add_one_shot_app_options(sub, args->app);
     add_backend_option(sub, args->app.backend);
     sub->footer(
         "Examples:\n  sdfprune discretize scenes/molecule.json -o molecule.npy --res 256\n"
@@ -99,6 +99,7 @@ void add_discretize(CLI::App& app, std::vector<Command>& commands) {
                          levels += (levels.empty() ? "" : "x") + std::to_string(r);
                      j.add("grid", s->grid)
                          .add("levels", levels)
+                         .add("refine", po.prune.refine)
                          .add("near_field_cells", s->near_field_cells);
                  }
                  if (p.device) j.add("device", p.device->name());

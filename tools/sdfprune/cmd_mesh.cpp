@@ -25,8 +25,12 @@ void add_mesh(CLI::App& app, std::vector<Command>& commands) {
         "Wavefront OBJ with shared vertices. Units are the scene's.");
     sub->add_option("SCENE", args->scene, "scene file (.json) or builtin:NAME")->required();
     sub->add_option("-o,--output", args->output, "output file, .stl, .ply or .obj")->required();
-    add_res_option(sub, args->res, "cubes", kMaxMeshResolution);
-    add_app_options(sub, args->app);
+    sub->add_option("--res", args->res,
+                    "cubes per axis; the pruning grid is half of it where it is even (the "
+                    "fastest), else equal, unless --grid is given")
+        ->capture_default_str()
+        ->check(CLI::Range(1u, kMaxMeshResolution));
+    add_one_shot_app_options(sub, args->app);
     sub->footer(
         "Examples:\n  sdfprune mesh scenes/molecule.json -o molecule.ply --res 256\n"
         "  sdfprune mesh builtin:demo -o demo.stl --res 128\n"
@@ -35,7 +39,9 @@ void add_mesh(CLI::App& app, std::vector<Command>& commands) {
         const AppOptions& o = args->app;
         check_output(args->output, {".stl", ".ply", ".obj"});
         const MeshFormat format = mesh_format_of(args->output);
-        const AppOptions po = following_res(sub, o, args->res);
+        AppOptions po = o;
+        if (sub->get_option("--grid")->count() == 0)
+            po.prune.resolution = default_mesh_grid(args->res);
         const Prepared p = prepare(args->scene, po);
 
         MeshOptions mo;
@@ -83,7 +89,7 @@ void add_mesh(CLI::App& app, std::vector<Command>& commands) {
                 .add("write_ms", write_ms)
                 .add("corners_evaluated", ms.corners_evaluated)
                 .add("cubes_visited", ms.cubes_visited);
-            if (p.grid) j.add("grid", p.grid->resolution());
+            if (p.grid) j.add("grid", p.grid->resolution()).add("refine", po.prune.refine);
             std::printf("%s\n", j.str().c_str());
         }
         return 0;

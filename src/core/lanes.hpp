@@ -1,0 +1,58 @@
+// lanes.hpp — the vector-lane loops shared by the pruner's box evaluation (prune_cell.cpp) and
+// the point evaluator eval_tape_lanes (eval_lanes.cpp): one loop over lanes per primitive kind,
+// over structure-of-arrays coordinates, so that the kind's distance is inlined whole and the
+// compiler turns the loop into vector instructions.
+//
+// Each lane computes exactly what the scalar code computes for its point: the same operations on
+// the same floats, with no reassociation and no fused multiply-add (-ffp-contract=off), so the
+// results are bit for bit those of one point at a time (and of the Vulkan kernels, which share
+// sdf_math.h). Callers compile these loops inside functions marked flatten, once for the baseline
+// instruction set and once for AVX2, and choose at run time (lane_isa() in prune.hpp).
+#pragma once
+
+#include <cstdint>
+#include <utility>
+
+#include "sdfprune/scene.hpp"
+
+namespace sdfprune::lanes {
+
+// Loops over lanes run to a multiple of kBlock (8 floats: one AVX2 register), so that vectorized
+// loops need no scalar remainder; lanes past the real ones repeat a real point, and nobody reads
+// what they compute.
+inline constexpr uint32_t kBlock = 8;
+
+// The lanes to compute, as the loops see them: W = 1, a single point (the loop disappears);
+// W = kBlock, a multiple of kBlock.
+template <uint32_t W>
+inline uint32_t lanes_of(uint32_t lanes) {
+    return W == 1 ? 1 : lanes & ~(W - 1);
+}
+
+// A primitive of kind kKind at every lane's point (x[b], y[b], z[b]).
+template <uint32_t W, uint32_t kKind>
+void primitive_values(const math::PrimitiveParams prm, const float* __restrict x,
+                      const float* __restrict y, const float* __restrict z, uint32_t lanes,
+                      float* __restrict v) {
+    for (uint32_t b = 0; b < lanes_of<W>(lanes); ++b) {
+        v[b] = math::eval_primitive_local(kKind, prm, math::to_local(prm, vec3(x[b], y[b], z[b])));
+    }
+}
+
+// primitive_values for a kind known at run time: direct calls, which the flattened callers
+// inline whole.
+template <uint32_t W, uint32_t... kKinds>
+void primitive_values_of(uint32_t kind, const math::PrimitiveParams& prm, const float* x,
+                         const float* y, const float* z, uint32_t lanes, float* v,
+                         std::integer_sequence<uint32_t, kKinds...>) {
+    ((kind == kKinds ? primitive_values<W, kKinds>(prm, x, y, z, lanes, v) : void()), ...);
+}
+
+template <uint32_t W>
+void primitive_values_any(uint32_t kind, const math::PrimitiveParams& prm, const float* x,
+                          const float* y, const float* z, uint32_t lanes, float* v) {
+    primitive_values_of<W>(kind, prm, x, y, z, lanes, v,
+                           std::make_integer_sequence<uint32_t, math::kPrimitiveKindCount>());
+}
+
+}  // namespace sdfprune::lanes
