@@ -79,7 +79,7 @@ def mesh_target():
 
     t_base, n_base = best(baseline, 2)
     t_ours, n_ours = best(ours, 3)
-    f.prune(res // 2, refine=1)  # the grid f.mesh(res) prunes: res / 2, no refinement
+    f.prune(sdfprune._sdfprune.default_mesh_grid(res), refine=1)  # the grid f.mesh(res) prunes
     t_mesh_only, _ = best(lambda: f.mesh(res), 3)
     ratio = t_base / t_ours
     print(f"mesh, quick-start scene, {res}^3 cubes ({(res + 1) ** 3 / 2 ** 22:.2f} x 2^22 corners):")

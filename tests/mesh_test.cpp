@@ -251,7 +251,9 @@ TEST(MeshShapes, GridsWhoseCellsTileTheCubes) {
         expect_identical(pruned_mesh(demo, 48, po), naive);
         expect_identical(pruned_mesh(half, 48, po), naive_half);
     }
-    EXPECT_EQ(default_mesh_grid(48), 24u);
+    EXPECT_EQ(default_mesh_grid(48), 6u);
+    EXPECT_EQ(default_mesh_grid(20), 5u);
+    EXPECT_EQ(default_mesh_grid(6), 3u);
     EXPECT_EQ(default_mesh_grid(49), 49u);
 }
 
@@ -431,7 +433,7 @@ TEST(MeshCli, WritesPlyAndReportsJson) {
     EXPECT_EQ(std::string(d["method"].GetString()), "pruned");
     EXPECT_EQ(d["res"].GetDouble(), 32);
     EXPECT_EQ(d["grid"].GetDouble(), default_mesh_grid(32)) << "the pruned grid follows --res";
-    EXPECT_EQ(d["grid"].GetDouble(), 16);
+    EXPECT_EQ(d["grid"].GetDouble(), 4);
     EXPECT_EQ(d["refine"].GetDouble(), 1) << "no refinement for a one-shot query";
     ASSERT_TRUE(std::filesystem::exists(path));
     const std::string s = read_file(path);

@@ -53,12 +53,15 @@ inline constexpr uint32_t kMaxMeshResolution = 2048;
 inline constexpr float kMinEdgeFraction = 1e-3f;
 
 // The pruning grid that meshes at `resolution` cubes per axis fastest, the default of the CLI
-// and of Python: half the resolution where it is even (a grid half as fine prunes in about a
-// quarter of the time, and its cells are unions of 2³ cubes, whose corners are evaluated
-// together), else the resolution. Measured on molecule, trees and the Python quick-start scene
-// (BENCHMARKS.md): prune + mesh 1.4–2.4× faster than with a grid of the mesh's resolution.
+// and of Python: the resolution divided by the largest of 8, 4 and 2 that divides it (else the
+// resolution). The mesher drops, inside each near-field cell, the boxes of cubes whose centre
+// value clears their Lipschitz reach, halving them down to single cubes, so a coarse grid costs
+// little in the mesher and much less to prune. Measured on molecule, trees and the Python
+// quick-start scene (BENCHMARKS.md).
 constexpr uint32_t default_mesh_grid(uint32_t resolution) {
-    return resolution % 2 == 0 ? resolution / 2 : resolution;
+    for (const uint32_t m : {8u, 4u, 2u})
+        if (resolution % m == 0) return resolution / m;
+    return resolution;
 }
 
 // An indexed triangle mesh, in the scene's world units.

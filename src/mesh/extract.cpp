@@ -125,6 +125,7 @@ constexpr TetTable kTets = make_tet_table();
 // tetrahedra's sections in tetrahedron order, the empty ones left out.
 struct CubeCase {
     uint8_t count = 0;           // sections (at most one per tetrahedron)
+    uint8_t triangles = 0;       // triangles they make (a quad makes 2)
     std::array<TetCase, 6> tet;  // the sections, each with 3 or 4 vertices
 };
 constexpr std::array<CubeCase, 256> make_cube_table() {
@@ -134,7 +135,9 @@ constexpr std::array<CubeCase, 256> make_cube_table() {
         for (uint32_t t = 0; t < 6; ++t) {
             uint32_t m = 0;
             for (uint32_t k = 0; k < 4; ++k) m |= ((inside >> kTetVertices[t][k]) & 1u) << k;
-            if (kTets[t][m].n != 0) cc.tet[cc.count++] = kTets[t][m];
+            if (kTets[t][m].n == 0) continue;
+            cc.tet[cc.count++] = kTets[t][m];
+            cc.triangles = uint8_t(cc.triangles + kTets[t][m].n - 2);
         }
     }
     return table;
@@ -175,6 +178,9 @@ struct Brick {
     uint64_t need[kB] = {};           // corners to evaluate
     uint64_t inside[kB] = {};         // needed corners with f < 0 (capped on the AABB)
     uint64_t has_vertex[kB] = {};     // corners with a vertex on an edge from them
+    uint64_t cross[kB] = {};          // candidate cubes whose corners differ in sign
+    uint32_t tbase = 0;               // the brick's first triangle
+    uint8_t cube_case[kBrickCorners];  // crossing cubes: bit k = cube corner k is inside
     // The bricks around this one: offset (dx, dy, dz) in {-1, 0, 1}³ at
     // (dx + 1) + 3 (dy + 1) + 9 (dz + 1), this brick at 13; null where none is allocated.
     std::array<const Brick*, 27> near{};
@@ -201,13 +207,19 @@ struct CornerRef {
     uint32_t local;
 };
 inline CornerRef moved(const Brick& b, uint32_t l, int sx, int sy, int sz) {
-    const bool inner = (l & 7) < kB - 1 && ((l >> 3) & 7) < kB - 1 && (l >> 6) < kB - 1 &&
-                       (l & 7) > 0 && ((l >> 3) & 7) > 0 && (l >> 6) > 0;
-    if (inner) return {&b, uint32_t(int(l) + sx + int(kB) * sy + int(kB * kB) * sz)};
     const int x = int(l & 7) + sx, y = int((l >> 3) & 7) + sy, z = int(l >> 6) + sz;
     const int dx = x < 0 ? -1 : x >= int(kB), dy = y < 0 ? -1 : y >= int(kB),
               dz = z < 0 ? -1 : z >= int(kB);
     return {b.near[near_slot(dx, dy, dz)], local_index(uint32_t(x), uint32_t(y), uint32_t(z))};
+}
+
+// The same for a move by k = x + 2y + 4z (a cube corner or an edge direction, all >= 0),
+// quicker where the corner stays in the brick.
+inline CornerRef moved_up(const Brick& b, uint32_t l, uint32_t k) {
+    const uint32_t x = l & 7, y = (l >> 3) & 7, z = l >> 6;
+    if (x < kB - 1 && y < kB - 1 && z < kB - 1)
+        return {&b, l + (k & 1) + kB * ((k >> 1) & 1) + kB * kB * (k >> 2)};
+    return moved(b, l, int(k & 1), int((k >> 1) & 1), int(k >> 2));
 }
 
 // Layer z of `field` moved by (sx, sy, sz), each in {-1, 0, 1}: bit (x, y) of the result is the
@@ -399,22 +411,24 @@ void parallel_stage(uint32_t count, const MeshOptions& o, double lo, double hi, 
 }
 
 // Visits the grid's cells: near(ix, iy, iz, cell) for every near-field cell of the finest
-// level, far(level, cx, cy, cz, cell) for every far-field cell, at the level where it became
-// far.
-template <class Near, class Far>
-void for_each_cell(const PrunedGrid& g, const Near& near, const Far& far) {
+// level, inside_far(level, cx, cy, cz) for every far-field cell with f < 0, at the level where
+// it became far.
+template <class Near, class InsideFar>
+void for_each_cell(const PrunedGrid& g, const Near& near, const InsideFar& inside_far) {
     g.for_each_block([&](const PrunedGrid::Block& b) {
         const uint32_t f = g.level_factor(b.level);
-        const PrunedCell* cells = g.level_cells(b.level).data() + b.first;
+        const PrunedCell* c = g.level_cells(b.level).data() + b.first;
         const bool finest = b.level + 1 == g.level_count();
-        for (uint32_t local = 0; local < f * f * f; ++local) {
-            const PrunedCell& c = cells[local];
-            const CellCoord at = block_cell(b.origin, f, local);
-            if (c.tape == PrunedCell::kFarField)
-                far(b.level, at.x, at.y, at.z, c);
-            else if (finest)
-                near(at.x, at.y, at.z, c);
-        }
+        for (uint32_t z = 0; z < f; ++z)
+            for (uint32_t y = 0; y < f; ++y)
+                for (uint32_t x = 0; x < f; ++x, ++c) {
+                    if (c->tape == PrunedCell::kFarField) {
+                        if (c->bound < 0.0f)
+                            inside_far(b.level, b.origin.x + x, b.origin.y + y, b.origin.z + z);
+                    } else if (finest) {
+                        near(b.origin.x + x, b.origin.y + y, b.origin.z + z, *c);
+                    }
+                }
     });
 }
 
@@ -433,13 +447,84 @@ void cell_range(uint32_t i, uint32_t g, uint32_t n, uint32_t& lo, uint32_t& hi) 
     lo = std::min(lo, hi);
 }
 
-// Stage 1 for a pruned grid: candidates are the cubes overlapping a near-field cell, and the
-// cubes on the AABB's boundary overlapping an inside far-field cell (the cap, where f < 0
-// meets the AABB: corners on the AABB count as outside). When the cells are unions of cubes
-// (n a multiple of the grid's resolution), each candidate keeps its cell's tape.
-void add_candidates(const PrunedGrid& grid, uint32_t n, CornerBricks& bricks) {
+// A near-field cell of the finest level, and (cells made of m³ cubes) which of its cubes may
+// hold the surface: bit x + m·y + m²·z of `keep`.
+struct NearCell {
+    uint32_t x, y, z;
+    uint32_t tape;
+    std::array<uint64_t, 8> keep;
+};
+
+// Stage 1b for one near-field cell of m³ cubes (m a power of two from 2 to kB): drops the cubes
+// where the cell's tape shows f != 0 everywhere, so that they cannot hold the surface. Boxes of
+// (m/2)³ cubes first, then the halves of those kept, down to single cubes: a box whose centre
+// value clears its Lipschitz reach (f's range over the box excludes 0, rounding included) is
+// dropped, unless f < 0 there and the box touches the AABB, where the mesh caps the shape.
+// Dropping them changes nothing in the mesh: their corners share one sign, and every edge and
+// triangle the mesh has comes from a cube whose corners differ in sign.
+void cull_cubes(const Scene& sc, const PrunedGrid& grid, uint32_t n, uint32_t m, vec3 origin,
+                vec3 h, NearCell& cell, float* stack) {
+    const std::span<const uint32_t> tape = grid.tape_at(cell.tape);
+    const float L = sc.lipschitz[sc.root()];
+    struct Box {
+        uint32_t x, y, z;  // lowest cube, within the cell
+    };
+    Box boxes[kBrickCorners], next[kBrickCorners];
+    uint32_t count = 0;
+    for (uint32_t k = 0; k < 8; ++k)
+        boxes[count++] = {(k & 1) * m / 2, ((k >> 1) & 1) * m / 2, (k >> 2) * m / 2};
+    for (uint32_t size = m / 2;; size /= 2) {
+        const float reach = math::far_field_reach(L, 0.5f * float(size) * math::length(h));
+        uint32_t kept = 0;
+        for (uint32_t first = 0; first < count; first += kEvalLanes) {
+            const uint32_t lanes = std::min(kEvalLanes, count - first);
+            PointLanes p;
+            for (uint32_t i = 0; i < lanes; ++i) {
+                const Box& bx = boxes[first + i];
+                const vec3 c = origin + vec3(float(cell.x * m + bx.x) + 0.5f * float(size),
+                                             float(cell.y * m + bx.y) + 0.5f * float(size),
+                                             float(cell.z * m + bx.z) + 0.5f * float(size)) *
+                                            h;
+                p.x[i] = c.x;
+                p.y[i] = c.y;
+                p.z[i] = c.z;
+            }
+            float v[kEvalLanes];
+            eval_tape_lanes(sc, tape, p, lanes, v, stack);
+            for (uint32_t i = 0; i < lanes; ++i) {
+                const Box& bx = boxes[first + i];
+                const uint32_t x0 = cell.x * m + bx.x, y0 = cell.y * m + bx.y,
+                               z0 = cell.z * m + bx.z;
+                const bool on_aabb = x0 == 0 || y0 == 0 || z0 == 0 || x0 + size == n ||
+                                     y0 + size == n || z0 + size == n;
+                if (std::abs(v[i]) > reach && !(v[i] < 0.0f && on_aabb)) continue;
+                if (size == 1) {
+                    const uint32_t bit_index = bx.x + m * (bx.y + m * bx.z);
+                    cell.keep[bit_index >> 6] |= 1ull << (bit_index & 63);
+                    continue;
+                }
+                for (uint32_t k = 0; k < 8; ++k)
+                    next[kept++] = {bx.x + (k & 1) * size / 2, bx.y + ((k >> 1) & 1) * size / 2,
+                                    bx.z + (k >> 2) * size / 2};
+            }
+        }
+        if (size == 1 || kept == 0) return;
+        std::copy_n(next, kept, boxes);
+        count = kept;
+    }
+}
+
+// Stage 1 for a pruned grid: candidates are the cubes overlapping a near-field cell (where its
+// cells are made of 2³ to 8³ cubes, only those that may hold the surface: cull_cubes), and the
+// cubes on the AABB's boundary overlapping an inside far-field cell (the cap, where f < 0 meets
+// the AABB: corners on the AABB count as outside). When the cells are unions of cubes (n a
+// multiple of the grid's resolution), each candidate keeps its cell's tape.
+void add_candidates(const PrunedGrid& grid, uint32_t n, CornerBricks& bricks,
+                    const MeshOptions& o) {
+    const Scene& sc = grid.scene();
     const uint32_t g = grid.resolution();
     const uint32_t m = n % g == 0 ? n / g : 0;  // cubes per cell and axis, 0: not a union
+    const bool culled = m >= 2 && kB % m == 0;
     const auto cubes_of = [&](uint32_t cx, uint32_t cy, uint32_t cz, uint32_t span,
                               bool boundary_only, uint32_t tape) {
         uint32_t x0, x1, y0, y1, z0, z1;
@@ -457,21 +542,42 @@ void add_candidates(const PrunedGrid& grid, uint32_t n, CornerBricks& bricks) {
                 for (uint32_t x = x0; x <= x1; ++x) bricks.add_candidate(x, y, z, tape);
             }
     };
+    std::vector<NearCell> near;
     for_each_cell(
         grid,
         [&](uint32_t cx, uint32_t cy, uint32_t cz, const PrunedCell& c) {
-            if (m != 0 && kB % m == 0)
-                bricks.add_cubes(cx * m, cy * m, cz * m, m, c.tape);
+            if (culled)
+                near.push_back({cx, cy, cz, c.tape, {}});
+            else if (m == 1)
+                bricks.add_candidate(cx, cy, cz, c.tape);
             else
                 cubes_of(cx, cy, cz, 1, false, c.tape);
         },
-        [&](uint32_t level, uint32_t cx, uint32_t cy, uint32_t cz, const PrunedCell& c) {
-            if (!(c.bound < 0.0f)) return;
+        [&](uint32_t level, uint32_t cx, uint32_t cy, uint32_t cz) {
             const uint32_t span = g / grid.level_resolution(level);
             const uint32_t last = grid.level_resolution(level) - 1;
             if (cx == 0 || cy == 0 || cz == 0 || cx == last || cy == last || cz == last)
                 cubes_of(cx, cy, cz, span, true, kNone);
         });
+    if (!culled) return;
+    // Stage 1b in parallel, a fixed number of cells per chunk; then the kept cubes in cell order.
+    constexpr uint32_t kChunkCells = 64;
+    const vec3 origin = sc.aabb.min, h = (sc.aabb.max - sc.aabb.min) / float(n);
+    const uint32_t chunks = uint32_t((near.size() + kChunkCells - 1) / kChunkCells);
+    parallel_for<MeshCancelled>(chunks, parallel_options(o, 0.0, 0.05), [&](uint64_t c) {
+        thread_local std::vector<float> stack;
+        stack.resize(size_t(std::max(sc.max_stack, 1u)) * kEvalLanes);
+        const size_t end = std::min(near.size(), size_t(c + 1) * kChunkCells);
+        for (size_t i = size_t(c) * kChunkCells; i < end; ++i)
+            cull_cubes(sc, grid, n, m, origin, h, near[i], stack.data());
+    });
+    for (const NearCell& cell : near)
+        for (uint32_t w = 0; w < (m * m * m + 63) / 64; ++w)
+            for (uint64_t bits = cell.keep[w]; bits; bits &= bits - 1) {
+                const uint32_t i = w * 64 + uint32_t(std::countr_zero(bits));
+                bricks.add_candidate(cell.x * m + i % m, cell.y * m + (i / m) % m,
+                                     cell.z * m + i / (m * m), cell.tape);
+            }
 }
 
 // A tape for corner (x, y, z) when the grid's cells are not unions of cubes: a near-field cell
@@ -557,31 +663,41 @@ class CornerBatch {
     uint64_t evaluated_ = 0;
 };
 
-// Stage 5 for one brick: the triangles of its candidate cubes whose corners differ in sign,
-// appended to `out`; returns the candidate cubes visited.
-uint64_t polygonize_brick(const Brick& b, const std::vector<vec3>& vertices,
-                          std::vector<uint32_t>& out) {
-    uint64_t visited = 0;
+// Stage 4a for one brick, after its corners' signs are known: its crossing cubes (candidates
+// whose corners differ in sign) and their sign cases; returns the triangles they make.
+uint32_t classify_cubes(Brick& b) {
+    uint32_t triangles = 0;
     for (uint32_t z = 0; z < kB; ++z) {
+        b.cross[z] = 0;
         if (b.cand[z] == 0) continue;
-        visited += uint64_t(std::popcount(b.cand[z]));
         uint64_t corner_in[8];  // bit l: corner k of cube l is inside
         uint64_t all = ~0ull, any = 0;
         for (uint32_t k = 0; k < 8; ++k) {
-            corner_in[k] = shifted(b, &Brick::inside, z, int(k & 1), int((k >> 1) & 1), int(k >> 2));
+            corner_in[k] =
+                shifted(b, &Brick::inside, z, int(k & 1), int((k >> 1) & 1), int(k >> 2));
             all &= corner_in[k];
             any |= corner_in[k];
         }
-        for (uint64_t bits = b.cand[z] & any & ~all; bits; bits &= bits - 1) {
+        b.cross[z] = b.cand[z] & any & ~all;
+        for (uint64_t bits = b.cross[z]; bits; bits &= bits - 1) {
             const uint32_t at = uint32_t(std::countr_zero(bits));
-            const uint32_t l = z * 64 + at;
-            uint32_t inside = 0;  // bit k: cube corner k is inside
+            uint32_t inside = 0;
+            for (uint32_t k = 0; k < 8; ++k) inside |= uint32_t((corner_in[k] >> at) & 1) << k;
+            b.cube_case[z * 64 + at] = uint8_t(inside);
+            triangles += kCubes[inside].triangles;
+        }
+    }
+    return triangles;
+}
+
+// Stage 5 for one brick: the triangles of its crossing cubes, written from `out` on.
+void polygonize_brick(const Brick& b, const std::vector<vec3>& vertices, uint32_t* out) {
+    for (uint32_t z = 0; z < kB; ++z) {
+        for (uint64_t bits = b.cross[z]; bits; bits &= bits - 1) {
+            const uint32_t l = z * 64 + uint32_t(std::countr_zero(bits));
             CornerRef c[8];
-            for (uint32_t k = 0; k < 8; ++k) {
-                inside |= uint32_t((corner_in[k] >> at) & 1) << k;
-                c[k] = moved(b, l, int(k & 1), int((k >> 1) & 1), int(k >> 2));
-            }
-            const CubeCase& cc = kCubes[inside];
+            for (uint32_t k = 0; k < 8; ++k) c[k] = moved_up(b, l, k);
+            const CubeCase& cc = kCubes[b.cube_case[l]];
             for (uint32_t t = 0; t < cc.count; ++t) {
                 const TetCase& tc = cc.tet[t];
                 uint32_t q[4] = {};
@@ -590,7 +706,8 @@ uint64_t polygonize_brick(const Brick& b, const std::vector<vec3>& vertices,
                     q[k] = vertex(*c[lo].brick, c[lo].local, uint32_t(lo ^ tc.hi[k]));
                 }
                 if (tc.n == 3) {
-                    out.insert(out.end(), {q[0], q[1], q[2]});
+                    out[0] = q[0], out[1] = q[1], out[2] = q[2];
+                    out += 3;
                     continue;
                 }
                 // A quad: split along its shorter diagonal.
@@ -599,13 +716,15 @@ uint64_t polygonize_brick(const Brick& b, const std::vector<vec3>& vertices,
                     return math::dot(e, e);
                 };
                 if (dist2(q[0], q[2]) <= dist2(q[1], q[3]))
-                    out.insert(out.end(), {q[0], q[1], q[2], q[0], q[2], q[3]});
+                    out[0] = q[0], out[1] = q[1], out[2] = q[2], out[3] = q[0], out[4] = q[2],
+                    out[5] = q[3];
                 else
-                    out.insert(out.end(), {q[0], q[1], q[3], q[1], q[2], q[3]});
+                    out[0] = q[0], out[1] = q[1], out[2] = q[3], out[3] = q[1], out[4] = q[2],
+                    out[5] = q[3];
+                out += 6;
             }
         }
     }
-    return visited;
 }
 
 Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, MeshStats* stats) {
@@ -626,23 +745,20 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
     const uint32_t g = grid ? grid->resolution() : 0;
     CornerBricks bricks(n, grid && n % g == 0);
     if (grid)
-        add_candidates(*grid, n, bricks);
+        add_candidates(*grid, n, bricks, o);
     else
         bricks.add_all_cubes();
     bricks.finish();
     const uint32_t count = bricks.count();
     // Stage 3 takes a cell's own cubes together where cells tile the bricks (cell_step cubes
-    // per axis); elsewhere one cube at a time. cell_origins: a layer's cubes named by a cell.
+    // per axis); elsewhere one cube at a time.
     const uint32_t cubes_per_cell = bricks.with_tapes() ? n / g : 1;
     const uint32_t cell_step = kB % cubes_per_cell == 0 ? cubes_per_cell : 1;
-    uint64_t cell_origins = 0;
-    for (uint32_t y = 0; y < kB; y += cell_step)
-        for (uint32_t x = 0; x < kB; x += cell_step) cell_origins |= 1ull << (x + kB * y);
+    uint64_t cell_square = 0;  // a cell's cubes in the layer word, at x = y = 0
+    for (uint32_t y = 0; y < cell_step; ++y) cell_square |= ((1ull << cell_step) - 1) << (kB * y);
 
     Mesh mesh;
-    std::vector<std::vector<uint32_t>> tri_chunks;
-    constexpr uint32_t kChunkBricks = 8;  // bricks per triangle chunk: fixed, for determinism
-    std::atomic<uint64_t> cubes{0}, evaluated{0};
+    std::atomic<uint64_t> evaluated{0};
 
     {
         // Stage 2: needed corners.
@@ -676,19 +792,25 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
                     // the naive mesh. Otherwise the full tree.
                     uint64_t rest[kB];
                     std::copy_n(b.need, kB, rest);
-                    for (uint32_t z = 0; z < kB; z += cell_step) {
-                        for (uint64_t bits = b.cand[z] & cell_origins; bits; bits &= bits - 1) {
-                            const uint32_t first = z * 64 + uint32_t(std::countr_zero(bits));
-                            if (b.tape[first] == kNone) continue;
-                            const std::span<const uint32_t> tape = grid->tape_at(b.tape[first]);
-                            for (uint32_t dz = 0; dz < cell_step; ++dz)
-                                for (uint32_t dy = 0; dy < cell_step; ++dy)
-                                    for (uint32_t dx = 0; dx < cell_step; ++dx) {
-                                        const uint32_t l = first + dx + kB * dy + kB * kB * dz;
-                                        batch.add(tape, l);
-                                        rest[l >> 6] &= ~(1ull << (l & 63));
-                                    }
-                        }
+                    const auto own = [&](uint32_t l) {
+                        if (b.tape[l] == kNone) return;  // a cap cube
+                        batch.add(grid->tape_at(b.tape[l]), l);
+                        rest[l >> 6] &= ~(1ull << (l & 63));
+                    };
+                    if (cell_step == 1) {
+                        for (uint32_t z = 0; z < kB; ++z)
+                            for (uint64_t bits = b.cand[z]; bits; bits &= bits - 1)
+                                own(z * 64 + uint32_t(std::countr_zero(bits)));
+                    } else {
+                        for (uint32_t cz = 0; cz < kB; cz += cell_step)
+                            for (uint32_t cy = 0; cy < kB; cy += cell_step)
+                                for (uint32_t cx = 0; cx < kB; cx += cell_step) {
+                                    const uint64_t square = cell_square << (cx + kB * cy);
+                                    for (uint32_t z = cz; z < cz + cell_step; ++z)
+                                        for (uint64_t bits = b.cand[z] & square; bits;
+                                             bits &= bits - 1)
+                                            own(z * 64 + uint32_t(std::countr_zero(bits)));
+                                }
                     }
                     // A corner held by cube u - s (s in {0, 1}³ \ {0}), the first s as in
                     // corner_tape; taken a direction at a time, so that a cell's corners stay
@@ -735,17 +857,26 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
             }
         });
 
-        // Stage 4a: which edges carry a vertex, numbered within each brick.
-        parallel_stage(count, o, 0.8, 0.85,
-                       [&](uint32_t i) { bricks[i].vbase = mark_vertex_edges(bricks[i]); });
-        uint64_t total = 0;
+        // Stage 4a: which edges carry a vertex, numbered within each brick; which cubes cross
+        // the surface, and the triangles they make.
+        std::vector<uint32_t> tri_count(count);
+        parallel_stage(count, o, 0.8, 0.85, [&](uint32_t i) {
+            bricks[i].vbase = mark_vertex_edges(bricks[i]);
+            tri_count[i] = classify_cubes(bricks[i]);
+        });
+        uint64_t total = 0, total_tris = 0;
         for (uint32_t i = 0; i < count; ++i) {
             const uint64_t c = bricks[i].vbase;
             bricks[i].vbase = uint32_t(total);
             total += c;
             if (total > 0xffffffffull) throw std::length_error("mesh has more than 2^32 vertices");
+            bricks[i].tbase = uint32_t(total_tris);
+            total_tris += tri_count[i];
+            if (total_tris * 3 > 0xffffffffull)
+                throw std::length_error("mesh has more than 2^32 triangle indices");
         }
         mesh.vertices.resize(total);
+        mesh.triangles.resize(total_tris * 3);
 
         // Stage 4b: vertex positions, where f's linear interpolation along the edge is zero.
         parallel_stage(count, o, 0.85, 0.9, [&](uint32_t i) {
@@ -758,40 +889,30 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
                     const float fu = b.value[l];
                     const vec3 pu = corner(x, y, z);
                     uint32_t id = b.vbase + b.voff[l];
-                    for (uint32_t d = 1; d < 8; ++d) {
-                        if (!(b.vmask[l] >> (d - 1) & 1)) continue;
-                        const int dx = int(d & 1), dy = int((d >> 1) & 1), dz = int(d >> 2);
-                        const CornerRef v = moved(b, l, dx, dy, dz);
+                    for (uint32_t mask = b.vmask[l]; mask; mask &= mask - 1) {
+                        const uint32_t d = uint32_t(std::countr_zero(mask)) + 1;
+                        const CornerRef v = moved_up(b, l, d);
                         const float fv = v.brick->value[v.local];
                         const float t =
                             std::clamp(fu / (fu - fv), kMinEdgeFraction, 1.0f - kMinEdgeFraction);
-                        const vec3 pv = corner(x + uint32_t(dx), y + uint32_t(dy), z + uint32_t(dz));
+                        const vec3 pv = corner(x + (d & 1), y + ((d >> 1) & 1), z + (d >> 2));
                         mesh.vertices[id++] = pu + (pv - pu) * t;
                     }
                 }
             }
         });
 
-        // Stage 5: triangles, per fixed chunk of bricks, concatenated in order.
-        const uint32_t chunks = (count + kChunkBricks - 1) / kChunkBricks;
-        tri_chunks.resize(chunks);
-        parallel_stage(chunks, o, 0.9, 0.99, [&](uint32_t c) {
-            uint64_t visited = 0;
-            for (uint32_t i = c * kChunkBricks; i < std::min(count, (c + 1) * kChunkBricks); ++i)
-                visited += polygonize_brick(bricks[i], mesh.vertices, tri_chunks[c]);
-            cubes += visited;
+        // Stage 5: triangles, each brick's at its place.
+        parallel_stage(count, o, 0.9, 0.99, [&](uint32_t i) {
+            polygonize_brick(bricks[i], mesh.vertices,
+                             mesh.triangles.data() + size_t(bricks[i].tbase) * 3);
         });
-    }
-
-    size_t tri_words = 0;
-    for (const auto& c : tri_chunks) tri_words += c.size();
-    mesh.triangles.reserve(tri_words);
-    for (auto& c : tri_chunks) {
-        mesh.triangles.insert(mesh.triangles.end(), c.begin(), c.end());
-        std::vector<uint32_t>().swap(c);
     }
     if (o.progress) o.progress(1.0);
     if (stats) {
+        uint64_t cubes = 0;  // the candidates
+        for (uint32_t i = 0; i < count; ++i)
+            for (const uint64_t w : bricks[i].cand) cubes += uint64_t(std::popcount(w));
         stats->resolution = n;
         stats->cubes_visited = cubes;
         stats->corners_evaluated = evaluated;

@@ -26,8 +26,8 @@ void add_mesh(CLI::App& app, std::vector<Command>& commands) {
     sub->add_option("SCENE", args->scene, "scene file (.json) or builtin:NAME")->required();
     sub->add_option("-o,--output", args->output, "output file, .stl, .ply or .obj")->required();
     sub->add_option("--res", args->res,
-                    "cubes per axis; the pruning grid is half of it where it is even (the "
-                    "fastest), else equal, unless --grid is given")
+                    "cubes per axis; the pruning grid is it divided by the largest of 8, 4, 2 "
+                    "that divides it (the fastest), unless --grid is given")
         ->capture_default_str()
         ->check(CLI::Range(1u, kMaxMeshResolution));
     add_one_shot_app_options(sub, args->app);
