@@ -20,6 +20,7 @@
 #include "sdfprune/builtin.hpp"
 #include "sdfprune/io.hpp"
 #include "sdfprune/mesh.hpp"
+#include "prune_check.hpp"
 #include "test_util.hpp"
 
 namespace sdfprune {
@@ -255,6 +256,34 @@ TEST(MeshShapes, GridsWhoseCellsTileTheCubes) {
     EXPECT_EQ(default_mesh_grid(20), 5u);
     EXPECT_EQ(default_mesh_grid(6), 3u);
     EXPECT_EQ(default_mesh_grid(49), 49u);
+}
+
+TEST(MeshShapes, RandomScenesUnderEveryPlacementMatchNaive) {
+    // Cube culling inside near-field cells leans on the root's Lipschitz bound: scenes with
+    // similarity maps (scales 0.3-3), non-uniform scales and shears, smooth operators and plane
+    // cuts, meshed at the default pruning grid and at one of 2³ cubes per cell.
+    for (uint32_t i = 0; i < 10; ++i) {
+        SCOPED_TRACE("random scene " + std::to_string(i));
+        test::RandomSceneSpec spec;
+        spec.primitives = 4 + 3 * i;
+        spec.tree = test::TreeShape(i % 4);
+        spec.placement = test::Placement(i % 5);
+        spec.smooth_prob = (i % 3) * 0.5f;
+        spec.plane_cut = i % 5 == 3;
+        spec.union_share = 0.8f;
+        spec.clip_aabb = i % 4 == 2;
+        const Scene sc = test::random_scene(9300 + i, spec);
+        const uint32_t res = 40;
+        const Mesh naive = naive_mesh(sc, res);
+        ASSERT_GT(naive.triangle_count(), 100u);
+        check_closed_manifold(naive);
+        PruneOptions po;
+        po.resolution = default_mesh_grid(res);
+        po.refine = 1;
+        expect_identical(pruned_mesh(sc, res, po), naive);
+        po.resolution = res / 2;
+        expect_identical(pruned_mesh(sc, res, po), naive);
+    }
 }
 
 TEST(MeshShapes, ZeroAtGridCornersCountsAsOutside) {
