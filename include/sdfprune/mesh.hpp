@@ -24,12 +24,15 @@
 //
 // Cost: the pruned version visits only cubes overlapping near-field cells of the pruned grid
 // (a far-field cell has f != 0 everywhere in it, so no surface), plus the cubes where an inside
-// far-field cell meets the AABB (their cap), and evaluates each corner of those cubes once,
-// with the tape of a near-field cell holding it. Memory: corners are stored in 8³ bricks
-// allocated only where needed, about 7.3 bytes per corner of an allocated brick, 11.3 for the
-// pruned version when the grid's cells are the cubes (the naive version allocates all bricks:
-// ~7.3·(resolution+1)³ bytes, 125 MB at 256), plus 4·(resolution/8+1)³ bytes of brick table,
-// plus the mesh.
+// far-field cell meets the AABB (their cap). Where the grid's cells are made of 2³ to 8³ cubes,
+// it drops inside each cell the boxes of cubes whose centre value clears their Lipschitz reach,
+// halving them down to single cubes, so the cubes kept do not depend on the pruning grid and a
+// coarse grid (default_mesh_grid) is the fastest. It evaluates each corner of the cubes kept
+// once, with the tape of a near-field cell holding it, the corners of a cell together in vector
+// lanes (eval_tape_lanes). Memory: corners are stored in 8³ bricks allocated only where needed,
+// about 9.2 bytes per corner of an allocated brick, 13.2 when the bricks keep the cells' tapes (the
+// naive version allocates all bricks: ~9.2·(resolution+1)³ bytes, 156 MB at 256), plus
+// 4·(resolution/8+1)³ bytes of brick table, plus the mesh.
 //
 // Thread-safety: mesh() functions are pure (they read the scene / grid, which may be shared);
 // they run on oneTBB with options.threads workers.
@@ -98,9 +101,10 @@ struct MeshStats {
 // tape of a near-field cell holding it. Near-field tapes return the full tree's values bit for
 // bit, so the result equals mesh(grid.scene(), options) (as far as the grid's far-field
 // guarantee holds: sign(f) known over each far-field cell). The grid's resolution need not
-// equal options.resolution, but equal is fastest: cubes are then exactly the grid's cells;
-// otherwise a corner held by far-field cells only (rare, except on caps) costs a full-tree
-// evaluation. Throws std::invalid_argument for a bad resolution, MeshCancelled when cancelled.
+// divide options.resolution, but default_mesh_grid(options.resolution) is the fastest (cells of
+// up to 8³ cubes); where it does not divide it, each corner looks up its cell, and one held by
+// far-field cells only (rare, except on caps) costs a full-tree evaluation. Throws
+// std::invalid_argument for a bad resolution, MeshCancelled when cancelled.
 Mesh mesh(const PrunedGrid& grid, const MeshOptions& options = {}, MeshStats* stats = nullptr);
 
 // The naive baseline: the full tree at every one of the (resolution + 1)³ grid corners, with
