@@ -441,7 +441,8 @@ TEST(DiscretizeCli, GridFollowsResolution) {
     discretize_pruned(prune(sc, po), 24, v);
     EXPECT_EQ(read_npy(out).data, v);
     // An explicit --refine is kept.
-    r = test::run_cli("discretize builtin:demo -o " + out + " --res 24 --grid 64 --refine 3 --json");
+    r = test::run_cli("discretize builtin:demo -o " + out +
+                      " --res 24 --grid 64 --refine 3 --json");
     ASSERT_EQ(r.status, 0) << r.err;
     EXPECT_NE(r.out.find("\"refine\":3"), std::string::npos) << r.out;
     po.refine = 3;

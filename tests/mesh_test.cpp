@@ -16,11 +16,11 @@
 #include <set>
 #include <sstream>
 
+#include "prune_check.hpp"
 #include "sdfprune/builder.hpp"
 #include "sdfprune/builtin.hpp"
 #include "sdfprune/io.hpp"
 #include "sdfprune/mesh.hpp"
-#include "prune_check.hpp"
 #include "test_util.hpp"
 
 namespace sdfprune {
@@ -493,7 +493,8 @@ TEST(MeshCli, WritesPlyAndReportsJson) {
     EXPECT_EQ(d32["grid"].GetDouble(), 32);
     EXPECT_EQ(read_file(path), s) << "the same mesh from any pruning grid";
     // An odd resolution prunes at itself.
-    const test::CliResult odd = test::run_cli("mesh builtin:sphere -o " + path + " --res 33 --json");
+    const test::CliResult odd =
+        test::run_cli("mesh builtin:sphere -o " + path + " --res 33 --json");
     ASSERT_EQ(odd.status, 0) << odd.err;
     const rapidjson::Document dodd = last_json_line(odd.out);
     ASSERT_TRUE(dodd.IsObject()) << odd.out;

@@ -12,8 +12,8 @@ namespace sdfprune {
 namespace {
 
 template <uint32_t W>
-void eval_rows(const Scene& sc, std::span<const uint32_t> tape, const PointLanes& p,
-               uint32_t lanes, float* stack) {
+void eval_rows(const Scene& sc, std::span<const uint32_t> tape, const PointLanes& p, uint32_t lanes,
+               float* stack) {
     uint32_t top = 0;
     for (const uint32_t w : tape) {
         const uint32_t n = math::tape_node(w);
@@ -62,8 +62,8 @@ inline void eval_any_rows(const Scene& sc, std::span<const uint32_t> tape, const
 
 }  // namespace
 
-void eval_tape_lanes(const Scene& sc, std::span<const uint32_t> tape, PointLanes& p,
-                     uint32_t count, float* out, float* stack) {
+void eval_tape_lanes(const Scene& sc, std::span<const uint32_t> tape, PointLanes& p, uint32_t count,
+                     float* out, float* stack) {
     const uint32_t lanes =
         count == 1 ? 1 : (count + lanes::kBlock - 1) / lanes::kBlock * lanes::kBlock;
     for (uint32_t i = count; i < lanes; ++i) {

@@ -172,19 +172,19 @@ constexpr std::array<uint8_t, 128> kPopcount7 = make_popcount7();
 // 8³ grid corners, and the cubes having them as lowest corner. Arrays other than the masks are
 // left uninitialized and written before being read.
 struct Brick {
-    uint32_t bx = 0, by = 0, bz = 0;  // brick coordinates
-    uint32_t vbase = 0;               // the brick's first vertex
-    uint64_t cand[kB] = {};           // candidate cubes, one word per z layer
-    uint64_t need[kB] = {};           // corners to evaluate
-    uint64_t inside[kB] = {};         // needed corners with f < 0 (capped on the AABB)
-    uint64_t has_vertex[kB] = {};     // corners with a vertex on an edge from them
-    uint64_t cross[kB] = {};          // candidate cubes whose corners differ in sign
-    uint32_t tbase = 0;               // the brick's first triangle
+    uint32_t bx = 0, by = 0, bz = 0;   // brick coordinates
+    uint32_t vbase = 0;                // the brick's first vertex
+    uint64_t cand[kB] = {};            // candidate cubes, one word per z layer
+    uint64_t need[kB] = {};            // corners to evaluate
+    uint64_t inside[kB] = {};          // needed corners with f < 0 (capped on the AABB)
+    uint64_t has_vertex[kB] = {};      // corners with a vertex on an edge from them
+    uint64_t cross[kB] = {};           // candidate cubes whose corners differ in sign
+    uint32_t tbase = 0;                // the brick's first triangle
     uint8_t cube_case[kBrickCorners];  // crossing cubes: bit k = cube corner k is inside
     // The bricks around this one: offset (dx, dy, dz) in {-1, 0, 1}³ at
     // (dx + 1) + 3 (dy + 1) + 9 (dz + 1), this brick at 13; null where none is allocated.
     std::array<const Brick*, 27> near{};
-    float value[kBrickCorners];    // needed corners: f, capped on the AABB
+    float value[kBrickCorners];  // needed corners: f, capped on the AABB
     // Corners with a vertex (has_vertex): bit d-1 = the edge along d has a vertex; their first
     // vertex, relative to vbase.
     uint8_t vmask[kBrickCorners];
@@ -302,8 +302,8 @@ class CornerBricks {
                     for (int dx = -1; dx <= 1; ++dx) {
                         const int64_t x = int64_t(b->bx) + dx, y = int64_t(b->by) + dy,
                                       z = int64_t(b->bz) + dz;
-                        const bool inside = x >= 0 && y >= 0 && z >= 0 && x < nb_ && y < nb_ &&
-                                            z < nb_;
+                        const bool inside =
+                            x >= 0 && y >= 0 && z >= 0 && x < nb_ && y < nb_ && z < nb_;
                         const uint32_t s =
                             inside ? slot_of_[brick_index(uint32_t(x), uint32_t(y), uint32_t(z))]
                                    : kNone;
@@ -564,7 +564,7 @@ void add_candidates(const PrunedGrid& grid, uint32_t n, CornerBricks& bricks,
     constexpr uint32_t kChunkCells = 64;
     const vec3 origin = sc.aabb.min, h = (sc.aabb.max - sc.aabb.min) / float(n);
     const uint32_t chunks = uint32_t((near.size() + kChunkCells - 1) / kChunkCells);
-    parallel_for<MeshCancelled>(chunks, parallel_options(o, 0.0, 0.05), [&](uint64_t c) {
+    parallel_for<MeshCancelled>(chunks, parallel_options(o, 0.0, 0.04), [&](uint64_t c) {
         thread_local std::vector<float> stack;
         stack.resize(size_t(std::max(sc.max_stack, 1u)) * kEvalLanes);
         const size_t end = std::min(near.size(), size_t(c + 1) * kChunkCells);
@@ -617,8 +617,8 @@ class CornerBatch {
     // Corner l of the brick, with `tape`; the batch is evaluated when full or when the tape
     // changes.
     void add(std::span<const uint32_t> tape, uint32_t l) {
-        if (count_ > 0 && (count_ == kEvalLanes || tape.data() != tape_.data() ||
-                           tape.size() != tape_.size()))
+        if (count_ > 0 &&
+            (count_ == kEvalLanes || tape.data() != tape_.data() || tape.size() != tape_.size()))
             flush();
         tape_ = tape;
         const uint32_t x = b_.bx * kB + (l & 7), y = b_.by * kB + ((l >> 3) & 7),
@@ -762,7 +762,7 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
 
     {
         // Stage 2: needed corners.
-        parallel_stage(count, o, 0.0, 0.05, [&](uint32_t i) { compute_needed(bricks[i]); });
+        parallel_stage(count, o, 0.04, 0.05, [&](uint32_t i) { compute_needed(bricks[i]); });
 
         // Stage 3: every needed corner evaluated once, in batches sharing a tape.
         parallel_stage(count, o, 0.05, 0.8, [&](uint32_t i) {
@@ -778,8 +778,8 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
                         for (uint64_t bits = b.need[word]; bits; bits &= bits - 1) {
                             const uint32_t l = word * 64 + uint32_t(std::countr_zero(bits));
                             const std::span<const uint32_t> t =
-                                held_tape(*grid, n, b.bx * kB + (l & 7),
-                                          b.by * kB + ((l >> 3) & 7), b.bz * kB + (l >> 6));
+                                held_tape(*grid, n, b.bx * kB + (l & 7), b.by * kB + ((l >> 3) & 7),
+                                          b.bz * kB + (l >> 6));
                             batch.add(t.empty() ? std::span<const uint32_t>(sc.full_tape) : t, l);
                         }
                 } else {
