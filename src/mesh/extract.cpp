@@ -277,6 +277,31 @@ class CornerBricks {
     void add_candidate(uint32_t x, uint32_t y, uint32_t z, uint32_t tape = kNone) {
         add_cubes(x, y, z, 1, tape);
     }
+    // The same for some of the cubes [x0, x0 + m)³ (as add_cubes): those of `keep`, bit
+    // x + m·y + m²·z for cube (x0 + x, y0 + y, z0 + z).
+    void add_kept_cubes(uint32_t x0, uint32_t y0, uint32_t z0, uint32_t m, const uint64_t* keep,
+                        uint32_t tape) {
+        Brick* b = nullptr;
+        const uint32_t lx = x0 % kB, ly = y0 % kB, lz = z0 % kB;
+        uint32_t ex = 0, ey = 0, ez = 0;  // some cube touches the brick's +x, +y, +z face
+        for (uint32_t w = 0; w < (m * m * m + 63) / 64; ++w)
+            for (uint64_t bits = keep[w]; bits; bits &= bits - 1) {
+                if (!b) b = &allocate(x0 / kB, y0 / kB, z0 / kB);
+                const uint32_t i = w * 64 + uint32_t(std::countr_zero(bits));
+                const uint32_t x = lx + i % m, y = ly + (i / m) % m, z = lz + i / (m * m);
+                const uint32_t l = local_index(x, y, z);
+                b->cand[l >> 6] |= 1ull << (l & 63);
+                if (with_tapes_) b->tape[l] = tape;
+                ex |= x == kB - 1;
+                ey |= y == kB - 1;
+                ez |= z == kB - 1;
+            }
+        if (ex | ey | ez)
+            for (uint32_t dz = 0; dz <= ez; ++dz)
+                for (uint32_t dy = 0; dy <= ey; ++dy)
+                    for (uint32_t dx = 0; dx <= ex; ++dx)
+                        allocate(x0 / kB + dx, y0 / kB + dy, z0 / kB + dz);
+    }
     // Stage 1 for the naive method: every cube is a candidate.
     void add_all_cubes() {
         for (uint32_t bz = 0; bz < nb_; ++bz)
@@ -572,12 +597,7 @@ void add_candidates(const PrunedGrid& grid, uint32_t n, CornerBricks& bricks,
             cull_cubes(sc, grid, n, m, origin, h, near[i], stack.data());
     });
     for (const NearCell& cell : near)
-        for (uint32_t w = 0; w < (m * m * m + 63) / 64; ++w)
-            for (uint64_t bits = cell.keep[w]; bits; bits &= bits - 1) {
-                const uint32_t i = w * 64 + uint32_t(std::countr_zero(bits));
-                bricks.add_candidate(cell.x * m + i % m, cell.y * m + (i / m) % m,
-                                     cell.z * m + i / (m * m), cell.tape);
-            }
+        bricks.add_kept_cubes(cell.x * m, cell.y * m, cell.z * m, m, cell.keep.data(), cell.tape);
 }
 
 // A tape for corner (x, y, z) when the grid's cells are not unions of cubes: a near-field cell
