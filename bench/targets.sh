@@ -95,7 +95,7 @@ log "discretize molecule naive (slow)"
 n=$("$bin" discretize "$scenes/molecule.json" -o "$tmp/n.npy" --res $RES --method naive --json --quiet | tail -n 1)
 pe=$(field "$p" eval_ms); pp=$(field "$p" prune_ms); ne=$(field "$n" eval_ms)
 printf "| naive | – | %.0f ms | %.0f ms | ×1 | ×1 | 841.65 ms |\n" "$ne" "$ne"
-printf "| pruned | %.0f ms | %.1f ms | %.0f ms | ×%.0f | ×%.0f | 8.9 + 1.48 ms: ×569 / ×81 |\n" "$pp" "$pe" \
+printf "| pruned (\`--refine %s\`, the default) | %.0f ms | %.1f ms | %.0f ms | ×%.0f | ×%.0f | 8.9 + 1.48 ms: ×569 / ×81 |\n" "$(field "$p" refine)" "$pp" "$pe" \
   "$(calc '%.3f' "$pp + $pe")" "$(calc '%.3f' "$ne / $pe")" "$(calc '%.3f' "$ne / ($pp + $pe)")"
 echo
 echo "## Full 1920x1080 renders (pruned, wall time of the whole command)"
