@@ -205,10 +205,13 @@ py::array_t<float> eval_sliced(const py::array& points, const py::object& out_ob
 py::tuple mesh_arrays(Mesh&& m) {
     const auto nv = py::ssize_t(m.vertices.size());
     const auto nt = py::ssize_t(m.triangle_count());
-    std::vector<float> v(size_t(nv) * 3);
-    if (nv) std::memcpy(v.data(), m.vertices.data(), v.size() * sizeof(float));
-    m.vertices = {};
-    return py::make_tuple(adopt(std::move(v), {nv, 3}), adopt(std::move(m.triangles), {nt, 3}));
+    // The vertices are read in place: a vec3 is three packed floats.
+    static_assert(sizeof(vec3) == 3 * sizeof(float) && alignof(vec3) == alignof(float));
+    auto* owned = new std::vector<vec3>(std::move(m.vertices));
+    py::capsule free_it(owned, [](void* p) { delete static_cast<std::vector<vec3>*>(p); });
+    py::array_t<float> vertices({nv, py::ssize_t(3)}, reinterpret_cast<const float*>(owned->data()),
+                                free_it);
+    return py::make_tuple(vertices, adopt(std::move(m.triangles), {nt, 3}));
 }
 
 Shading shading_of(const std::string& s) {
