@@ -112,16 +112,30 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
     PruneOptions o;
     o.resolution = 64;
     const PrunedGrid cpu = prune(sc, o);
+    {
+        // Pools sized before each level from the parents' tapes: no level is redone.
+        const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+        EXPECT_EQ(gpu.stats().pool_grows, 0u);
+        EXPECT_EQ(gpu.stats().submissions, 3u);  // one per level
+        expect_same_stats(cpu.stats(), gpu.stats(), "demo 64³, presized");
+        expect_same_cells(cpu, gpu, "demo 64³, presized");
+    }
+    // Without that, the demo's tapes at 64³ outgrow the initial pools (1 Mi words, 64 Ki for
+    // the octants'): they grow and their levels are redone.
+    ::setenv("SDFPRUNE_VULKAN_PRESIZE_WORDS", "0", 1);
     const gpu::Grid gpu = gpu::prune(*dev, sc, o);
-    // The demo's tapes at 64³ outgrow the initial pool (1 Mi words).
+    ::unsetenv("SDFPRUNE_VULKAN_PRESIZE_WORDS");
     EXPECT_GT(gpu.stats().pool_grows, 0u);
+    EXPECT_GT(gpu.stats().submissions, 3u);
+    EXPECT_LE(gpu.stats().submissions, 3u + gpu.stats().pool_grows);
     expect_same_stats(cpu.stats(), gpu.stats(), "demo 64³");
     expect_same_cells(cpu, gpu, "demo 64³");
 }
 
 // The steps' work shapes (GpuStepShape) follow the hierarchy: per level the octants then the
-// cells from them, then the refinement; jobs are the CPU's cells and octants, every job has a
-// lane, and the busiest lane walks at least one parent tape.
+// cells from them, then the refinement; jobs are the CPU's cells and octants, lanes come in
+// teams that share a parent tape (one lane per cell or octant, in refinement per sub-box), and
+// the busiest lane walks at least one parent tape.
 TEST(Gpu, StepShapesFollowTheLevels) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = builtin_scene("demo");
@@ -140,7 +154,10 @@ TEST(Gpu, StepShapesFollowTheLevels) {
         EXPECT_GE(st.dispatches, 1u);
         EXPECT_GE(st.workgroups, st.dispatches);
         EXPECT_GT(st.lanes, 0u);
-        EXPECT_LE(st.lanes, st.jobs);
+        EXPECT_EQ(st.lanes_per_tape, 8u);
+        EXPECT_EQ(st.lanes % st.lanes_per_tape, 0u);
+        // One lane per cell or octant; refinement has a team per cell.
+        EXPECT_LE(st.lanes, st.mode == 3 ? st.lanes_per_tape * st.jobs : st.jobs);
         EXPECT_GT(st.longest_walk_words, 0u);
         if (st.mode == 2) jobs += st.jobs;
     }
