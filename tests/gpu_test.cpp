@@ -113,10 +113,11 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
     o.resolution = 64;
     const PrunedGrid cpu = prune(sc, o);
     {
-        // Pools sized before each level from the parents' tapes: no level is redone.
+        // Pools sized before each level from the parents' tapes: one or two submissions per
+        // level (more only where a level is redone).
         const gpu::Grid gpu = gpu::prune(*dev, sc, o);
-        EXPECT_EQ(gpu.stats().pool_grows, 0u);
-        EXPECT_EQ(gpu.stats().submissions, 3u);  // one per level
+        EXPECT_GE(gpu.stats().submissions, 3u);
+        EXPECT_LE(gpu.stats().submissions, 6u + gpu.stats().pool_grows);
         expect_same_stats(cpu.stats(), gpu.stats(), "demo 64³, presized");
         expect_same_cells(cpu, gpu, "demo 64³, presized");
     }
@@ -127,7 +128,7 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
     ::unsetenv("SDFPRUNE_VULKAN_PRESIZE_WORDS");
     EXPECT_GT(gpu.stats().pool_grows, 0u);
     EXPECT_GT(gpu.stats().submissions, 3u);
-    EXPECT_LE(gpu.stats().submissions, 3u + gpu.stats().pool_grows);
+    EXPECT_LE(gpu.stats().submissions, 6u + gpu.stats().pool_grows);
     expect_same_stats(cpu.stats(), gpu.stats(), "demo 64³");
     expect_same_cells(cpu, gpu, "demo 64³");
 }

@@ -85,6 +85,8 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     ctx.upload(blocks, &root_block, sizeof(root_block));
     uint64_t block_count = 1;
     uint64_t parent_words = head.size();  // the parents' tapes, headers included
+    // The share of the pools' bound (see presize) the last level used.
+    double main_ratio = 1, octant_ratio = 1;
     uint32_t max_len = sc.size();       // longest tape of the current parents
     uint32_t max_depth = sc.max_stack;  // deepest evaluation stack of the current parents
     Buffer& scratch = local.slot();
@@ -275,59 +277,95 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         Buffer& octants = local.create(split ? block_count * 8 * sizeof(PrunedCell) : 16);
         Buffer& refined = local.create(refine ? total * sizeof(PrunedCell) : 16);
         Buffer& next = local.create(finest ? 16 : total * sizeof(GpuBlock));
+        const uint32_t nf = finest ? 0 : res[li + 1] / res[li];
+        // Every cell's tape (with its header) is at most its parent's: the octants' go to the
+        // octant pool, the cells' to the main pool (or first to the octant pool, refined into
+        // the main pool). Sized for twice the share of that bound the last level used.
+        const uint64_t main_bound = per_block * parent_words;
+        const uint64_t octant_bound = split ? 8 * parent_words : 0;
+        const auto share = [](uint64_t bound, double ratio) {
+            return uint64_t(std::ceil(double(bound) * std::min(1.0, 2 * ratio)));
+        };
+        const uint64_t pool_before = g.pool_words;
+        presize(g.pool, capacity, g.pool_words, share(main_bound, main_ratio));
+        presize(octant_pool, octant_capacity, 0,
+                share(octant_bound, octant_ratio) + (refine ? share(main_bound, main_ratio) : 0));
+
+        // Runs `steps` (and expand.comp when `expand`) in one submission, the octant pool
+        // holding `octant_keep` words from before; grows a pool and runs them again while one
+        // overflows.
+        const auto run_steps = [&](std::vector<Step>& steps, bool expand, uint64_t octant_keep) {
+            for (;;) {
+                GpuCounters start{};
+                start.pool_used = g.pool_words;
+                start.pool_capacity = uint32_t(capacity);
+                start.octant_used = uint32_t(octant_keep);
+                start.octant_capacity = uint32_t(octant_capacity);
+                *counter = start;
+                ctx.begin();
+                for (Step& s : steps) {
+                    // The longest tape and deepest stack read back: the cells' (the next
+                    // parents'), not the octants'.
+                    if (s.push.mode == 2) {
+                        ctx.fill(counters, 0, offsetof(GpuCounters, max_len), 4);
+                        ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
+                    }
+                    record_step(s);
+                }
+                if (expand) {
+                    const ExpandPush push{f, uint32_t(total), nf};
+                    ctx.dispatch(KernelId::kExpand, {&blocks, &cells, &next, &counters}, &push,
+                                 sizeof(push), ctx.groups_for(total));
+                }
+                gpu_ms += ctx.submit();
+                ++st.submissions;
+                if (!counter->overflow) break;
+                // Grow the pool that overflowed (keeping what the steps started with) and run
+                // them again. A counter that wrapped past 2^32 words asks for the most the
+                // device allows.
+                const bool main_over = counter->pool_used > capacity,
+                           octant_over = counter->octant_used > octant_capacity;
+                if (main_over || !octant_over)
+                    grow(g.pool, capacity, main_over ? counter->pool_used : max_pool_words,
+                         g.pool_words);
+                if (octant_over)
+                    grow(octant_pool, octant_capacity, counter->octant_used, octant_keep);
+            }
+            g.pool_words = counter->pool_used;
+            for (const Step& s : steps) st.steps.push_back(s.shape);
+            return *counter;
+        };
+
+        // One submission for the level where the parents' longest tape sizes the cells' steps
+        // with a team for every job; where scratch would hold the cells' teams back (long
+        // tapes), the octants first, so that their own longest tape sizes the rest.
         std::vector<Step> steps;
+        uint64_t octant_keep = 0;
         if (split) {
             steps.push_back(plan_step(1, f, block_count * 8, csize, octants, cells, false));
-            steps.push_back(plan_step(2, f, total, csize, octants, cells, refine));
+            Step cells_step = plan_step(2, f, total, csize, octants, cells, refine);
+            if (cells_step.teams < cells_step.team_jobs) {
+                const GpuCounters oc = run_steps(steps, false, 0);
+                octant_keep = oc.octant_used;
+                max_len = std::max(std::min(oc.max_len, max_len), 1u);
+                max_depth = std::max(std::min(oc.max_depth, max_depth), 1u);
+                steps.clear();
+                cells_step = plan_step(2, f, total, csize, octants, cells, refine);
+            }
+            steps.push_back(cells_step);
         } else {
             steps.push_back(plan_step(0, f, total, csize, cells, cells, refine));
         }
         // The finest cells decided again over their sub-boxes (refine_cell), into a new cell
         // array.
         if (refine) steps.push_back(plan_step(3, f, total, csize, refined, cells, false));
-        const uint32_t nf = finest ? 0 : res[li + 1] / res[li];
-        // Every cell's tape (with its header) is at most its parent's: the octants' go to the
-        // octant pool, the cells' to the main pool (or first to the octant pool, refined into
-        // the main pool).
-        const uint64_t child_words = per_block * parent_words;
-        presize(g.pool, capacity, g.pool_words, child_words);
-        presize(octant_pool, octant_capacity, 0,
-                (split ? 8 * parent_words : 0) + (refine ? child_words : 0));
-        for (;;) {
-            GpuCounters start{};
-            start.pool_used = g.pool_words;
-            start.pool_capacity = uint32_t(capacity);
-            start.octant_capacity = uint32_t(octant_capacity);
-            *counter = start;
-            ctx.begin();
-            for (Step& s : steps) {
-                // The longest tape and deepest stack read back: the cells' (the next parents).
-                if (s.push.mode == 2) {
-                    ctx.fill(counters, 0, offsetof(GpuCounters, max_len), 4);
-                    ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
-                }
-                record_step(s);
-            }
-            if (!finest) {
-                const ExpandPush push{f, uint32_t(total), nf};
-                ctx.dispatch(KernelId::kExpand, {&blocks, &cells, &next, &counters}, &push,
-                             sizeof(push), ctx.groups_for(total));
-            }
-            gpu_ms += ctx.submit();
-            ++st.submissions;
-            if (!counter->overflow) break;
-            // Grow the pool that overflowed (keeping what the level started with) and redo it.
-            // A counter that wrapped past 2^32 words asks for the most the device allows.
-            const bool main_over = counter->pool_used > capacity,
-                       octant_over = counter->octant_used > octant_capacity;
-            if (main_over || !octant_over)
-                grow(g.pool, capacity, main_over ? counter->pool_used : max_pool_words,
-                     g.pool_words);
-            if (octant_over) grow(octant_pool, octant_capacity, counter->octant_used, 0);
-        }
+        run_steps(steps, !finest, octant_keep);
+        // (A level that wrote nothing, its tapes all shared with their parents, says nothing.)
+        if (g.pool_words > pool_before)
+            main_ratio = double(g.pool_words - pool_before) / double(main_bound);
+        if (counter->octant_used > 0 && !refine)
+            octant_ratio = double(counter->octant_used) / double(octant_bound);
         const GpuCounters c = *counter;
-        g.pool_words = c.pool_used;
-        for (const Step& s : steps) st.steps.push_back(s.shape);
         ctx.destroy(octants);
         if (refine) {
             ctx.destroy(cells);
