@@ -151,9 +151,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     const auto plan_step = [&](uint32_t mode, uint32_t factor, uint64_t jobs, vec3 csize,
                                const Buffer& octants, const Buffer& cells, bool transient) {
         const uint64_t per_block = uint64_t(factor) * factor * factor, hf = factor / 2;
-        const auto teams_for = [](uint64_t boxes) {
-            return (boxes + kPruneTeam - 1) / kPruneTeam;
-        };
+        const auto teams_for = [](uint64_t boxes) { return (boxes + kPruneTeam - 1) / kPruneTeam; };
         Step s;
         s.octants = &octants;
         s.cells = &cells;
@@ -190,8 +188,8 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         const auto windows = [](uint64_t words) {
             return (words + kPruneWindow - 1) / kPruneWindow;
         };
-        const uint64_t batch_len = mode == 3 ? std::min<uint64_t>(max_len, math::kRefineMaxTape)
-                                             : max_len;
+        const uint64_t batch_len =
+            mode == 3 ? std::min<uint64_t>(max_len, math::kRefineMaxTape) : max_len;
         const uint64_t per_job =
             std::max((batches + 2) * windows(batch_len), 3 * windows(max_len)) + 2;
         // Under a loop limit (lavapipe), as many jobs per team and dispatch as fit the limit,
@@ -204,7 +202,8 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                                     2 * kPruneWindow + 8;
         const uint64_t max_steps = (Context::kLoopLimit - 1024) / step_loops;
         s.rounds = limited ? (per_job + max_steps - 1) / max_steps : 1;
-        const uint32_t budget = !limited ? 0xffffffffu : uint32_t(s.rounds > 1 ? max_steps : per_job);
+        const uint32_t budget =
+            !limited ? 0xffffffffu : uint32_t(s.rounds > 1 ? max_steps : per_job);
         s.per_dispatch = limited ? s.teams * std::max<uint64_t>(1, max_steps / per_job)
                                  : std::max<uint64_t>(s.team_jobs, 1);
         s.push = PrunePush{vec4(origin.x, origin.y, origin.z, L),
@@ -249,8 +248,8 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                 push.jobs = uint32_t(std::min<uint64_t>(s.team_jobs, first + s.per_dispatch));
                 push.round = round;
                 ctx.dispatch(KernelId::kPrune,
-                             {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, s.octants,
-                              s.cells, &counters, &scratch, &octant_pool},
+                             {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, s.octants, s.cells,
+                              &counters, &scratch, &octant_pool},
                              &push, sizeof(push), s.groups);
                 ++s.shape.dispatches;
                 s.shape.workgroups += s.groups;
