@@ -69,8 +69,8 @@ void tape_write(uint ref, uint value) {
 // Per team (see team_words): the lanes' job state (kStateWords each), each parent-tape entry's
 // left operand (one word, the same in every lane), each entry's decision and sweep flags (one
 // word per lane), then 4 words per stack slot and lane (value, lo, hi, entry). Lane l's
-// word of item k is at k · kTeam + l. Coherent: a team's lanes read each other's decisions and
-// far-field flags (refinement) and lane 0's left operands, written at earlier steps.
+// word of item k is at k · kTeam + l. Coherent: in refinement a team's lanes read each other's
+// decisions and far-field flags, written at earlier steps (a barrier between).
 layout(std430, binding = 8) coherent buffer Scratch { uint scratch[]; };
 
 layout(push_constant) uniform Push {
@@ -346,7 +346,9 @@ void main() {
                         float rhi = uintBitsToFloat(scratch[sr + 2u * kTeam]);
                         float sgn = operator_s(kind), k = nd.blend;
                         decision = prune_decision(sgn, k, llo, lhi, rlo, rhi);
-                        if (lane == 0u) scratch[lbase + i] = scratch[sl + 3u * kTeam];
+                        // Written by every lane (the same value): a lane's sweep may follow in
+                        // this very step, and reads its own write, with no barrier between.
+                        scratch[lbase + i] = scratch[sl + 3u * kTeam];
                         v = apply_operator(sgn, k, lv, rv);
                         if (decision == kLeftWins) {
                             lo = llo;
