@@ -1,8 +1,8 @@
 #version 450
 // prune.comp — one pruning step of a level, on teams of kTeam lanes: a team walks one parent
 // tape in lockstep, each lane pruning one box from it. Mirrors src/prune/prune_cell.cpp stage for
-// stage (evaluate_boxes over sibling lanes, is_near_field, compact_siblings, refine_cell) and
-// the octant split of src/prune/prune.cpp. A team's job:
+// stage (evaluate_boxes over sibling lanes, is_near_field, compact_tape in each lane,
+// refine_cell) and the octant split of src/prune/prune.cpp. A team's job:
 //   mode 0: kTeam cells of a block, from the block's tape
 //   mode 1: the 8 octants of a block, from the block's tape (not stored as cells)
 //   mode 2: kTeam cells of an octant, from the octant's tape (or far-field from a far octant)
@@ -16,7 +16,7 @@
 // lane of a team runs the same entry at the same step. Decisions and the sweep's flags are kept
 // per lane and entry, interleaved so that a team's lanes touch adjacent words.
 // New tapes are appended to the pool with an atomic counter; on overflow nothing is written
-// (the box is stored as far-field) and the host grows the pool and runs the level again.
+// (the box is stored as far-field) and the host grows the pool and runs the steps again.
 //
 // A job is resumable: its lanes' state lives in the team's scratch, and each dispatch (a
 // "round") runs at most pc.budget steps of it. Devices without a loop limit use one round with

@@ -194,12 +194,14 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             std::max((batches + 2) * windows(batch_len), 3 * windows(max_len)) + 2;
         // Under a loop limit (lavapipe), as many jobs per team and dispatch as fit the limit,
         // or one job resumed over as many rounds as its steps need; elsewhere one unlimited
-        // round. A step's loops: staging the window, evaluating it (kPruneBatchesPerStep times
-        // over a short tape), refinement's far-field test over the team, the sweep, the write.
+        // round. A step's loops: staging the window, evaluating it (in refinement up to
+        // kPruneBatchesPerStep times, over a tape that fits it), refinement's far-field test
+        // over the team, the sweep, the write; each over at most the longest tape.
         const bool limited = ctx.loop_limited();
+        const uint64_t step_len = std::min<uint64_t>(max_len, kPruneWindow);
         const uint64_t step_loops = kPruneWindow / kPruneTeam +
-                                    kPruneBatchesPerStep * kPruneWindow + kPruneTeam +
-                                    2 * kPruneWindow + 8;
+                                    (mode == 3 ? kPruneBatchesPerStep : 1) * step_len + kPruneTeam +
+                                    2 * step_len + 8;
         const uint64_t max_steps = (Context::kLoopLimit - 1024) / step_loops;
         s.rounds = limited ? (per_job + max_steps - 1) / max_steps : 1;
         const uint32_t budget =
@@ -279,7 +281,9 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         const uint32_t nf = finest ? 0 : res[li + 1] / res[li];
         // Every cell's tape (with its header) is at most its parent's: the octants' go to the
         // octant pool, the cells' to the main pool (or first to the octant pool, refined into
-        // the main pool). Sized for twice the share of that bound the last level used.
+        // the main pool). Sized for twice the share of that bound the last level used (finer
+        // levels tend to use less of it, more of their cells being far-field; with 1.25 times,
+        // the generated fluid's finest level overflowed and was redone).
         const uint64_t main_bound = per_block * parent_words;
         const uint64_t octant_bound = split ? 8 * parent_words : 0;
         const auto share = [](uint64_t bound, double ratio) {
