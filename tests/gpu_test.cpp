@@ -1,7 +1,8 @@
 // gpu_test.cpp — the Vulkan backend against the CPU backend (the reference): the same
 // statistics and the same finest cells (far-field constants, tapes word for word) over random
-// scenes and options, the same images and samples, buffer growth, a deep chain, and the CLI's
-// handling of --backend. Runs on whatever Vulkan device is present (Mesa's lavapipe in CI).
+// scenes and options on lavapipe (on other devices: what the cells must guarantee, statistics
+// within 1 %), the same images and samples, buffer growth, a deep chain, and the CLI's handling
+// of --backend. Runs on whatever Vulkan device is present (Mesa's lavapipe in CI).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -11,6 +12,7 @@
 #include "prune_check.hpp"
 #include "sdfprune/builtin.hpp"
 #include "sdfprune/discretize.hpp"
+#include "sdfprune/eval.hpp"
 #include "sdfprune/gpu.hpp"
 #include "sdfprune/io.hpp"
 #include "sdfprune/render.hpp"
@@ -41,9 +43,67 @@ gpu::Device* device(std::string& why) {
     gpu::Device* var = device(why_);                                                   \
     ASSERT_NE(var, nullptr) << "no Vulkan device (install mesa-vulkan-drivers): " << why_
 
-void expect_same_stats(const PruneStats& cpu, const PruneStats& gpu, const std::string& what) {
-    expect_same_prune_stats(cpu, gpu, what);
+// Whether the device should give the CPU's grids bit for bit: lavapipe (the same LLVM code
+// generation rules as the CPU build, no fused multiply-add). Other drivers may round a centre
+// or a bound differently and so decide a borderline operator or cell the other way; there the
+// tests check what a grid must guarantee instead (expect_valid_cells). SDFPRUNE_GPU_EXACT=0 or
+// 1 overrides the choice.
+bool exact_device(const gpu::Device& dev) {
+    if (const char* env = std::getenv("SDFPRUNE_GPU_EXACT")) return std::string(env) != "0";
+    return dev.name().find("llvmpipe") != std::string::npos;
+}
+
+// On an exact device the same statistics; elsewhere within 1 % (cells that flip near a
+// decision's margin move the averages a little).
+void expect_same_stats(const PruneStats& cpu, const PruneStats& gpu, const std::string& what,
+                       bool exact = true) {
     EXPECT_EQ(cpu.levels, gpu.levels) << what;
+    if (exact) return expect_same_prune_stats(cpu, gpu, what);
+    SCOPED_TRACE(what);
+    EXPECT_EQ(cpu.cells, gpu.cells);
+    const auto near = [](double a, double b) {
+        return std::fabs(a - b) <= 0.01 * (1 + std::fabs(a));
+    };
+    EXPECT_PRED2(near, double(cpu.near_field_cells), double(gpu.near_field_cells));
+    EXPECT_PRED2(near, cpu.active_avg, gpu.active_avg);
+    EXPECT_PRED2(near, cpu.tape_avg, gpu.tape_avg);
+}
+
+// What every finest cell must guarantee, whichever device made it, at its centre and 8 points
+// near its corners: a near-field cell's tape gives the full tree's value (within float
+// rounding); a far-field constant has the value's sign and never overstates it (a lower bound of
+// |f| over the cell).
+void expect_valid_cells(const Scene& sc, const gpu::Grid& gpu, const std::string& what) {
+    SCOPED_TRACE(what);
+    const uint32_t N = gpu.stats().grid;
+    const vec3 cs = (sc.aabb.max - sc.aabb.min) / float(N);
+    std::vector<float> stack(sc.max_stack + 1);
+    uint64_t bad = 0;
+    gpu.for_each_finest_cell([&](uint64_t i, const gpu::Grid::CellContents& c) {
+        const uint32_t x = uint32_t(i % N), y = uint32_t(i / N % N), z = uint32_t(i / N / N);
+        const vec3 centre =
+            sc.aabb.min + vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * cs;
+        for (uint32_t k = 0; k < 9; ++k) {
+            const vec3 d = k == 0 ? vec3(0, 0, 0)
+                                  : vec3(k & 1 ? 0.45f : -0.45f, k & 2 ? 0.45f : -0.45f,
+                                         k & 4 ? 0.45f : -0.45f);
+            const vec3 p = centre + d * cs;
+            const float f = eval_tape(sc, sc.full_tape, p, stack.data());
+            const float tol = 1e-5f * (1 + std::fabs(f));
+            bool ok;
+            if (c.far_field)
+                ok = c.constant > 0 ? f >= c.constant - tol : f <= c.constant + tol;
+            else
+                ok = std::fabs(eval_tape(sc, c.tape, p, stack.data()) - f) <= tol;
+            if (!ok && ++bad <= 3)
+                ADD_FAILURE() << "cell (" << x << ", " << y << ", " << z << ") point " << k
+                              << ": full tree " << f << ", "
+                              << (c.far_field ? "far " + std::to_string(c.constant)
+                                              : "tape gives " + std::to_string(eval_tape(
+                                                                    sc, c.tape, p, stack.data())));
+        }
+    });
+    EXPECT_EQ(bad, 0u);
 }
 
 // Every finest cell: same kind, same far-field constant, same tape.
@@ -101,8 +161,10 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
             (o.far_field ? "" : " no-farfield") + (o.hierarchy ? "" : " no-hierarchy");
         const PrunedGrid cpu = prune(sc, o);
         const gpu::Grid gpu = gpu::prune(*dev, sc, o);
-        expect_same_stats(cpu.stats(), gpu.stats(), what);
-        expect_same_cells(cpu, gpu, what);
+        const bool exact = exact_device(*dev);
+        expect_same_stats(cpu.stats(), gpu.stats(), what, exact);
+        if (exact) expect_same_cells(cpu, gpu, what);
+        expect_valid_cells(sc, gpu, what);  // on every device
     }
 }
 
@@ -112,16 +174,37 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
     PruneOptions o;
     o.resolution = 64;
     const PrunedGrid cpu = prune(sc, o);
+    {
+        // Pools sized before each level from the parents' tapes: one or two submissions per
+        // level (more only where a level is redone).
+        const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+        EXPECT_GE(gpu.stats().submissions, 3u);
+        EXPECT_LE(gpu.stats().submissions, 6u + gpu.stats().pool_grows);
+        expect_same_stats(cpu.stats(), gpu.stats(), "demo 64³, presized", exact_device(*dev));
+        if (exact_device(*dev))
+            expect_same_cells(cpu, gpu, "demo 64³, presized");
+        else
+            expect_valid_cells(sc, gpu, "demo 64³, presized");
+    }
+    // Without that, the demo's tapes at 64³ outgrow the initial pools (1 Mi words, 64 Ki for
+    // the octants'): they grow and their levels are redone.
+    ::setenv("SDFPRUNE_VULKAN_PRESIZE_WORDS", "0", 1);
     const gpu::Grid gpu = gpu::prune(*dev, sc, o);
-    // The demo's tapes at 64³ outgrow the initial pool (1 Mi words).
+    ::unsetenv("SDFPRUNE_VULKAN_PRESIZE_WORDS");
     EXPECT_GT(gpu.stats().pool_grows, 0u);
-    expect_same_stats(cpu.stats(), gpu.stats(), "demo 64³");
-    expect_same_cells(cpu, gpu, "demo 64³");
+    EXPECT_GT(gpu.stats().submissions, 3u);
+    EXPECT_LE(gpu.stats().submissions, 6u + gpu.stats().pool_grows);
+    expect_same_stats(cpu.stats(), gpu.stats(), "demo 64³", exact_device(*dev));
+    if (exact_device(*dev))
+        expect_same_cells(cpu, gpu, "demo 64³");
+    else
+        expect_valid_cells(sc, gpu, "demo 64³");
 }
 
 // The steps' work shapes (GpuStepShape) follow the hierarchy: per level the octants then the
-// cells from them, then the refinement; jobs are the CPU's cells and octants, every job has a
-// lane, and the busiest lane walks at least one parent tape.
+// cells from them, then the refinement; jobs are the CPU's cells and octants, lanes come in
+// teams that share a parent tape (one lane per cell or octant, in refinement per sub-box), and
+// the busiest lane walks at least one parent tape.
 TEST(Gpu, StepShapesFollowTheLevels) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = builtin_scene("demo");
@@ -140,7 +223,10 @@ TEST(Gpu, StepShapesFollowTheLevels) {
         EXPECT_GE(st.dispatches, 1u);
         EXPECT_GE(st.workgroups, st.dispatches);
         EXPECT_GT(st.lanes, 0u);
-        EXPECT_LE(st.lanes, st.jobs);
+        EXPECT_EQ(st.lanes_per_tape, 8u);
+        EXPECT_EQ(st.lanes % st.lanes_per_tape, 0u);
+        // One lane per cell or octant; refinement has a team per cell.
+        EXPECT_LE(st.lanes, st.mode == 3 ? st.lanes_per_tape * st.jobs : st.jobs);
         EXPECT_GT(st.longest_walk_words, 0u);
         if (st.mode == 2) jobs += st.jobs;
     }
@@ -176,8 +262,11 @@ TEST(Gpu, DeepChainPrunes) {
         const PrunedGrid cpu = prune(sc, o);
         const gpu::Grid gpu = gpu::prune(*dev, sc, o);
         const std::string what = "chain of " + std::to_string(depth);
-        expect_same_stats(cpu.stats(), gpu.stats(), what);
-        expect_same_cells(cpu, gpu, what);
+        expect_same_stats(cpu.stats(), gpu.stats(), what, exact_device(*dev));
+        if (exact_device(*dev))
+            expect_same_cells(cpu, gpu, what);
+        else
+            expect_valid_cells(sc, gpu, what);
     }
 }
 
@@ -190,7 +279,7 @@ TEST(Gpu, ReferenceScenesMatchCpu) {
         o.resolution = 128;
         const PrunedGrid cpu = prune(sc, o);
         const gpu::Grid gpu = gpu::prune(*dev, sc, o);
-        expect_same_stats(cpu.stats(), gpu.stats(), file);
+        expect_same_stats(cpu.stats(), gpu.stats(), file, exact_device(*dev));
     }
 }
 
@@ -264,7 +353,9 @@ TEST(Gpu, DiscretizeMatchesCpu) {
     const PrunedGrid cpu = prune(sc, o);
     const gpu::Grid gpu = gpu::prune(*dev, sc, o);
     for (uint32_t n : {32u, 20u, 48u})
-        EXPECT_EQ(discretize_mismatches(cpu, *dev, gpu, n), 0u) << "n = " << n;
+        EXPECT_LE(discretize_mismatches(cpu, *dev, gpu, n),
+                  exact_device(*dev) ? 0u : size_t(n) * n * n / 100)
+            << "n = " << n;
 }
 
 // A device whose shaders address at most 1 MiB of one buffer: images and grids come back in
@@ -289,7 +380,7 @@ TEST(Gpu, SmallBufferRangeSplitsTheWork) {
     o.resolution = 16;
     const PrunedGrid cpu = prune(sc, o);
     const gpu::Grid gpu = gpu::prune(*small, sc, o);
-    expect_same_stats(cpu.stats(), gpu.stats(), "16^3 on a 1 MiB device");
+    expect_same_stats(cpu.stats(), gpu.stats(), "16^3 on a 1 MiB device", exact_device(*small));
 
     RenderOptions ro;
     ro.width = 256;  // 49,152 pixels of 32 bytes: chunks of 32,768
@@ -302,7 +393,8 @@ TEST(Gpu, SmallBufferRangeSplitsTheWork) {
     EXPECT_NEAR(cs.steps_avg, gs.steps_avg, 0.01 * cs.steps_avg);
     EXPECT_GT(gs.hit_fraction, 0.0);
 
-    EXPECT_EQ(discretize_mismatches(cpu, *small, gpu, 90), 0u);  // 729,000 values: 3 slices
+    // 729,000 values: 3 slices.
+    EXPECT_LE(discretize_mismatches(cpu, *small, gpu, 90), exact_device(*small) ? 0u : 7290u);
 
     o.resolution = 256;
     const uint64_t held = small->memory_in_use();
@@ -330,9 +422,14 @@ TEST(GpuCli, StatsOnVulkanEqualCpu) {
         return at == std::string::npos ? std::string("missing")
                                        : json.substr(at, json.find(',', at) - at);
     };
+    // Elsewhere than lavapipe the figures may differ a little (see exact_device).
     for (const char* key :
-         {"near_field_cells", "active_avg", "active_std", "active_max", "tape_avg", "tape_max"})
-        EXPECT_EQ(field(cpu.out, key), field(gpu.out, key)) << key;
+         {"near_field_cells", "active_avg", "active_std", "active_max", "tape_avg", "tape_max"}) {
+        if (exact_device(*dev))
+            EXPECT_EQ(field(cpu.out, key), field(gpu.out, key)) << key;
+        else
+            EXPECT_NE(field(gpu.out, key), "missing") << key;
+    }
     EXPECT_NE(gpu.out.find("\"backend\":\"vulkan\""), std::string::npos);
     EXPECT_NE(gpu.out.find("\"device\":"), std::string::npos);
 }

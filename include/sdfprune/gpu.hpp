@@ -4,8 +4,9 @@
 //
 // The shaders include shaders/shared/sdf_math.h, the same header the CPU code uses, and mirror
 // the CPU stages step for step, so both backends find the same tapes and statistics. Tapes are
-// allocated in device buffers sized from counts (the tape pool grows and the level is redone
-// when it overflows); a device that truly lacks memory gives a GpuError.
+// allocated in device buffers sized from counts (before each level from the parents' tapes, up
+// to a cap; past it the tape pool grows and the level is redone when it overflows); a device
+// that truly lacks memory gives a GpuError.
 //
 // Thread-safety: a Device and the grids made with it are used from one thread at a time.
 #pragma once
@@ -54,7 +55,9 @@ class Device {
 // Pruning statistics as PruneStats; prune_ms is GPU time (timestamps), prune_peak_bytes the
 // device memory held at most while pruning, tape_bytes the device bytes of the result.
 // wall_ms adds the host's share (submissions, waits, buffer growth); pool_grows counts the
-// steps redone after the tape pool overflowed and grew.
+// times a pool overflowed and grew (its level is then redone); submissions counts the
+// pruning's submissions to the device, each waited for (one per level, and one more per
+// level redone).
 // The work shape of one pruning step on the device (a kernel over one level's octants, cells
 // or refinement jobs), to judge the kernel's fit to a GPU without one: how many dispatches and
 // workgroups it took, how many invocations (lanes) had work, and how far the busiest lane walks
@@ -64,19 +67,23 @@ struct GpuStepShape {
     // 0: cells from their parents' tapes; 1: a block's octants; 2: cells from their octants';
     // 3: the finest cells' sub-box refinement
     uint32_t mode = 0;
-    uint32_t dispatches = 0;  // redone steps (the pool grew) included
+    uint32_t dispatches = 0;  // redone levels (a pool grew) included
     uint64_t workgroups = 0;  // over all dispatches
     uint64_t jobs = 0;        // cells or octants
-    uint64_t lanes = 0;       // invocations with at least one job
-    // The tape words one lane reads in sequence, at most: its jobs (jobs / lanes, rounded up)
-    // times the passes over a parent tape per job (evaluation, compaction, and one per sub-box
-    // in refinement) times the parents' longest tape. A bound, not a count.
+    uint64_t lanes = 0;       // invocations with a job (whole teams, see lanes_per_tape)
+    // Lanes that walk one parent tape together in lockstep (a team): one per child box (cell,
+    // octant, or sub-box in refinement).
+    uint32_t lanes_per_tape = 1;
+    // The tape words one lane reads in sequence, at most: its team's jobs (rounded up) times
+    // the passes over a parent tape per job (evaluation once per batch of sub-boxes, the
+    // sweep, the write) times the parents' longest tape. A bound, not a count.
     uint64_t longest_walk_words = 0;
 };
 
 struct DevicePruneStats : PruneStats {
     double wall_ms = 0;
     uint32_t pool_grows = 0;
+    uint32_t submissions = 0;
     std::vector<GpuStepShape> steps;  // in the order they ran
 };
 

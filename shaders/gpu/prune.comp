@@ -1,25 +1,40 @@
 #version 450
-// prune.comp — one pruning step of a level, one job (a cell or an octant) per iteration of a
-// persistent thread; mirrors src/prune/prune_cell.cpp stage for stage (evaluate_cell,
-// is_near_field, compact_tape) and the octant split of src/prune/prune.cpp.
-//   mode 0: cells of a level from their block's tape (blocks[job / f³])
-//   mode 1: the 8 octants of each block from the block's tape (not stored as cells)
-//   mode 2: cells of a level from their octant's tape (or far-field from a far octant)
-//   mode 3: finest near-field cells decided again over refine³ sub-boxes (refine_cell), from
-//           `cells` into the buffer of binding 5; tapes longer than kRefineMaxTape are copied
+// prune.comp — one pruning step of a level, on teams of kTeam lanes: a team walks one parent
+// tape in lockstep, each lane pruning one box from it. Mirrors src/prune/prune_cell.cpp stage for
+// stage (evaluate_boxes over sibling lanes, is_near_field, compact_tape in each lane,
+// refine_cell) and the octant split of src/prune/prune.cpp. A team's job:
+//   mode 0: kTeam cells of a block, from the block's tape
+//   mode 1: the 8 octants of a block, from the block's tape (not stored as cells)
+//   mode 2: kTeam cells of an octant, from the octant's tape (or far-field from a far octant)
+//   mode 3: one finest near-field cell decided again over its refine³ sub-boxes, kTeam at a time
+//           (refine_cell), from `cells` into the buffer of binding 5; tapes longer than
+//           kRefineMaxTape are evaluated once over the cell (which copies them to the main pool)
+// The kernel runs in steps, the same for every lane of a workgroup: at each step a team that
+// evaluates stages the next kWindow entries of its tape (words and nodes) in shared memory, then
+// every lane advances its phase by at most kWindow entries (evaluation from the window; the
+// far-field test; the top-down sweep; the write of the compacted tape). During evaluation every
+// lane of a team runs the same entry at the same step. Decisions and the sweep's flags are kept
+// per lane and entry, interleaved so that a team's lanes touch adjacent words.
 // New tapes are appended to the pool with an atomic counter; on overflow nothing is written
-// and the host grows the pool and runs the step again.
+// (the box is stored as far-field) and the host grows the pool and runs the steps again.
 //
-// A job is resumable: its state lives in the thread's scratch, and each dispatch (a "round")
-// runs at most pc.budget loop iterations of it. Devices without a loop limit use one round with
+// A job is resumable: its lanes' state lives in the team's scratch, and each dispatch (a
+// "round") runs at most pc.budget steps of it. Devices without a loop limit use one round with
 // an unlimited budget; lavapipe, which ends an invocation's loops after 65,535 iterations in
-// all, gets as many jobs per invocation as fit that, or one job over as many rounds as its
-// parent tape needs.
+// all, gets as many jobs per team and dispatch as fit that, or one job over as many rounds as
+// its steps need (gpu_prune.cpp counts them).
 #include "scene.glsl"
 
 layout(local_size_x = 64) in;
 
 #include "cells.glsl"
+
+const uint kTeam = 8u;     // lanes per team (gpu_prune.cpp: kPruneTeam)
+const uint kTeams = 8u;    // teams per workgroup
+const uint kWindow = 64u;  // tape entries a lane advances per step (gpu_prune.cpp: kPruneWindow)
+// Batches of sub-boxes a step evaluates when the whole tape fits the window
+// (gpu_prune.cpp: kPruneBatchesPerStep).
+const uint kBatchesPerStep = 4u;
 
 layout(std430, binding = 4) readonly buffer Blocks { Block blocks[]; };
 layout(std430, binding = 5) buffer Octants { Cell octants[]; };
@@ -34,6 +49,7 @@ layout(std430, binding = 7) buffer Counters {
     uint max_depth;  // deepest evaluation stack of the tapes written or shared in this step
     uint octant_used;      // the octant pool, as pool_used, pool_capacity
     uint octant_capacity;
+    uint near_words;  // words of the near-field cells' tapes with their headers (modes 0 and 2)
 };
 // Octants' tapes (mode 1) live in a pool of their own, dropped after the level: a reference
 // with kInOctantPool set points there. So do the finest cells' tapes that refinement (mode 3)
@@ -50,335 +66,483 @@ void tape_write(uint ref, uint value) {
     else
         pool[ref] = value;
 }
-// Per thread: the job's state (kStateWords), 2 words per parent-tape entry (left operand;
-// decision | alive << 2 | negate << 4), then 4 words per stack slot (value, lo, hi, entry).
-layout(std430, binding = 8) buffer Scratch { uint scratch[]; };
+// Per team (see team_words): the lanes' job state (kStateWords each), each parent-tape entry's
+// left operand (one word, the same in every lane), each entry's decision and sweep flags (one
+// word per lane), then 4 words per stack slot and lane (value, lo, hi, entry). Lane l's
+// word of item k is at k · kTeam + l. Coherent: in refinement a team's lanes read each other's
+// decisions and far-field flags, written at earlier steps (a barrier between).
+layout(std430, binding = 8) coherent buffer Scratch { uint scratch[]; };
 
 layout(push_constant) uniform Push {
     vec4 origin;  // AABB min; w: Lipschitz bound of the root
     vec4 csize;   // cell size of this level; w: far-field C
     uint mode;
     uint factor;  // f: cells per axis of a block
-    uint jobs;
-    uint threads;
-    uint max_len;    // longest parent tape (entry scratch per thread)
+    uint jobs;    // team jobs (see above)
+    uint threads;  // lanes that take jobs (whole teams; the last workgroup may have idle ones)
+    uint max_len;    // longest parent tape (entry scratch per team)
     uint max_stack;  // deepest evaluation stack of the parent tapes
     uint flags;      // 1: far field on; 2: interval bounds; 4: new tapes go to the octant pool
     uint pool_start;  // pool words in use before this step
-    uint first_job;   // this dispatch's jobs: [first_job, jobs)
+    uint first_job;   // this dispatch's team jobs: [first_job, jobs)
     uint round;       // 0: start the jobs; later rounds resume them
-    uint budget;      // loop iterations per job and round
+    uint budget;      // steps per job and round
     uint refine;      // mode 3: sub-boxes per axis
     uint octant_start;  // octant pool words in use before this step
 } pc;
 
-// The state of a job between rounds, at the start of its thread's scratch.
-const uint kStateWords = 16u;
-const uint kPhaseEvaluate = 0u, kPhaseSweep = 1u, kPhaseWrite = 2u, kPhaseDone = 3u;
-// Words: phase, i (next entry), top (stack size; in the write phase the next word), out_len,
-// prims, at (tape offset), value, constant (float bits), the parent's stack depth, the new
-// tape's stack depth now and at most, the sub-box, the far-field flags (1: every sub-box so far
-// clears above, 2: below) and the lowest and highest root bounds so far (float bits).
+// A team's window of its parent tape, staged for the step.
+shared uint s_word[kTeams * kWindow];
+shared Node s_node[kTeams * kWindow];
+// Lanes still busy after a step, counted in one word while the other is reset.
+shared uint s_busy[2];
 
-// Runs (a budget's worth of) pruning the tape at `parent` over the box; returns true in the
-// round that finishes the job, with `near`, `value`, `constant` and `tape` (the new tape, or the parent's when
-// nothing was pruned) set.
-// With subs > 1 (mode 3) the tape is evaluated over each of the box's subs³ sub-boxes, an
-// operator is decided only where all of them agree, and the far-field test asks every sub-box's
-// root range to clear the box's margin (refine_cell in src/prune/prune_cell.cpp).
-bool prune_box(uint parent, vec3 centre, vec3 half_size, float R, uint subs, out bool near,
-               out float value, out float constant, out uint tape) {
-    uint t = gl_GlobalInvocationID.x;
-    uint base = t * (kStateWords + 2u * pc.max_len + 4u * pc.max_stack);
-    uint ebase = base + kStateWords;
-    uint sbase = ebase + 2u * pc.max_len;
-    bool interval = (pc.flags & 2u) != 0u;
-    uint len = tape_read(parent, 0u);
-    if (pc.round == 0u) {
-        for (uint k = 0u; k < kStateWords; ++k) scratch[base + k] = 0u;
-        scratch[base + 12u] = (pc.flags & 1u) != 0u ? 3u : 0u;
-        scratch[base + 13u] = floatBitsToUint(kInfinity);
-        scratch[base + 14u] = floatBitsToUint(-kInfinity);
-    }
-    uint phase = scratch[base], i = scratch[base + 1u], top = scratch[base + 2u];
-    if (phase == kPhaseDone) return false;  // finished in an earlier round
-    uint out_len = scratch[base + 3u], prims = scratch[base + 4u], at = scratch[base + 5u];
-    uint budget = pc.budget;
-    near = true;
-    tape = kFarField;
-    uint nsub = subs * subs * subs;
-    vec3 sub_half = subs == 1u ? half_size : half_size / float(subs);
-    float sub_R = subs == 1u ? R : length(sub_half);
-    uint sb = scratch[base + 11u];
-    while (phase == kPhaseEvaluate && budget > 0u) {
-        // Stage 1: values and ranges at the (sub-)box centre, decisions (evaluate_cell).
-        uvec3 sc = uvec3(sb % subs, (sb / subs) % subs, sb / (subs * subs));
-        precise vec3 sub_centre =
-            subs == 1u ? centre : centre - half_size + vec3(2u * sc + 1u) * sub_half;
-        for (; i < len && budget > 0u; ++i, --budget) {
-            uint w = tape_read(parent, 2u + i);
-            uint n = tape_node(w);
-            uint kind = nodes[n].kind;
-            float spread = nodes[n].lipschitz * sub_R;
-            float v, lo, hi;
-            uint decision = kKeepBoth;
-            if (kind < kPrimitiveKindCount) {
-                uint p = nodes[n].primitive;
-                v = eval_primitive(kind, params[p], sub_centre);
-                lo = v - spread;
-                hi = v + spread;
-                vec4 b0 = extras[p].bound0;
-                if (interval && b0.w > 0.0) {
-                    vec2 r = similarity_range(b0.xyz, b0.w, extras[p].bound1.x,
-                                              extras[p].bound1.y, sub_centre, sub_half);
-                    lo = max(lo, r.x);
-                    hi = min(hi, r.y);
-                }
-            } else {
-                uint sr = sbase + (top - 1u) * 4u, sl = sbase + (top - 2u) * 4u;
-                top -= 2u;
-                float lv = uintBitsToFloat(scratch[sl]), llo = uintBitsToFloat(scratch[sl + 1u]),
-                      lhi = uintBitsToFloat(scratch[sl + 2u]);
-                float rv = uintBitsToFloat(scratch[sr]), rlo = uintBitsToFloat(scratch[sr + 1u]),
-                      rhi = uintBitsToFloat(scratch[sr + 2u]);
-                float sgn = operator_s(kind), k = nodes[n].blend;
-                decision = prune_decision(sgn, k, llo, lhi, rlo, rhi);
-                scratch[ebase + 2u * i] = scratch[sl + 3u];
-                v = apply_operator(sgn, k, lv, rv);
-                if (decision == kLeftWins) {
-                    lo = llo;
-                    hi = lhi;
-                } else if (decision == kRightWins) {
-                    lo = rlo;
-                    hi = rhi;
-                } else if (interval) {
-                    vec2 r2 = operator_range(sgn, k, llo, lhi, rlo, rhi);
-                    lo = max(v - spread, r2.x);
-                    hi = min(v + spread, r2.y);
-                } else {
-                    lo = v - spread;
-                    hi = v + spread;
-                }
-            }
-            if (tape_negated(w)) {
-                v = -v;
-                float tmp = lo;
-                lo = -hi;
-                hi = -tmp;
-            }
-            // Flags cleared for stage 3; over sub-boxes, a decision all of them share.
-            uint e = ebase + 2u * i + 1u;
-            scratch[e] = sb == 0u || scratch[e] == decision ? decision : kKeepBoth;
-            uint so = sbase + top * 4u;
-            scratch[so] = floatBitsToUint(v);
-            scratch[so + 1u] = floatBitsToUint(lo);
-            scratch[so + 2u] = floatBitsToUint(hi);
-            scratch[so + 3u] = i;
-            ++top;
-            scratch[base + 8u] = max(scratch[base + 8u], top);
-        }
-        if (i < len) break;  // out of budget: resume in the next round
-        // Stage 2 for this sub-box: the far-field test on its root range against the box's
-        // margin (is_near_field).
-        float v = uintBitsToFloat(scratch[sbase]);
-        if (sb == 0u) scratch[base + 6u] = floatBitsToUint(v);
-        float L = nodes[tape_node(tape_read(parent, 2u + len - 1u))].lipschitz;
-        float clearance = far_field_clearance(pc.csize.w, L, R);
-        vec2 range = far_field_range(v, uintBitsToFloat(scratch[sbase + 1u]),
-                                     uintBitsToFloat(scratch[sbase + 2u]), L, sub_R);
-        float lo = range.x, hi = range.y;
-        uint far_flags = scratch[base + 12u];
-        if (!clears_above(lo, clearance)) far_flags &= ~1u;
-        if (!clears_below(hi, clearance)) far_flags &= ~2u;
-        scratch[base + 12u] = far_flags;
-        scratch[base + 13u] = floatBitsToUint(min(uintBitsToFloat(scratch[base + 13u]), lo));
-        scratch[base + 14u] = floatBitsToUint(max(uintBitsToFloat(scratch[base + 14u]), hi));
-        ++sb;
-        i = 0u;
-        top = 0u;
-        if (sb < nsub) continue;
-        phase = kPhaseSweep;
-        if ((far_flags & 1u) != 0u) {
-            scratch[base + 7u] = scratch[base + 13u];
-            phase = kPhaseDone;
-            near = false;
-        } else if ((far_flags & 2u) != 0u) {
-            scratch[base + 7u] = scratch[base + 14u];
-            phase = kPhaseDone;
-            near = false;
+const uint kStateWords = 16u;
+const uint kPhaseEvaluate = 0u, kPhaseDecide = 1u, kPhaseSweep = 2u, kPhaseWrite = 3u,
+           kPhaseDone = 4u;
+// State words: phase, i (next entry), top (stack size; in the write phase the next word),
+// out_len, prims, at (the new tape), value, constant (float bits), the parent's stack depth, the
+// new tape's stack depth now and at most, the batch of sub-boxes, the far-field flags (1: every
+// sub-box so far clears above, 2: below) and the lowest and highest root bounds (float bits).
+const uint kStFar = 12u, kStLowest = 13u, kStHighest = 14u;
+// An entry's word per lane: bits 0-1 its decision, then the sweep's flags: bits 2-3 alive (0
+// dead, 1 kept, 2 skipped), bit 4 negate.
+
+uint team_words() {
+    return kStateWords * kTeam + pc.max_len * (1u + kTeam) + 4u * pc.max_stack * kTeam;
+}
+
+// Refinement: an entry's decision shared by the team's 8 lanes (every sub-box), else keep both.
+uint team_decision(uint at) {
+    uint d0 = scratch[at] & 3u, d1 = scratch[at + 1u] & 3u, d2 = scratch[at + 2u] & 3u;
+    uint d3 = scratch[at + 3u] & 3u, d4 = scratch[at + 4u] & 3u, d5 = scratch[at + 5u] & 3u;
+    uint d6 = scratch[at + 6u] & 3u, d7 = scratch[at + 7u] & 3u;
+    uint differ = (d0 ^ d1) | (d0 ^ d2) | (d0 ^ d3) | (d0 ^ d4) | (d0 ^ d5) | (d0 ^ d6) | (d0 ^ d7);
+    return differ == 0u ? d0 : kKeepBoth;
+}
+
+// Stores a finished lane's result: `tape` of `words` words (near), or the far-field constant.
+void store(uint dest, bool near, float value, float constant, uint tape, uint words, Cell c) {
+    if (pc.mode == 3u) {
+        if (near) {
+            c.tape = tape;
         } else {
-            uint root_neg = tape_negated(tape_read(parent, 2u + len - 1u)) ? 1u : 0u;
-            scratch[ebase + 2u * (len - 1u) + 1u] |= (1u << 2) | (root_neg << 4);
-            i = len;
+            c.tape = kFarField;
+            c.bound = constant;
         }
+        octants[dest] = c;
+        return;
     }
-    scratch[base + 11u] = sb;
-    if (phase == kPhaseSweep) {
-        // Stage 3: the top-down pass (compact_tape). Flags: alive (bits 2-3: 1 kept,
-        // 2 skipped), negate (bit 4). An entry's flags are final when the reverse sweep reaches
-        // it (parents come later), so the sweep also counts the kept entries.
-        for (; i > 0u && budget > 0u; --i, --budget) {
-            uint e = i - 1u;
-            uint f = scratch[ebase + 2u * e + 1u];
-            uint w = tape_read(parent, 2u + e);
-            if (((f >> 2) & 3u) != 1u) continue;
-            if (is_primitive(tape_node(w))) {
-                ++out_len;
-                ++prims;
-                continue;
-            }
-            uint l = scratch[ebase + 2u * e], r = e - 1u;
-            uint d = f & 3u;
-            if (d == kKeepBoth) {
-                ++out_len;
-                uint nl = tape_negated(tape_read(parent, 2u + l)) ? 1u : 0u;
-                uint nr = tape_negated(tape_read(parent, 2u + r)) ? 1u : 0u;
-                scratch[ebase + 2u * l + 1u] =
-                    (scratch[ebase + 2u * l + 1u] & 3u) | (1u << 2) | (nl << 4);
-                scratch[ebase + 2u * r + 1u] =
-                    (scratch[ebase + 2u * r + 1u] & 3u) | (1u << 2) | (nr << 4);
-                continue;
-            }
-            uint win = d == kLeftWins ? l : r;
-            uint neg = ((f >> 4) & 1u) ^ (tape_negated(tape_read(parent, 2u + win)) ? 1u : 0u);
-            scratch[ebase + 2u * e + 1u] = (f & 3u) | (2u << 2) | (f & 16u);
-            scratch[ebase + 2u * win + 1u] =
-                (scratch[ebase + 2u * win + 1u] & 3u) | (1u << 2) | (neg << 4);
-        }
-        if (i == 0u) {
-            atomicMax(max_len, out_len);
-            bool transient = pc.mode == 1u || (pc.flags & 4u) != 0u;
-            if (out_len == len && ((parent & kInOctantPool) == 0u || transient)) {
-                at = parent;  // nothing pruned: share the parent's tape
-                atomicMax(max_depth, scratch[base + 8u]);
-                phase = kPhaseDone;
-            } else {
-                bool octant = transient;
-                at = octant ? atomicAdd(octant_used, out_len + 2u)
-                            : atomicAdd(pool_used, out_len + 2u);
-                uint start = octant ? pc.octant_start : pc.pool_start;
-                uint capacity = octant ? octant_capacity : pool_capacity;
-                if (at < start || at + out_len + 2u > capacity || at + out_len + 2u < at ||
-                    at >= kInOctantPool) {
-                    overflow = 1u;
-                    at = kFarField;
-                    phase = kPhaseDone;
-                } else {
-                    if (octant) at |= kInOctantPool;
-                    tape_write(at, out_len);
-                    tape_write(at + 1u, prims);
-                    phase = kPhaseWrite;
-                    top = at + 2u;  // the next word to write
-                }
-            }
-        }
+    Cell result = Cell(near ? tape : kFarField, 0u, value, constant);
+    if (pc.mode == 1u) {
+        octants[dest] = result;
+        return;
     }
-    if (phase == kPhaseWrite) {
-        for (; i < len && budget > 0u; ++i, --budget) {
-            uint f = scratch[ebase + 2u * i + 1u];
-            if (((f >> 2) & 3u) != 1u) continue;
-            uint node = tape_node(tape_read(parent, 2u + i));
-            tape_write(top++, tape_word(node, ((f >> 4) & 1u) != 0u));
-            // Stack depth of the new tape: a primitive pushes, an operator pops two, pushes one.
-            uint depth = is_primitive(node) ? scratch[base + 9u] + 1u : scratch[base + 9u] - 1u;
-            scratch[base + 9u] = depth;
-            scratch[base + 10u] = max(scratch[base + 10u], depth);
-        }
-        if (i == len) {
-            atomicMax(max_depth, scratch[base + 10u]);
-            phase = kPhaseDone;
-        }
+    if (near) {
+        atomicAdd(near_jobs, 1u);
+        atomicAdd(near_words, words + 2u);
     }
-    scratch[base] = phase;
-    scratch[base + 1u] = i;
-    scratch[base + 2u] = top;
-    scratch[base + 3u] = out_len;
-    scratch[base + 4u] = prims;
-    scratch[base + 5u] = at;
-    value = uintBitsToFloat(scratch[base + 6u]);
-    constant = uintBitsToFloat(scratch[base + 7u]);
-    if (phase != kPhaseDone) return false;
-    if (near) tape = at;
-    return true;
+    cells[dest] = result;
 }
 
 void main() {
+    uint tl = gl_LocalInvocationID.x / kTeam, lane = gl_LocalInvocationID.x % kTeam;
+    uint team = gl_WorkGroupID.x * kTeams + tl;
+    uint teams = pc.threads / kTeam;
+    uint tbase = team * team_words();
+    uint st = tbase + lane;                    // state word k at st + k · kTeam
+    uint lbase = tbase + kStateWords * kTeam;  // entry e's left operand at lbase + e
+    uint dbase = lbase + pc.max_len;           // entry e's decision and flags at dbase + e · kTeam
+    uint sbase = dbase + pc.max_len * kTeam;   // stack slot j, word c at sbase + (4j + c) · kTeam
+    uint win = tl * kWindow;                   // the team's window in shared memory
+
     uint f = pc.factor;
     uint per_block = f * f * f;
+    uint hf = f / 2u;
     vec3 origin = pc.origin.xyz;
     vec3 cs = pc.csize.xyz;
     vec3 half_cell = cs * 0.5;
     float radius = length(half_cell);
-    uint hf = f / 2u;
-    for (uint job = pc.first_job + gl_GlobalInvocationID.x; job < pc.jobs; job += pc.threads) {
-        Cell result;
-        result.children = 0u;
-        bool near;
-        if (pc.mode == 1u) {
-            Block b = blocks[job / 8u];
-            uint o = job % 8u;
+    bool interval = (pc.flags & 2u) != 0u;
+    bool transient = pc.mode == 1u || (pc.flags & 4u) != 0u;
+
+    // Every lane of a workgroup sees the same trip count (barriers inside); teams past
+    // pc.threads / kTeam hold no scratch and take no jobs.
+    for (uint first = pc.first_job; first < pc.jobs; first += teams) {
+        uint job = first + team;
+        bool has_job = team < teams && job < pc.jobs;
+        // This lane's box and the team's parent tape; `valid`: the lane stores a result.
+        bool valid = has_job, walk = has_job;
+        uint parent = 0u, dest = 0u, subs = 1u, nbatch = 1u;
+        precise vec3 centre = vec3(0.0);
+        vec3 half_size = half_cell;
+        float R = radius;
+        Cell c0 = Cell(kFarField, 0u, 0.0, 0.0);
+        if (has_job && pc.mode == 1u) {
+            Block b = blocks[job];
+            uint o = lane;
             uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
                              b.z + ((o >> 2) & 1u) * hf);
-            precise vec3 centre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
-            if (!prune_box(b.tape, centre, half_cell * float(hf), radius * float(hf), 1u, near,
-                           result.value, result.bound, result.tape))
-                continue;
-            octants[job] = result;
-            continue;
-        }
-        uint bi = job / per_block, local = job % per_block;
-        Block b = blocks[bi];
-        uvec3 lc = uvec3(local % f, (local / f) % f, local / (f * f));
-        precise vec3 centre = origin + (vec3(b.x + lc.x, b.y + lc.y, b.z + lc.z) + 0.5) * cs;
-        uint parent = b.tape;
-        if (pc.mode == 3u) {
-            // Reads `cells`, writes the refined cells to `octants` (binding 5): a step redone
-            // after a pool overflow starts again from unchanged cells.
-            // Long tapes are not refined (kRefineMaxTape); their one evaluation changes nothing
-            // and copies them from the octant pool to the main pool.
-            Cell c = cells[job];
-            if (c.tape == kFarField) {
-                if (pc.round == 0u) octants[job] = c;
-                continue;
-            }
-            uint subs = tape_read(c.tape, 0u) > kRefineMaxTape ? 1u : pc.refine;
-            float unused;
-            if (!prune_box(c.tape, centre, half_cell, radius, subs, near, unused, result.bound,
-                           result.tape))
-                continue;
-            if (!near) {
-                c.tape = kFarField;
-                c.bound = result.bound;
+            centre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
+            half_size = half_cell * float(hf);
+            R = radius * float(hf);
+            parent = b.tape;
+            dest = job * 8u + o;
+        } else if (has_job) {
+            uint bi, local;
+            if (pc.mode == 3u) {
+                bi = job / per_block;
+                local = job % per_block;
+            } else if (pc.mode == 0u) {
+                uint per_team = (per_block + kTeam - 1u) / kTeam;
+                bi = job / per_team;
+                local = (job % per_team) * kTeam + lane;
+                valid = local < per_block;
+                local = min(local, per_block - 1u);
             } else {
-                c.tape = result.tape;
+                // Mode 2: the octant's cells, kTeam at a time.
+                uint per_octant = hf * hf * hf;
+                uint per_team = (per_octant + kTeam - 1u) / kTeam;
+                bi = job / (8u * per_team);
+                uint o = (job / per_team) % 8u;
+                uint q = (job % per_team) * kTeam + lane;
+                valid = q < per_octant;
+                q = min(q, per_octant - 1u);
+                uvec3 l3 = uvec3((o & 1u) * hf + q % hf, ((o >> 1) & 1u) * hf + (q / hf) % hf,
+                                 ((o >> 2) & 1u) * hf + q / (hf * hf));
+                local = (l3.z * f + l3.y) * f + l3.x;
             }
-            octants[job] = c;
-            continue;
-        }
-        if (pc.mode == 2u) {
-            uint o = (lc.x >= hf ? 1u : 0u) | (lc.y >= hf ? 2u : 0u) | (lc.z >= hf ? 4u : 0u);
-            Cell oct = octants[bi * 8u + o];
-            if (oct.tape == kFarField) {
-                if (pc.round != 0u) continue;
-                // A far octant makes far cells (prune.cpp): its constant, and its centre value
-                // moved conservatively to the cell's centre.
-                uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
-                                 b.z + ((o >> 2) & 1u) * hf);
-                precise vec3 ocentre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
-                float reach = pc.origin.w * length(centre - ocentre);
-                result.tape = kFarField;
-                result.bound = oct.bound;
-                result.value = oct.value > 0.0 ? max(oct.value - reach, oct.bound)
-                                               : min(oct.value + reach, oct.bound);
-                cells[job] = result;
-                continue;
+            Block b = blocks[bi];
+            uvec3 lc = uvec3(local % f, (local / f) % f, local / (f * f));
+            centre = origin + (vec3(b.x + lc.x, b.y + lc.y, b.z + lc.z) + 0.5) * cs;
+            dest = bi * per_block + local;
+            parent = b.tape;
+            if (pc.mode == 3u) {
+                // Reads `cells`, writes the refined cells to `octants` (binding 5): a step
+                // redone after a pool overflow starts again from unchanged cells. Lane 0
+                // stores the cell; the others evaluate sub-boxes.
+                dest = job;
+                c0 = cells[job];
+                valid = lane == 0u;
+                if (c0.tape == kFarField) {
+                    walk = false;
+                    if (pc.round == 0u && valid) octants[job] = c0;
+                } else {
+                    parent = c0.tape;
+                    subs = tape_read(parent, 0u) > kRefineMaxTape ? 1u : pc.refine;
+                    nbatch = (subs * subs * subs + kTeam - 1u) / kTeam;
+                }
+            } else if (pc.mode == 2u) {
+                uint o = (lc.x >= hf ? 1u : 0u) | (lc.y >= hf ? 2u : 0u) | (lc.z >= hf ? 4u : 0u);
+                Cell oct = octants[bi * 8u + o];
+                if (oct.tape == kFarField) {
+                    // A far octant makes far cells (prune.cpp): its constant, and its centre
+                    // value moved conservatively to the cell's centre.
+                    walk = false;
+                    if (pc.round == 0u && valid) {
+                        uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
+                                         b.z + ((o >> 2) & 1u) * hf);
+                        precise vec3 ocentre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
+                        float reach = pc.origin.w * length(centre - ocentre);
+                        cells[dest] = Cell(kFarField, 0u,
+                                          oct.value > 0.0 ? max(oct.value - reach, oct.bound)
+                                                          : min(oct.value + reach, oct.bound),
+                                          oct.bound);
+                    }
+                } else {
+                    parent = oct.tape;
+                }
             }
-            parent = oct.tape;
         }
-        if (!prune_box(parent, centre, half_cell, radius, 1u, near, result.value, result.bound,
-                       result.tape))
-            continue;
-        if (near) atomicAdd(near_jobs, 1u);
-        cells[job] = result;
+
+        // The lane's state: new, or from the previous round.
+        uint len = walk ? tape_read(parent, 0u) : 0u;
+        uint phase = kPhaseDone, i = 0u, top = 0u, out_len = 0u, prims = 0u, at = 0u;
+        uint pdepth = 0u, depth = 0u, depth_max = 0u, batch = 0u;
+        uint far_flags = (pc.flags & 1u) != 0u ? 3u : 0u;
+        float value = 0.0, constant = 0.0, lowest = kInfinity, highest = -kInfinity;
+        if (walk && pc.round == 0u) {
+            phase = kPhaseEvaluate;
+        } else if (walk) {
+            phase = scratch[st];
+        }
+        if (walk && pc.round != 0u && phase != kPhaseDone) {
+            i = scratch[st + kTeam];
+            top = scratch[st + 2u * kTeam];
+            out_len = scratch[st + 3u * kTeam];
+            prims = scratch[st + 4u * kTeam];
+            at = scratch[st + 5u * kTeam];
+            value = uintBitsToFloat(scratch[st + 6u * kTeam]);
+            constant = uintBitsToFloat(scratch[st + 7u * kTeam]);
+            pdepth = scratch[st + 8u * kTeam];
+            depth = scratch[st + 9u * kTeam];
+            depth_max = scratch[st + 10u * kTeam];
+            batch = scratch[st + 11u * kTeam];
+            far_flags = scratch[st + kStFar * kTeam];
+            lowest = uintBitsToFloat(scratch[st + kStLowest * kTeam]);
+            highest = uintBitsToFloat(scratch[st + kStHighest * kTeam]);
+        }
+        uint nsub = subs * subs * subs;
+        vec3 sub_half = subs == 1u ? half_size : half_size / float(subs);
+        float sub_R = subs == 1u ? R : length(sub_half);
+
+        barrier();  // the previous job's last reads of s_busy are done
+        if (gl_LocalInvocationID.x == 0u) {
+            s_busy[0] = 0u;
+            s_busy[1] = 0u;
+        }
+        for (uint s = 0u; s < pc.budget; ++s) {
+            // The team's window, staged by its lanes together (every lane of a team evaluates
+            // the same entries).
+            uint w0 = i;
+            if (phase == kPhaseEvaluate) {
+                uint we = min(i + kWindow, len);
+                for (uint k = i + lane; k < we; k += kTeam) {
+                    uint w = tape_read(parent, 2u + k);
+                    s_word[win + k - w0] = w;
+                    s_node[win + k - w0] = nodes[tape_node(w)];
+                }
+            }
+            memoryBarrierShared();
+            barrier();
+            // Stage 1: values and ranges at the (sub-)box centre, decisions (evaluate_cell);
+            // over sub-boxes, per lane the decision all of its sub-boxes share. A tape that fits
+            // the window is walked again for the next batches of sub-boxes in the same step.
+            bool fresh = false;  // the evaluation ended in this step
+            for (uint rep = 0u; rep < kBatchesPerStep && phase == kPhaseEvaluate; ++rep) {
+                uint sb = min(batch * kTeam + lane, nsub - 1u);
+                uvec3 sc = uvec3(sb % subs, (sb / subs) % subs, sb / (subs * subs));
+                precise vec3 sub_centre =
+                    subs == 1u ? centre : centre - half_size + vec3(2u * sc + 1u) * sub_half;
+                uint we = min(i + kWindow, len);
+                for (; i < we; ++i) {
+                    uint w = s_word[win + i - w0];
+                    Node nd = s_node[win + i - w0];
+                    uint kind = nd.kind;
+                    float spread = nd.lipschitz * sub_R;
+                    float v, lo, hi;
+                    uint decision = kKeepBoth;
+                    if (kind < kPrimitiveKindCount) {
+                        uint p = nd.primitive;
+                        v = eval_primitive(kind, params[p], sub_centre);
+                        lo = v - spread;
+                        hi = v + spread;
+                        vec4 b0 = extras[p].bound0;
+                        if (interval && b0.w > 0.0) {
+                            vec2 r = similarity_range(b0.xyz, b0.w, extras[p].bound1.x,
+                                                      extras[p].bound1.y, sub_centre, sub_half);
+                            lo = max(lo, r.x);
+                            hi = min(hi, r.y);
+                        }
+                    } else {
+                        uint sr = sbase + 4u * (top - 1u) * kTeam + lane;
+                        uint sl = sbase + 4u * (top - 2u) * kTeam + lane;
+                        top -= 2u;
+                        float lv = uintBitsToFloat(scratch[sl]);
+                        float llo = uintBitsToFloat(scratch[sl + kTeam]);
+                        float lhi = uintBitsToFloat(scratch[sl + 2u * kTeam]);
+                        float rv = uintBitsToFloat(scratch[sr]);
+                        float rlo = uintBitsToFloat(scratch[sr + kTeam]);
+                        float rhi = uintBitsToFloat(scratch[sr + 2u * kTeam]);
+                        float sgn = operator_s(kind), k = nd.blend;
+                        decision = prune_decision(sgn, k, llo, lhi, rlo, rhi);
+                        // Written by every lane (the same value): a lane's sweep may follow in
+                        // this very step, and reads its own write, with no barrier between.
+                        scratch[lbase + i] = scratch[sl + 3u * kTeam];
+                        v = apply_operator(sgn, k, lv, rv);
+                        if (decision == kLeftWins) {
+                            lo = llo;
+                            hi = lhi;
+                        } else if (decision == kRightWins) {
+                            lo = rlo;
+                            hi = rhi;
+                        } else if (interval) {
+                            vec2 r2 = operator_range(sgn, k, llo, lhi, rlo, rhi);
+                            lo = max(v - spread, r2.x);
+                            hi = min(v + spread, r2.y);
+                        } else {
+                            lo = v - spread;
+                            hi = v + spread;
+                        }
+                    }
+                    if (tape_negated(w)) {
+                        v = -v;
+                        float tmp = lo;
+                        lo = -hi;
+                        hi = -tmp;
+                    }
+                    // Flags cleared for stage 3.
+                    uint e = dbase + i * kTeam + lane;
+                    scratch[e] =
+                        batch == 0u || (scratch[e] & 3u) == decision ? decision : kKeepBoth;
+                    uint so = sbase + 4u * top * kTeam + lane;
+                    scratch[so] = floatBitsToUint(v);
+                    scratch[so + kTeam] = floatBitsToUint(lo);
+                    scratch[so + 2u * kTeam] = floatBitsToUint(hi);
+                    scratch[so + 3u * kTeam] = i;
+                    ++top;
+                    pdepth = max(pdepth, top);
+                }
+                if (i == len) {
+                    // Stage 2 for this sub-box: the far-field test on its root range against
+                    // the box's margin (is_near_field); the root is in this window.
+                    uint s0 = sbase + lane;
+                    float v = uintBitsToFloat(scratch[s0]);
+                    if (batch == 0u) value = v;
+                    float L = s_node[win + len - 1u - w0].lipschitz;
+                    float clearance = far_field_clearance(pc.csize.w, L, R);
+                    vec2 range = far_field_range(v, uintBitsToFloat(scratch[s0 + kTeam]),
+                                                 uintBitsToFloat(scratch[s0 + 2u * kTeam]), L,
+                                                 sub_R);
+                    if (!clears_above(range.x, clearance)) far_flags &= ~1u;
+                    if (!clears_below(range.y, clearance)) far_flags &= ~2u;
+                    lowest = min(lowest, range.x);
+                    highest = max(highest, range.y);
+                    ++batch;
+                    i = 0u;
+                    top = 0u;
+                    if (batch == nbatch) {
+                        phase = kPhaseDecide;
+                        fresh = true;
+                        scratch[st + kStFar * kTeam] = far_flags;
+                        scratch[st + kStLowest * kTeam] = floatBitsToUint(lowest);
+                        scratch[st + kStHighest * kTeam] = floatBitsToUint(highest);
+                    }
+                }
+                if (i != 0u || w0 != 0u || len > kWindow) break;  // the window holds no more
+            }
+            // The phases that follow run in the same step, each over at most kWindow entries.
+            // Refinement's far-field test reads the other lanes' results: the next step.
+            if (phase == kPhaseDecide && !(fresh && pc.mode == 3u)) {
+                // Stage 2 for the box: over sub-boxes, every lane's sub-boxes must clear.
+                if (pc.mode == 3u) {
+                    uint t0 = tbase;
+                    for (uint m = 0u; m < kTeam; ++m) {
+                        far_flags &= scratch[t0 + kStFar * kTeam + m];
+                        lowest = min(lowest, uintBitsToFloat(scratch[t0 + kStLowest * kTeam + m]));
+                        highest =
+                            max(highest, uintBitsToFloat(scratch[t0 + kStHighest * kTeam + m]));
+                    }
+                }
+                if ((far_flags & 3u) != 0u) {
+                    constant = (far_flags & 1u) != 0u ? lowest : highest;
+                    phase = kPhaseDone;
+                    if (valid) store(dest, false, value, constant, kFarField, 0u, c0);
+                } else if (!valid) {
+                    phase = kPhaseDone;  // a lane past the boxes, or a sub-box's helper
+                } else {
+                    uint root_neg = tape_negated(tape_read(parent, 2u + len - 1u)) ? 1u : 0u;
+                    uint e = dbase + (len - 1u) * kTeam + lane;
+                    scratch[e] = (scratch[e] & 3u) | (1u << 2) | (root_neg << 4);
+                    i = len;
+                    phase = kPhaseSweep;
+                }
+            }
+            if (phase == kPhaseSweep) {
+                // Stage 3: the top-down pass (compact_tape), kWindow entries a step. An entry's
+                // flags are final when the reverse sweep reaches it (parents come later), so
+                // the sweep also counts the kept entries.
+                uint stop = i > kWindow ? i - kWindow : 0u;
+                for (; i > stop; --i) {
+                    uint e = i - 1u;
+                    uint fe = dbase + e * kTeam + lane;
+                    uint fl = scratch[fe];
+                    if (((fl >> 2) & 3u) != 1u) continue;
+                    uint w = tape_read(parent, 2u + e);
+                    if (is_primitive(tape_node(w))) {
+                        ++out_len;
+                        ++prims;
+                        continue;
+                    }
+                    uint l = scratch[lbase + e], r = e - 1u;
+                    uint d = pc.mode == 3u ? team_decision(dbase + e * kTeam) : fl & 3u;
+                    if (d == kKeepBoth) {
+                        ++out_len;
+                        uint nl = tape_negated(tape_read(parent, 2u + l)) ? 1u : 0u;
+                        uint nr = tape_negated(tape_read(parent, 2u + r)) ? 1u : 0u;
+                        uint fl_l = dbase + l * kTeam + lane, fl_r = dbase + r * kTeam + lane;
+                        scratch[fl_l] = (scratch[fl_l] & 3u) | (1u << 2) | (nl << 4);
+                        scratch[fl_r] = (scratch[fl_r] & 3u) | (1u << 2) | (nr << 4);
+                        continue;
+                    }
+                    uint wn = d == kLeftWins ? l : r;
+                    uint neg = ((fl >> 4) & 1u) ^ (tape_negated(tape_read(parent, 2u + wn)) ? 1u : 0u);
+                    scratch[fe] = (fl & 3u) | (2u << 2) | (fl & 16u);
+                    uint fl_w = dbase + wn * kTeam + lane;
+                    scratch[fl_w] = (scratch[fl_w] & 3u) | (1u << 2) | (neg << 4);
+                }
+                if (i == 0u) {
+                    atomicMax(max_len, out_len);
+                    if (out_len == len && ((parent & kInOctantPool) == 0u || transient)) {
+                        // Nothing pruned: share the parent's tape.
+                        atomicMax(max_depth, pdepth);
+                        phase = kPhaseDone;
+                        store(dest, true, value, constant, parent, out_len, c0);
+                    } else {
+                        at = transient ? atomicAdd(octant_used, out_len + 2u)
+                                       : atomicAdd(pool_used, out_len + 2u);
+                        uint start = transient ? pc.octant_start : pc.pool_start;
+                        uint capacity = transient ? octant_capacity : pool_capacity;
+                        if (at < start || at + out_len + 2u > capacity ||
+                            at + out_len + 2u < at || at >= kInOctantPool) {
+                            // The host grows the pool and redoes the level; until then
+                            // the box reads as far-field, so the steps after this one in the
+                            // same submission read no garbage.
+                            overflow = 1u;
+                            phase = kPhaseDone;
+                            store(dest, false, value, constant, kFarField, 0u, c0);
+                        } else {
+                            if (transient) at |= kInOctantPool;
+                            tape_write(at, out_len);
+                            tape_write(at + 1u, prims);
+                            phase = kPhaseWrite;
+                            top = at + 2u;  // the next word to write
+                        }
+                    }
+                }
+            }
+            if (phase == kPhaseWrite) {
+                uint we = min(i + kWindow, len);
+                for (; i < we; ++i) {
+                    uint fl = scratch[dbase + i * kTeam + lane];
+                    if (((fl >> 2) & 3u) != 1u) continue;
+                    uint node = tape_node(tape_read(parent, 2u + i));
+                    tape_write(top++, tape_word(node, ((fl >> 4) & 1u) != 0u));
+                    // Stack depth of the new tape: a primitive pushes, an operator pops two,
+                    // pushes one.
+                    depth = is_primitive(node) ? depth + 1u : depth - 1u;
+                    depth_max = max(depth_max, depth);
+                }
+                if (i == len) {
+                    atomicMax(max_depth, depth_max);
+                    phase = kPhaseDone;
+                    store(dest, true, value, constant, at, out_len, c0);
+                }
+            }
+            if (phase != kPhaseDone) atomicAdd(s_busy[s & 1u], 1u);
+            memoryBarrierBuffer();
+            memoryBarrierShared();
+            barrier();
+            bool busy = s_busy[s & 1u] != 0u;
+            if (gl_LocalInvocationID.x == 0u) s_busy[(s + 1u) & 1u] = 0u;
+            if (!busy) break;
+        }
+        if (walk) scratch[st] = phase;
+        if (walk && phase != kPhaseDone) {
+            scratch[st + kTeam] = i;
+            scratch[st + 2u * kTeam] = top;
+            scratch[st + 3u * kTeam] = out_len;
+            scratch[st + 4u * kTeam] = prims;
+            scratch[st + 5u * kTeam] = at;
+            scratch[st + 6u * kTeam] = floatBitsToUint(value);
+            scratch[st + 7u * kTeam] = floatBitsToUint(constant);
+            scratch[st + 8u * kTeam] = pdepth;
+            scratch[st + 9u * kTeam] = depth;
+            scratch[st + 10u * kTeam] = depth_max;
+            scratch[st + 11u * kTeam] = batch;
+            scratch[st + kStFar * kTeam] = far_flags;
+            scratch[st + kStLowest * kTeam] = floatBitsToUint(lowest);
+            scratch[st + kStHighest * kTeam] = floatBitsToUint(highest);
+        }
     }
 }

@@ -36,10 +36,16 @@ struct GpuGridParams {  // GridParams
 // prune.comp: Counters (expand.comp sees the same buffer as uint[]: [5] is next_blocks).
 struct GpuCounters {
     uint32_t pool_used, pool_capacity, overflow, max_len, near_jobs, next_blocks, max_depth;
-    uint32_t octant_used, octant_capacity, pad[3];
+    uint32_t octant_used, octant_capacity, near_words, pad[2];
 };
-// prune.comp: kStateWords, the words of a job's state at the start of its thread's scratch.
+// prune.comp: kStateWords, the words of a lane's job state in its team's scratch; kTeam, the
+// lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step
+// and phase; kBatchesPerStep, the batches of sub-boxes a step evaluates over a tape that fits
+// one window.
 inline constexpr uint64_t kPruneStateWords = 16;
+inline constexpr uint64_t kPruneTeam = 8;
+inline constexpr uint64_t kPruneWindow = 64;
+inline constexpr uint64_t kPruneBatchesPerStep = 4;
 struct PrunePush {  // prune.comp: Push
     vec4 origin, csize;
     uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;

@@ -1,11 +1,14 @@
 // gpu_prune.cpp — hierarchical pruning on the device (gpu.hpp): the host walks the levels as
-// src/prune/prune.cpp does and runs each step as a dispatch of prune.comp over all its cells
-// (or octants), then expand.comp to make the next level's blocks. The tape pool grows and the
-// step is redone when a step overflows it; statistics are read back at the end.
+// src/prune/prune.cpp does; each level is one submission of prune.comp's steps (the octants,
+// the cells, the refinement), each over all its jobs in teams of lanes that share a parent
+// tape, then expand.comp to make the next level's blocks. The pools are sized before each level
+// from the parents' tapes; one that overflows all the same grows and the level is redone.
+// Statistics are read back at the end.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstddef>
+#include <cstdlib>
 #include <cstring>
 
 #include "device_grid.hpp"
@@ -81,6 +84,9 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     const GpuBlock root_block{0, 0, 0, 0};
     ctx.upload(blocks, &root_block, sizeof(root_block));
     uint64_t block_count = 1;
+    uint64_t parent_words = head.size();  // the parents' tapes, headers included
+    // The share of the pools' bound (see presize) the last level used.
+    double main_ratio = 1, octant_ratio = 1;
     uint32_t max_len = sc.size();       // longest tape of the current parents
     uint32_t max_depth = sc.max_stack;  // deepest evaluation stack of the current parents
     Buffer& scratch = local.slot();
@@ -89,13 +95,10 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     Buffer& octant_pool = local.create(octant_capacity * 4);
     double gpu_ms = 0;
 
-    // Replaces `pool` by one of at least `need` words (at most the device's limit), keeping
-    // its first `keep` words.
-    const auto grow = [&](Buffer& pool, uint64_t& cap, uint64_t need, uint64_t keep) {
-        if (cap >= max_pool_words)
-            throw GpuError("tape pool exceeds the device's largest storage buffer (" +
-                           std::to_string(ctx.max_buffer_bytes()) + " bytes); use --backend cpu");
-        const uint64_t grown = std::min(std::max(cap * 2, need + need / 4), max_pool_words);
+    // Replaces `pool` by one of `words` words (at most the device's limit), keeping its first
+    // `keep` words.
+    const auto resize = [&](Buffer& pool, uint64_t& cap, uint64_t words, uint64_t keep) {
+        const uint64_t grown = std::min(words, max_pool_words);
         Buffer& bigger = local.create(grown * 4);
         if (keep > 0) {
             ctx.begin();
@@ -106,101 +109,164 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         pool = bigger;
         bigger = Buffer{};
         cap = grown;
+    };
+    // After an overflow: at least `need` words, at least twice as many as before.
+    const auto grow = [&](Buffer& pool, uint64_t& cap, uint64_t need, uint64_t keep) {
+        if (cap >= max_pool_words)
+            throw GpuError("tape pool exceeds the device's largest storage buffer (" +
+                           std::to_string(ctx.max_buffer_bytes()) + " bytes); use --backend cpu");
+        resize(pool, cap, std::max(cap * 2, need + need / 4), keep);
         ++st.pool_grows;
+    };
+    // Before a level: room for what its parents' tapes can give, within 64 Mi words more
+    // than in use (a bound: a child's tape is never longer than its parent's; past the cap
+    // an overflow grows the pool and redoes the level).
+    // SDFPRUNE_VULKAN_PRESIZE_WORDS=N sets the cap (0: pools only grow on overflow, for tests).
+    uint64_t presize_cap = uint64_t(64) << 20;
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_PRESIZE_WORDS"))
+        presize_cap = std::strtoull(env, nullptr, 10);
+    const auto presize = [&](Buffer& pool, uint64_t& cap, uint64_t used, uint64_t bound) {
+        const uint64_t want = used + std::min(bound, presize_cap);
+        if (want > cap) resize(pool, cap, want, used);
     };
 
     const vec3 origin = sc.aabb.min, extent = sc.aabb.max - sc.aabb.min;
     const float L = sc.lipschitz[sc.root()];
     const uint32_t flags =
         (opt.far_field ? 1u : 0u) | (opt.bounds == CellBounds::kInterval ? 2u : 0u);
-    uint64_t octant_words = 0;  // in use in octant_pool, from earlier steps of this level
     uint32_t level_index = 0;   // the level being made (for the steps' shapes)
 
-    // One step: `jobs` cells or octants from their parents' tapes into `octants`/`cells`.
-    // `transient`: new tapes go to the octant pool (the finest cells' tapes before refinement).
-    const auto run_step = [&](uint32_t mode, uint32_t factor, uint64_t jobs, vec3 csize,
-                              const Buffer& octants, const Buffer& cells, bool transient) {
-        const uint64_t thread_bytes = (kPruneStateWords + 2ull * max_len + 4ull * max_depth) * 4;
-        const uint32_t threads = ctx.threads_for(jobs, thread_bytes);
-        // Under a loop limit (lavapipe), as many jobs per invocation as fit the limit, or one
-        // job resumed over as many rounds as its three passes over the parent tape need;
-        // elsewhere one unlimited round.
-        const bool limited = ctx.loop_limited();
-        const uint32_t budget = limited ? uint32_t(Context::kLoopLimit - 512) : 0xffffffffu;
-        const uint64_t evaluations = mode == 3 ? uint64_t(opt.refine) * opt.refine * opt.refine : 1;
-        const uint64_t per_job = (evaluations + 2) * max_len + evaluations + 16;
-        const uint64_t rounds = limited ? (per_job + budget - 1) / budget : 1;
-        const uint64_t jobs_per_invocation = limited ? std::max<uint64_t>(1, budget / per_job) : 0;
-        if (scratch.size < threads * thread_bytes) {
-            ctx.destroy(scratch);
-            scratch = ctx.create_buffer(threads * thread_bytes);
-        }
+    // A step of a level (prune.comp): `jobs` cells or octants from their parents' tapes into
+    // `octants`/`cells`, run as team jobs that each walk one parent tape with kPruneTeam lanes,
+    // sized by the parents' longest tape and deepest stack (a child's tape is never longer or
+    // deeper than its parent's). `transient`: new tapes go to the octant pool (the finest cells'
+    // tapes before refinement).
+    struct Step {
+        PrunePush push;
+        const Buffer *octants, *cells;
+        uint64_t team_jobs, teams, rounds, per_dispatch;
+        uint32_t threads, groups;  // lanes that take jobs, and their workgroups
         GpuStepShape shape;
-        shape.level = level_index;
-        shape.mode = mode;
-        shape.jobs = jobs;
-        shape.lanes = std::min<uint64_t>(jobs, threads);
-        shape.longest_walk_words =
-            shape.lanes == 0 ? 0
-                             : (jobs + shape.lanes - 1) / shape.lanes * (evaluations + 2) * max_len;
-        for (;;) {
-            GpuCounters start{};
-            start.pool_used = g.pool_words;
-            start.pool_capacity = uint32_t(capacity);
-            start.octant_capacity = uint32_t(octant_capacity);
-            start.octant_used = uint32_t(octant_words);
-            *counter = start;
-            PrunePush push{vec4(origin.x, origin.y, origin.z, L),
+    };
+    const auto plan_step = [&](uint32_t mode, uint32_t factor, uint64_t jobs, vec3 csize,
+                               const Buffer& octants, const Buffer& cells, bool transient) {
+        const uint64_t per_block = uint64_t(factor) * factor * factor, hf = factor / 2;
+        const auto teams_for = [](uint64_t boxes) { return (boxes + kPruneTeam - 1) / kPruneTeam; };
+        Step s;
+        s.octants = &octants;
+        s.cells = &cells;
+        s.team_jobs = mode == 0   ? block_count * teams_for(per_block)
+                      : mode == 1 ? block_count
+                      : mode == 2 ? block_count * 8 * teams_for(hf * hf * hf)
+                                  : jobs;
+        if (s.team_jobs > 0xfffffffeull) throw std::length_error("too many cells in one level");
+        // A team's scratch: its lanes' state, per parent-tape entry a left operand and a word
+        // per lane (decision and sweep flags), per stack slot and lane 4 words.
+        const uint64_t team_bytes =
+            (kPruneStateWords * kPruneTeam + uint64_t(max_len) * (1 + kPruneTeam) +
+             4ull * max_depth * kPruneTeam) *
+            4;
+        // Teams in flight: as many as have jobs and their scratch fits the budget. Only teams
+        // with jobs hold scratch, so one parent tape as long as the budget allows can be pruned
+        // (the root's, the full tree, at level 0) even where a workgroup's 8 teams could not.
+        const uint64_t fit = ctx.scratch_budget_bytes() / team_bytes;
+        if (fit == 0)
+            throw GpuError("Vulkan: pruning a tape of " + std::to_string(max_len) +
+                           " words needs " + std::to_string(team_bytes) +
+                           " bytes of scratch, more than the device's buffers allow; use "
+                           "--backend cpu");
+        s.teams = std::min({std::max<uint64_t>(s.team_jobs, 1), fit,
+                            uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kPruneTeam)});
+        s.threads = uint32_t(s.teams * kPruneTeam);
+        s.groups = uint32_t((s.threads + kWorkgroupSize - 1) / kWorkgroupSize);
+        // Steps of a job: per batch of sub-boxes an evaluation window by window, the far-field
+        // test, the sweep and the write window by window (and one to spare).
+        const uint64_t batches =
+            mode == 3 ? teams_for(uint64_t(opt.refine) * opt.refine * opt.refine) : 1;
+        // Refinement takes its batches of sub-boxes only over tapes up to kRefineMaxTape; a
+        // longer tape is evaluated once.
+        const auto windows = [](uint64_t words) {
+            return (words + kPruneWindow - 1) / kPruneWindow;
+        };
+        const uint64_t batch_len =
+            mode == 3 ? std::min<uint64_t>(max_len, math::kRefineMaxTape) : max_len;
+        const uint64_t per_job =
+            std::max((batches + 2) * windows(batch_len), 3 * windows(max_len)) + 2;
+        // Under a loop limit (lavapipe), as many jobs per team and dispatch as fit the limit,
+        // or one job resumed over as many rounds as its steps need; elsewhere one unlimited
+        // round. A step's loops: staging the window, evaluating it (in refinement up to
+        // kPruneBatchesPerStep times, over a tape that fits it), refinement's far-field test
+        // over the team, the sweep, the write; each over at most the longest tape.
+        const bool limited = ctx.loop_limited();
+        const uint64_t step_len = std::min<uint64_t>(max_len, kPruneWindow);
+        const uint64_t step_loops = kPruneWindow / kPruneTeam +
+                                    (mode == 3 ? kPruneBatchesPerStep : 1) * step_len + kPruneTeam +
+                                    2 * step_len + 8;
+        const uint64_t max_steps = (Context::kLoopLimit - 1024) / step_loops;
+        s.rounds = limited ? (per_job + max_steps - 1) / max_steps : 1;
+        const uint32_t budget =
+            !limited ? 0xffffffffu : uint32_t(s.rounds > 1 ? max_steps : per_job);
+        s.per_dispatch = limited ? s.teams * std::max<uint64_t>(1, max_steps / per_job)
+                                 : std::max<uint64_t>(s.team_jobs, 1);
+        s.push = PrunePush{vec4(origin.x, origin.y, origin.z, L),
                            vec4(csize.x, csize.y, csize.z, opt.far_field_c),
                            mode,
                            factor,
-                           uint32_t(jobs),
-                           threads,
+                           0,
+                           s.threads,
                            max_len,
                            max_depth,
                            flags | (transient ? 4u : 0u),
-                           g.pool_words,
+                           0,
                            0,
                            0,
                            budget,
                            opt.refine,
-                           uint32_t(octant_words)};
-            const uint64_t per_dispatch =
-                limited ? threads * jobs_per_invocation : std::max<uint64_t>(jobs, 1);
-            ctx.begin();
-            for (uint64_t first = 0; first < std::max<uint64_t>(jobs, 1); first += per_dispatch)
-                for (uint32_t round = 0; round < rounds; ++round) {
-                    push.first_job = uint32_t(first);
-                    push.jobs = uint32_t(std::min<uint64_t>(jobs, first + per_dispatch));
-                    push.round = round;
-                    ctx.dispatch(KernelId::kPrune,
-                                 {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, &octants,
-                                  &cells, &counters, &scratch, &octant_pool},
-                                 &push, sizeof(push), threads / kWorkgroupSize);
-                    ++shape.dispatches;
-                    shape.workgroups += threads / kWorkgroupSize;
-                }
-            gpu_ms += ctx.submit();
-            if (!counter->overflow) break;
-            // Grow the pool that overflowed (keeping what the step started with) and redo it.
-            // A counter that wrapped past 2^32 words asks for the most the device allows.
-            const bool main_over = counter->pool_used > capacity,
-                       octant_over = counter->octant_used > octant_capacity;
-            if (main_over || !octant_over)
-                grow(g.pool, capacity, main_over ? counter->pool_used : max_pool_words,
-                     g.pool_words);
-            if (octant_over) grow(octant_pool, octant_capacity, counter->octant_used, octant_words);
+                           0};
+        s.shape.level = level_index;
+        s.shape.mode = mode;
+        s.shape.jobs = jobs;
+        s.shape.lanes_per_tape = uint32_t(kPruneTeam);
+        s.shape.lanes = std::min<uint64_t>(s.team_jobs, s.teams) * kPruneTeam;
+        // A lane's walk per job: the evaluation once per batch, the sweep and the write.
+        s.shape.longest_walk_words =
+            s.team_jobs == 0 ? 0
+                             : (s.team_jobs + s.teams - 1) / s.teams *
+                                   std::max((batches + 2) * batch_len, uint64_t(3) * max_len);
+        if (scratch.size < s.teams * team_bytes) {
+            ctx.destroy(scratch);
+            scratch = ctx.create_buffer(s.teams * team_bytes);
         }
-        g.pool_words = counter->pool_used;
-        octant_words = counter->octant_used;
-        st.steps.push_back(shape);
-        return *counter;
+        return s;
+    };
+    // Records a step's dispatches; the pools' words in use before the level start them.
+    const auto record_step = [&](Step& s) {
+        PrunePush push = s.push;
+        push.pool_start = g.pool_words;
+        for (uint64_t first = 0; first < std::max<uint64_t>(s.team_jobs, 1);
+             first += s.per_dispatch)
+            for (uint32_t round = 0; round < s.rounds; ++round) {
+                push.first_job = uint32_t(first);
+                push.jobs = uint32_t(std::min<uint64_t>(s.team_jobs, first + s.per_dispatch));
+                push.round = round;
+                ctx.dispatch(KernelId::kPrune,
+                             {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, s.octants, s.cells,
+                              &counters, &scratch, &octant_pool},
+                             &push, sizeof(push), s.groups);
+                ++s.shape.dispatches;
+                s.shape.workgroups += s.groups;
+            }
     };
 
+    // Each level in one submission: its steps (the octants, the cells, the refinement) and the
+    // next level's blocks (expand.comp, into a buffer for as many blocks as the level has
+    // cells). The counters are read back once; a pool that overflowed grows and the level is
+    // redone.
     std::vector<Buffer*> level_cells;
     for (uint32_t li = 0; li < res.size(); ++li) {
         level_index = li;
         const bool finest = li + 1 == res.size();
+        const bool refine = finest && opt.refine > 1;
         const uint32_t f = li == 0 ? res[0] : res[li] / res[li - 1];
         const uint64_t per_block = uint64_t(f) * f * f;
         const uint64_t total = per_block * block_count;
@@ -209,26 +275,102 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         Buffer& cells = local.create(total * sizeof(PrunedCell));
         // The same split as the CPU backend (prune.cpp): octants first where it applies.
         const bool split = opt.hierarchy && f >= 4 && f % 2 == 0 && 1024 % per_block == 0;
-        GpuCounters c;
+        Buffer& octants = local.create(split ? block_count * 8 * sizeof(PrunedCell) : 16);
+        Buffer& refined = local.create(refine ? total * sizeof(PrunedCell) : 16);
+        Buffer& next = local.create(finest ? 16 : total * sizeof(GpuBlock));
+        const uint32_t nf = finest ? 0 : res[li + 1] / res[li];
+        // Every cell's tape (with its header) is at most its parent's: the octants' go to the
+        // octant pool, the cells' to the main pool (or first to the octant pool, refined into
+        // the main pool). Sized for twice the share of that bound the last level used (finer
+        // levels tend to use less of it, more of their cells being far-field; with 1.25 times,
+        // the generated fluid's finest level overflowed and was redone).
+        const uint64_t main_bound = per_block * parent_words;
+        const uint64_t octant_bound = split ? 8 * parent_words : 0;
+        const auto share = [](uint64_t bound, double ratio) {
+            return uint64_t(std::ceil(double(bound) * std::min(1.0, 2 * ratio)));
+        };
+        const uint64_t pool_before = g.pool_words;
+        presize(g.pool, capacity, g.pool_words, share(main_bound, main_ratio));
+        presize(octant_pool, octant_capacity, 0,
+                share(octant_bound, octant_ratio) + (refine ? share(main_bound, main_ratio) : 0));
+
+        // Runs `steps` (and expand.comp when `expand`) in one submission, the octant pool
+        // holding `octant_keep` words from before; grows a pool and runs them again while one
+        // overflows.
+        const auto run_steps = [&](std::vector<Step>& steps, bool expand, uint64_t octant_keep) {
+            for (;;) {
+                GpuCounters start{};
+                start.pool_used = g.pool_words;
+                start.pool_capacity = uint32_t(capacity);
+                start.octant_used = uint32_t(octant_keep);
+                start.octant_capacity = uint32_t(octant_capacity);
+                *counter = start;
+                ctx.begin();
+                for (Step& s : steps) {
+                    // The longest tape and deepest stack read back: the cells' (the next
+                    // parents'), not the octants'.
+                    if (s.push.mode == 2) {
+                        ctx.fill(counters, 0, offsetof(GpuCounters, max_len), 4);
+                        ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
+                    }
+                    record_step(s);
+                }
+                if (expand) {
+                    const ExpandPush push{f, uint32_t(total), nf};
+                    ctx.dispatch(KernelId::kExpand, {&blocks, &cells, &next, &counters}, &push,
+                                 sizeof(push), ctx.groups_for(total));
+                }
+                gpu_ms += ctx.submit();
+                ++st.submissions;
+                if (!counter->overflow) break;
+                // Grow the pool that overflowed (keeping what the steps started with) and run
+                // them again. A counter that wrapped past 2^32 words asks for the most the
+                // device allows.
+                const bool main_over = counter->pool_used > capacity,
+                           octant_over = counter->octant_used > octant_capacity;
+                if (main_over || !octant_over)
+                    grow(g.pool, capacity, main_over ? counter->pool_used : max_pool_words,
+                         g.pool_words);
+                if (octant_over)
+                    grow(octant_pool, octant_capacity, counter->octant_used, octant_keep);
+            }
+            g.pool_words = counter->pool_used;
+            for (const Step& s : steps) st.steps.push_back(s.shape);
+            return *counter;
+        };
+
+        // One submission for the level where the parents' longest tape sizes the cells' steps
+        // with a team for every job; where scratch would hold the cells' teams back (long
+        // tapes), the octants first, so that their own longest tape sizes the rest.
+        std::vector<Step> steps;
+        uint64_t octant_keep = 0;
         if (split) {
-            Buffer& octants = local.create(block_count * 8 * sizeof(PrunedCell));
-            octant_words = 0;
-            c = run_step(1, f, block_count * 8, csize, octants, cells, false);
-            max_len = std::max(c.max_len, 1u);
-            max_depth = std::max(c.max_depth, 1u);
-            c = run_step(2, f, total, csize, octants, cells, finest && opt.refine > 1);
-            ctx.destroy(octants);
+            steps.push_back(plan_step(1, f, block_count * 8, csize, octants, cells, false));
+            Step cells_step = plan_step(2, f, total, csize, octants, cells, refine);
+            if (cells_step.teams < cells_step.team_jobs) {
+                const GpuCounters oc = run_steps(steps, false, 0);
+                octant_keep = oc.octant_used;
+                max_len = std::max(std::min(oc.max_len, max_len), 1u);
+                max_depth = std::max(std::min(oc.max_depth, max_depth), 1u);
+                steps.clear();
+                cells_step = plan_step(2, f, total, csize, octants, cells, refine);
+            }
+            steps.push_back(cells_step);
         } else {
-            octant_words = 0;
-            c = run_step(0, f, total, csize, cells, cells, finest && opt.refine > 1);
+            steps.push_back(plan_step(0, f, total, csize, cells, cells, refine));
         }
-        if (finest && opt.refine > 1) {
-            // The finest cells decided again over their sub-boxes (refine_cell), into a new
-            // cell array.
-            max_len = std::max(c.max_len, 1u);
-            max_depth = std::max(c.max_depth, 1u);
-            Buffer& refined = local.create(total * sizeof(PrunedCell));
-            run_step(3, f, total, csize, refined, cells, false);
+        // The finest cells decided again over their sub-boxes (refine_cell), into a new cell
+        // array.
+        if (refine) steps.push_back(plan_step(3, f, total, csize, refined, cells, false));
+        run_steps(steps, !finest, octant_keep);
+        // (A level that wrote nothing, its tapes all shared with their parents, says nothing.)
+        if (g.pool_words > pool_before)
+            main_ratio = double(g.pool_words - pool_before) / double(main_bound);
+        if (counter->octant_used > 0 && !refine)
+            octant_ratio = double(counter->octant_used) / double(octant_bound);
+        const GpuCounters c = *counter;
+        ctx.destroy(octants);
+        if (refine) {
             ctx.destroy(cells);
             cells = refined;
             refined = Buffer{};
@@ -236,18 +378,11 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         max_len = std::max(c.max_len, 1u);
         max_depth = std::max(c.max_depth, 1u);
         if (!finest) {
-            const uint32_t nf = res[li + 1] / res[li];
-            Buffer& next = local.create(uint64_t(c.near_jobs) * sizeof(GpuBlock));
-            *counter = GpuCounters{};
-            const ExpandPush push{f, uint32_t(total), nf};
-            ctx.begin();
-            ctx.dispatch(KernelId::kExpand, {&blocks, &cells, &next, &counters}, &push,
-                         sizeof(push), ctx.groups_for(total));
-            gpu_ms += ctx.submit();
             ctx.destroy(blocks);
             blocks = next;
             next = Buffer{};
             block_count = c.near_jobs;
+            parent_words = c.near_words;
         }
         g.level_info.push_back({res[li], f, 0, 0});
         level_cells.push_back(&cells);

@@ -324,8 +324,12 @@ uint32_t Context::groups_for(uint64_t n) const {
         std::clamp<uint64_t>((n + kWorkgroupSize - 1) / kWorkgroupSize, 1, max_groups_));
 }
 
+uint64_t Context::scratch_budget_bytes() const {
+    return std::min(kScratchBudgetBytes, max_range_);
+}
+
 uint32_t Context::threads_for(uint64_t work, uint64_t bytes_per_thread) const {
-    const uint64_t budget = std::min(kScratchBudgetBytes, max_range_);
+    const uint64_t budget = scratch_budget_bytes();
     const uint64_t fit = budget / std::max<uint64_t>(bytes_per_thread, 1) / kWorkgroupSize;
     if (fit == 0)
         throw GpuError("Vulkan: the scene needs " + std::to_string(bytes_per_thread) +
@@ -419,6 +423,11 @@ void Context::copy(const Buffer& src, const Buffer& dst, uint64_t bytes, uint64_
 
 void Context::fill(const Buffer& dst, uint32_t value) {
     vkCmdFillBuffer(cmd_, dst.buffer, 0, VK_WHOLE_SIZE, value);
+    barrier();
+}
+
+void Context::fill(const Buffer& dst, uint32_t value, uint64_t offset, uint64_t bytes) {
+    vkCmdFillBuffer(cmd_, dst.buffer, offset, bytes, value);
     barrier();
 }
 

@@ -52,6 +52,10 @@ class Context {
     // `bytes_per_thread` of scratch: as many as fit the scratch budget and one buffer's range.
     // Throws GpuError when not even one workgroup's scratch fits.
     uint32_t threads_for(uint64_t work, uint64_t bytes_per_thread) const;
+    // What threads_for shares out: the bytes of scratch all threads in flight may hold, and
+    // the most workgroups one dispatch may have.
+    uint64_t scratch_budget_bytes() const;
+    uint32_t max_workgroups() const { return max_groups_; }
 
     // A storage buffer in device memory, or host-visible (mapped) for uploads and readbacks.
     // Throws GpuError when the device has no memory left for it.
@@ -72,6 +76,8 @@ class Context {
     void copy(const Buffer& src, const Buffer& dst, uint64_t bytes, uint64_t src_offset = 0,
               uint64_t dst_offset = 0);
     void fill(const Buffer& dst, uint32_t value);
+    // Fills `bytes` of dst from `offset` (both multiples of 4).
+    void fill(const Buffer& dst, uint32_t value, uint64_t offset, uint64_t bytes);
     double submit();
 
     // Blocking transfers through a staging buffer.

@@ -204,9 +204,12 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                                              .add("workgroups", st.workgroups)
                                              .add("jobs", st.jobs)
                                              .add("lanes", st.lanes)
+                                             .add("lanes_per_tape", st.lanes_per_tape)
                                              .add("longest_walk_words", st.longest_walk_words));
                      j.add("device", device->name())
                          .add("wall_ms", device_grid->stats().wall_ms)
+                         .add("submissions", device_grid->stats().submissions)
+                         .add("pool_grows", device_grid->stats().pool_grows)
                          .add("gpu_steps", steps);
                  }
                  if (args->edit_bench > 0)
@@ -236,19 +239,21 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          s.tape_avg, s.tape_max, sc.size());
              if (device) {
                  std::printf(
-                     "  pruning on %s: %.1f ms GPU (%.1f ms wall), peak %.1f MB device "
-                     "memory\n",
+                     "  pruning on %s: %.1f ms GPU (%.1f ms wall, %u submissions, %u pool "
+                     "grows), peak %.1f MB device memory\n",
                      device->name().c_str(), s.prune_ms, device_grid->stats().wall_ms,
+                     device_grid->stats().submissions, device_grid->stats().pool_grows,
                      double(s.prune_peak_bytes) / 1e6);
                  static const char* const kModes[] = {"cells", "octants", "cells from octants",
                                                       "refinement"};
                  for (const gpu::GpuStepShape& st : device_grid->stats().steps)
                      std::printf(
                          "    level %u %-18s %u dispatches, %llu workgroups, %llu jobs "
-                         "on %llu lanes, longest walk <= %llu words\n",
+                         "on %llu lanes (%u to a tape), longest walk <= %llu words\n",
                          st.level, kModes[std::min(st.mode, 3u)], st.dispatches,
                          (unsigned long long)st.workgroups, (unsigned long long)st.jobs,
-                         (unsigned long long)st.lanes, (unsigned long long)st.longest_walk_words);
+                         (unsigned long long)st.lanes, st.lanes_per_tape,
+                         (unsigned long long)st.longest_walk_words);
              } else
                  std::printf(
                      "  pruning                   %.1f ms, peak %.1f MB in pruning buffers\n",
