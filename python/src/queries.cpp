@@ -107,6 +107,8 @@ py::dict stats_dict(const PruneStats& s, const PruneOptions& o, const Scene& sc)
     d["prune_peak_bytes"] = s.prune_peak_bytes;
     d["tape_bytes"] = s.tape_bytes;
     d["tape_words_visited"] = s.tape_words_visited;
+    d["clearance_ms"] = s.clearance_ms;
+    d["clearance_bytes"] = s.clearance_bytes;
     return d;
 }
 

@@ -193,6 +193,8 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                      .add("prune_peak_bytes", s.prune_peak_bytes)
                      .add("tape_bytes", s.tape_bytes)
                      .add("tape_words_visited", s.tape_words_visited)
+                     .add("clearance_ms", s.clearance_ms)
+                     .add("clearance_bytes", s.clearance_bytes)
                      .add("peak_rss_bytes", peak_rss_bytes());
                  if (device) {
                      std::vector<JsonLine> steps;
