@@ -12,7 +12,6 @@
 // doubling passes so that every pass runs on whole rows. Octants run in parallel.
 #include <algorithm>
 #include <array>
-#include <atomic>
 #include <cstring>
 #include <vector>
 
@@ -75,9 +74,9 @@ u8x16 min16(u8x16 a, u8x16 b) {
 }
 
 // The clearances in `octant` of the cells `pending` (sorted by z: those of plane z are
-// [first[z], first[z + 1])), OR-ed into their words.
+// [first[z], first[z + 1])), into out[0, pending.size()).
 void octant_clearances(const CellSet& near, uint32_t octant, std::span<const Pending> pending,
-                       std::span<const uint32_t> first, std::span<PrunedCell> cells) {
+                       std::span<const uint32_t> first, uint8_t* out) {
     // Rows of r cells are computed in 16-byte pieces up to r16; past r, where the octant heads
     // up along x, they come out kOpen like the pads (the grid's outside); where it heads down,
     // nothing reads them.
@@ -141,9 +140,7 @@ void octant_clearances(const CellSet& near, uint32_t octant, std::span<const Pen
         for (uint32_t p = first[z]; p < first[z + 1]; ++p) {
             const Pending& q = pending[p];
             // a far-field cell holds no near-field one: S >= 1
-            const uint32_t clearance = uint32_t(row(cur, q.y)[q.x]) - 1;
-            std::atomic_ref<uint32_t>(cells[q.index].children)
-                .fetch_or(clearance << (4 * octant), std::memory_order_relaxed);
+            out[p] = uint8_t(row(cur, q.y)[q.x] - 1);
         }
         std::swap(prev, cur);
     }
@@ -198,25 +195,30 @@ uint64_t set_clearance(std::span<const LevelCells> levels, int threads, const Ce
         const Range &to_set = set[level], &r = run[level];
         CellSet& n = near[level];
         bool any = false;
-        for (uint32_t local = 0; local < f * f * f; ++local) {
-            PrunedCell& c = l.cells[first + local];
-            const CellCoord at = block_cell(origin, f, local);
-            bool holds = true;
-            if (c.tape == PrunedCell::kFarField) {
-                holds = false;
-                if (to_set.holds(at)) {
-                    c.children = 0;
-                    if (n.nx)
-                        pending[level].push_back({first + local, uint16_t(at.x - r.lo[0]),
-                                                  uint16_t(at.y - r.lo[1]),
-                                                  uint16_t(at.z - r.lo[2])});
+        uint32_t local = 0;
+        for (uint32_t dz = 0; dz < f; ++dz)
+            for (uint32_t dy = 0; dy < f; ++dy)
+                for (uint32_t dx = 0; dx < f; ++dx, ++local) {
+                    PrunedCell& c = l.cells[first + local];
+                    const CellCoord at{origin.x + dx, origin.y + dy, origin.z + dz};
+                    bool holds = true;
+                    if (c.tape == PrunedCell::kFarField) {
+                        holds = false;
+                        if (to_set.holds(at)) {
+                            c.children = 0;
+                            if (n.nx)
+                                pending[level].push_back({first + local, uint16_t(at.x - r.lo[0]),
+                                                          uint16_t(at.y - r.lo[1]),
+                                                          uint16_t(at.z - r.lo[2])});
+                        }
+                    } else if (!finest) {
+                        holds =
+                            self(self, level + 1, c.children, {at.x * nf, at.y * nf, at.z * nf});
+                    }
+                    if (holds && n.nx && r.holds(at))
+                        n.set(at.x - r.lo[0], at.y - r.lo[1], at.z - r.lo[2]);
+                    any |= holds;
                 }
-            } else if (!finest) {
-                holds = self(self, level + 1, c.children, {at.x * nf, at.y * nf, at.z * nf});
-            }
-            if (holds && n.nx && r.holds(at)) n.set(at.x - r.lo[0], at.y - r.lo[1], at.z - r.lo[2]);
-            any |= holds;
-        }
         return any;
     };
     visit(visit, 0, 0, {});
@@ -239,9 +241,19 @@ uint64_t set_clearance(std::span<const LevelCells> levels, int threads, const Ce
         // per octant: two planes, three rows
         const uint64_t octant_bytes =
             (2 * uint64_t(near[k].ny + 2) + 3) * (near[k].nx + 16 + 2 * kPad);
-        peak = std::max(peak, bytes + sorted.size() * sizeof(Pending) + 8 * octant_bytes);
+        const size_t n = sorted.size();
+        std::vector<uint8_t> out(8 * n);  // per octant, per pending cell
+        peak = std::max(peak, bytes + n * (sizeof(Pending) + 8) + 8 * octant_bytes);
         parallel_for<NotCancellable>(8, po, [&](uint64_t octant) {
-            octant_clearances(near[k], uint32_t(octant), sorted, first, levels[k].cells);
+            octant_clearances(near[k], uint32_t(octant), sorted, first, out.data() + octant * n);
+        });
+        constexpr uint64_t kChunk = 1 << 14;
+        parallel_for<NotCancellable>((n + kChunk - 1) / kChunk, po, [&](uint64_t c) {
+            for (size_t i = c * kChunk; i < std::min(n, size_t(c + 1) * kChunk); ++i) {
+                uint32_t word = 0;
+                for (uint32_t o = 0; o < 8; ++o) word |= uint32_t(out[o * n + i]) << (4 * o);
+                levels[k].cells[sorted[i].index].children = word;
+            }
         });
     }
     return std::max(peak, bytes);
