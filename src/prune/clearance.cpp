@@ -96,12 +96,13 @@ void octant_clearances(const CellSet& near, uint32_t octant, std::span<const Pen
     uint32_t prev = 0, cur = 1;  // planes z + sz (at first: outside) and z
     // Per plane row: whether it is all kOpen (those of the pad rows and of the first plane
     // are): a row whose three inputs are, with no near cell, is too (most rows away from the
-    // surface), and needs no work.
+    // surface), and needs no work. (Past r, where the octant heads down along x, a row may hold
+    // other values: nothing reads them.)
     std::vector<uint8_t> open(2 * size_t(ny + 2), 1);
     const auto is_open = [&](uint32_t plane, int y) -> uint8_t& {
         return open[plane * size_t(ny + 2) + size_t(y + 1)];
     };
-    const u8x16 one = u8x16{} + 1;
+    const u8x16 one = u8x16{} + 1, open16 = u8x16{} + kOpen;
     for (uint32_t i = 0; i < nz; ++i) {
         const uint32_t z = up_z ? nz - 1 - i : i;
         for (uint32_t j = 0; j < ny; ++j) {
@@ -136,6 +137,16 @@ void octant_clearances(const CellSet& near, uint32_t octant, std::span<const Pen
                     store16(out + x, min16(load16(from + x), load16(from + int(x) + sx * k) + kk));
                 std::swap(from, to);
             }
+            // all kOpen again (past the surface's reach): later rows may skip it
+            const uint8_t* done = row(cur, y);
+            u8x16 differ{};
+            uint32_t x = 0;
+            for (; x + 16 <= r; x += 16) differ |= u8x16(load16(done + x) != open16);
+            uint64_t halves[2];
+            std::memcpy(halves, &differ, 16);
+            bool open_row = (halves[0] | halves[1]) == 0;
+            for (; x < r; ++x) open_row = open_row && done[x] == kOpen;
+            is_open(cur, y) = open_row;
         }
         for (uint32_t p = first[z]; p < first[z + 1]; ++p) {
             const Pending& q = pending[p];
