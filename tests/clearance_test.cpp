@@ -1,8 +1,8 @@
 // clearance_test.cpp — far-field clearances (set_clearance in prune.hpp): every far-field cell's
 // clearance in every octant, checked by brute force against the finest cells' near-field
 // states: the box it names holds no near-field finest cell, and (below the cap) the box one cell
-// larger does. Levels of factor 4, 2 and 3 (not powers of two), and a scene with no surface in
-// the grid.
+// larger does. Random scenes and the demo, levels of factor 4, 2 and 3 (not powers of two) up
+// to 128³, and a scene with no surface in the grid.
 #include <gtest/gtest.h>
 
 #include <vector>
@@ -84,16 +84,18 @@ TEST(Clearance, MatchesBruteForce) {
     RandomSceneSpec spec;
     spec.primitives = 20;
     spec.placement = Placement::kMixed;
-    for (uint64_t seed : {3u, 4u}) {
-        const Scene sc = random_scene(seed, spec);
+    const std::pair<std::string, Scene> scenes[] = {{"seed 3", random_scene(3, spec)},
+                                                    {"seed 4", random_scene(4, spec)},
+                                                    {"demo", builtin_scene("demo")}};
+    for (const auto& [name, sc] : scenes) {
         for (const auto& [res, factor] :
-             std::vector<std::pair<uint32_t, uint32_t>>{{64, 4}, {32, 2}, {54, 3}}) {
+             std::vector<std::pair<uint32_t, uint32_t>>{{64, 4}, {32, 2}, {54, 3}, {128, 4}}) {
             PruneOptions o;
             o.resolution = res;
             o.factor = factor;
             const PrunedGrid g = prune(sc, o);
-            const std::string what = "seed " + std::to_string(seed) + ", " + std::to_string(res) +
-                                     "³ factor " + std::to_string(factor);
+            const std::string what =
+                name + ", " + std::to_string(res) + "³ factor " + std::to_string(factor);
             EXPECT_GT(check_clearances(g, what), 0u) << what;
         }
     }
