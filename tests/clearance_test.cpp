@@ -115,5 +115,32 @@ TEST(Clearance, EmptyGridIsClearEverywhere) {
     }
 }
 
+TEST(Clearance, OffLeavesZeroAlsoAfterAnUpdate) {
+    const Scene sc = builtin_scene("demo");
+    PruneOptions o;
+    o.resolution = 64;
+    o.clearance = false;
+    o.coarse_tapes = true;  // for update()
+    const auto all_zero = [](const PrunedGrid& g) {
+        uint64_t nonzero = 0;
+        g.for_each_block([&](const PrunedGrid::Block& b) {
+            const uint32_t f = g.level_factor(b.level);
+            for (uint32_t i = 0; i < f * f * f; ++i) {
+                const PrunedCell& c = g.level_cells(b.level)[b.first + i];
+                nonzero += c.tape == PrunedCell::kFarField && c.children != 0;
+            }
+        });
+        return nonzero == 0;
+    };
+    const PrunedGrid g = prune(sc, o);
+    EXPECT_TRUE(all_zero(g));
+    EXPECT_EQ(g.stats().clearance_ms, 0.0);
+    // A move that turns cells near-field and far-field: the update equals a fresh prune.
+    const Scene moved = moved_primitive(sc, 0, (sc.aabb.max - sc.aabb.min) * 0.2f);
+    const PrunedGrid u = update(g, moved);
+    EXPECT_TRUE(all_zero(u));
+    EXPECT_TRUE(same_cells(u, prune(moved, o)));
+}
+
 }  // namespace
 }  // namespace sdfprune::test

@@ -95,6 +95,7 @@ py::dict stats_dict(const PruneStats& s, const PruneOptions& o, const Scene& sc)
     d["hierarchy"] = o.hierarchy;
     d["farfield_c"] = o.far_field_c;
     d["refine"] = o.refine;
+    d["clearance"] = o.clearance;
     d["cells"] = s.cells;
     d["near_field_cells"] = s.near_field_cells;
     d["active_avg"] = s.active_avg;

@@ -272,8 +272,8 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     ctx.upload(g.levels, g.level_info.data(), g.level_info.size() * sizeof(GpuLevel));
     for (Buffer* b : level_cells) ctx.destroy(*b);
     // The far-field clearances (set_clearance), on the host: the cells read back, set, and
-    // written again (a few ms at 256³ beside the transfers; within wall_ms, not prune_ms).
-    {
+    // written again (within wall_ms, not prune_ms).
+    if (opt.clearance) {
         const auto t_clear = std::chrono::steady_clock::now();
         std::vector<PrunedCell> host(cell_total);
         ctx.download(g.cells, host.data(), cell_total * sizeof(PrunedCell));

@@ -334,7 +334,7 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     g.pool_.shrink_to_fit();
 
     g.build_shortcut();
-    g.build_clearance();
+    if (opt.clearance) g.build_clearance();
 
     // Until here active_avg, active_std and tape_avg held the near-field cells' sums.
     finish_prune_stats(st, st.active_avg, st.active_std, st.tape_avg, far_finest);

@@ -279,6 +279,8 @@ void GridUpdate::run(PrunedGrid& g, const Scene& sc, const SceneEdit& edit,
                     flipped.push_back({li, block_cell(job.origin, f, local)});
                 if (!near) {
                     census.far_finest += below3;
+                    // (no clearances: a cell turned far-field keeps 0, not its old children)
+                    if (!opt.clearance) c.children = 0;
                     continue;
                 }
                 const uint32_t* header = out.words.data() + c.tape;
@@ -338,7 +340,7 @@ void GridUpdate::run(PrunedGrid& g, const Scene& sc, const SceneEdit& edit,
     }
     g.stats_.clearance_ms = 0;
     g.stats_.clearance_bytes = 0;
-    if (!flipped.empty()) g.build_clearance(&changed);
+    if (opt.clearance && !flipped.empty()) g.build_clearance(&changed);
 
     uint64_t cells = 0;
     for (const PrunedGrid::Level& l : g.levels_) cells += l.cells.size();
