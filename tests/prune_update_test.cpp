@@ -37,7 +37,8 @@ void expect_same_grid(const PrunedGrid& a, const PrunedGrid& b, const std::strin
             bool same = (p.tape == PrunedCell::kFarField) == (q.tape == PrunedCell::kFarField) &&
                         std::memcmp(&p.value, &q.value, sizeof(float)) == 0;
             if (same && p.tape == PrunedCell::kFarField) {
-                same = std::memcmp(&p.bound, &q.bound, sizeof(float)) == 0;
+                same = std::memcmp(&p.bound, &q.bound, sizeof(float)) == 0 &&
+                       p.children == q.children;  // the clearances
             } else if (same) {
                 const auto ta = a.tape_at(p.tape), tb = b.tape_at(q.tape);
                 same = std::equal(ta.begin(), ta.end(), tb.begin(), tb.end()) &&

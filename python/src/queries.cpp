@@ -95,6 +95,7 @@ py::dict stats_dict(const PruneStats& s, const PruneOptions& o, const Scene& sc)
     d["hierarchy"] = o.hierarchy;
     d["farfield_c"] = o.far_field_c;
     d["refine"] = o.refine;
+    d["clearance"] = o.clearance;
     d["cells"] = s.cells;
     d["near_field_cells"] = s.near_field_cells;
     d["active_avg"] = s.active_avg;
@@ -107,6 +108,8 @@ py::dict stats_dict(const PruneStats& s, const PruneOptions& o, const Scene& sc)
     d["prune_peak_bytes"] = s.prune_peak_bytes;
     d["tape_bytes"] = s.tape_bytes;
     d["tape_words_visited"] = s.tape_words_visited;
+    d["clearance_ms"] = s.clearance_ms;
+    d["clearance_bytes"] = s.clearance_bytes;
     return d;
 }
 

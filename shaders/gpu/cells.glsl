@@ -2,7 +2,8 @@
 // PrunedCell (prune.hpp) and src/gpu/device_layout.hpp (checked by the GpuLayout tests).
 struct Cell {
     uint tape;      // kFarField or offset of [length, primitives, words...] in the pool
-    uint children;  // near-field, not finest: first cell of its child block in the next level
+    uint children;  // near-field, not finest: first cell of its child block in the next level;
+                    // far-field: 4 bits of clearance per octant (clearance_in, prune.hpp)
     float value;    // value at the centre
     float bound;    // far-field constant
 };

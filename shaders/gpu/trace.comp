@@ -55,6 +55,10 @@ float march(vec3 o, vec3 dir, float t0, float t1, uint max_steps) {
     GridParams g = prm.grid;
     uint tid = gl_GlobalInvocationID.x;
     vec3 inv_dir = vec3(1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z);
+    // the octant the ray heads into: which 4 bits of a far-field cell's word are its clearance
+    // (clearance_in, prune.hpp)
+    uint octant_shift =
+        4u * ((dir.x > 0.0 ? 1u : 0u) | (dir.y > 0.0 ? 2u : 0u) | (dir.z > 0.0 ? 4u : 0u));
     uint near_tape = 0u;
     vec3 near_lo = vec3(kInfinity), near_hi = vec3(-kInfinity);
     precise float t = t0;
@@ -71,9 +75,12 @@ float march(vec3 o, vec3 dir, float t0, float t1, uint max_steps) {
             vec3 size = level_cell_size(g, at.level);
             precise vec3 lo = g.aabb_min.xyz + vec3(at.cell) * size;
             if (at.c.tape == kFarField) {
+                // the exit of the box of clear cells from this one, r cells the ray's way
+                float r = float((at.c.children >> octant_shift) & 15u);
                 float t_exit = kInfinity;
                 for (int a = 0; a < 3; ++a) {
-                    float bound = dir[a] > 0.0 ? lo[a] + size[a] : lo[a];
+                    precise float bound =
+                        dir[a] > 0.0 ? lo[a] + size[a] * (r + 1.0) : lo[a] - size[a] * r;
                     float ta = (bound - o[a]) * inv_dir[a];
                     if (!isnan(ta)) t_exit = ta < t_exit ? ta : t_exit;
                 }

@@ -406,6 +406,26 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     gpu_ms += ctx.submit();
     ctx.upload(g.levels, g.level_info.data(), g.level_info.size() * sizeof(GpuLevel));
     for (Buffer* b : level_cells) ctx.destroy(*b);
+    // The far-field clearances (set_clearance), on the host: the cells read back, set, and
+    // written again (within wall_ms, not prune_ms).
+    if (opt.clearance) {
+        const auto t_clear = std::chrono::steady_clock::now();
+        std::vector<PrunedCell> host(cell_total);
+        ctx.download(g.cells, host.data(), cell_total * sizeof(PrunedCell));
+        std::vector<LevelCells> levels;
+        for (size_t li = 0; li < g.level_info.size(); ++li) {
+            const uint64_t end =
+                li + 1 < g.level_info.size() ? g.level_info[li + 1].offset : cell_total;
+            levels.push_back(
+                {g.level_info[li].res, g.level_info[li].factor,
+                 std::span(host).subspan(g.level_info[li].offset, end - g.level_info[li].offset)});
+        }
+        st.clearance_bytes = set_clearance(levels, opt.threads) + cell_total * sizeof(PrunedCell);
+        ctx.upload(g.cells, host.data(), cell_total * sizeof(PrunedCell));
+        st.clearance_ms =
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_clear)
+                .count();
+    }
     st.prune_ms = gpu_ms;
     st.prune_peak_bytes = ctx.bytes_peak() - live_before;
     st.wall_ms =

@@ -334,12 +334,14 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     g.pool_.shrink_to_fit();
 
     g.build_shortcut();
+    if (opt.clearance) g.build_clearance();
 
     // Until here active_avg, active_std and tape_avg held the near-field cells' sums.
     finish_prune_stats(st, st.active_avg, st.active_std, st.tape_avg, far_finest);
     st.tape_bytes = pool_bytes();
     for (const PrunedGrid::Level& l : g.levels_) st.tape_bytes += bytes_of(l.cells);
-    st.prune_peak_bytes = std::max(buf.peak, st.tape_bytes + scratch_bytes());
+    st.prune_peak_bytes =
+        std::max({buf.peak, st.tape_bytes + scratch_bytes(), st.tape_bytes + st.clearance_bytes});
     st.prune_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     return g;

@@ -279,6 +279,8 @@ void GridUpdate::run(PrunedGrid& g, const Scene& sc, const SceneEdit& edit,
                     flipped.push_back({li, block_cell(job.origin, f, local)});
                 if (!near) {
                     census.far_finest += below3;
+                    // (no clearances: a cell turned far-field keeps 0, not its old children)
+                    if (!opt.clearance) c.children = 0;
                     continue;
                 }
                 const uint32_t* header = out.words.data() + c.tape;
@@ -325,6 +327,20 @@ void GridUpdate::run(PrunedGrid& g, const Scene& sc, const SceneEdit& edit,
         jobs.swap(next);
     }
     for (const auto& [l, at] : flipped) refresh_shortcut(g, l, at);
+    // Clearances change only within reach of the cells that turned near-field or far-field
+    // (under them, blocks appeared or went).
+    CellRange changed{{N, N, N}, {0, 0, 0}};
+    for (const auto& [l, at] : flipped) {
+        const uint32_t s = N / g.levels_[l].res;
+        changed.lo = {std::min(changed.lo.x, at.x * s), std::min(changed.lo.y, at.y * s),
+                      std::min(changed.lo.z, at.z * s)};
+        changed.hi = {std::max(changed.hi.x, (at.x + 1) * s),
+                      std::max(changed.hi.y, (at.y + 1) * s),
+                      std::max(changed.hi.z, (at.z + 1) * s)};
+    }
+    g.stats_.clearance_ms = 0;
+    g.stats_.clearance_bytes = 0;
+    if (opt.clearance && !flipped.empty()) g.build_clearance(&changed);
 
     uint64_t cells = 0;
     for (const PrunedGrid::Level& l : g.levels_) cells += l.cells.size();
@@ -399,7 +415,7 @@ bool same_cells(const PrunedGrid& a, const PrunedGrid& b) {
             if (far != (y.tape == PrunedCell::kFarField) || !same_bytes(x.value, y.value))
                 return false;
             if (far) {
-                if (!same_bytes(x.bound, y.bound)) return false;
+                if (!same_bytes(x.bound, y.bound) || x.children != y.children) return false;
                 continue;
             }
             const auto ta = a.tape_at(x.tape), tb = b.tape_at(y.tape);

@@ -3,6 +3,7 @@
 // lookup uses; for_each_block in prune.hpp is the one traversal of whole blocks), far-field
 // constants, and the pruned field's value at points.
 #include <algorithm>
+#include <chrono>
 #include <stdexcept>
 #include <vector>
 
@@ -67,6 +68,15 @@ void PrunedGrid::build_shortcut() {
                 const CellRef at = descend(x * scale, y * scale, z * scale, S);
                 shortcut_[(size_t(z) * r + y) * r + x] = at.level << 27 | at.index;
             }
+}
+
+void PrunedGrid::build_clearance(const CellRange* changed) {
+    const auto t0 = std::chrono::steady_clock::now();
+    std::vector<LevelCells> levels;
+    for (Level& l : levels_) levels.push_back({l.res, l.factor, l.cells});
+    stats_.clearance_bytes = set_clearance(levels, options_.threads, changed);
+    stats_.clearance_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
 float PrunedGrid::eval(vec3 p, float* stack) const {

@@ -37,7 +37,6 @@ Camera orbit_camera(const Aabb& aabb, float yaw, float pitch, float distance, fl
 }
 
 namespace {
-
 vec3 normalize(vec3 v) {
     return v / math::length(v);
 }
@@ -176,6 +175,7 @@ struct Lane {
     Ray* ray = nullptr;
     float4 o, dir, inv_dir;
     int4 up;  // all ones on the axes where the ray leaves cells by their upper face
+    uint32_t octant;  // the same as bits: x 1, y 2, z 4 (see clearance_in)
     float t = 0;
     uint32_t step = 0;
     Next next = Next::kEval;
@@ -196,10 +196,12 @@ bool in_box(float4 p, float4 lo, float4 hi) {
 }
 
 // The next t of lane l at p in far-field cell c (corner lo, level geometry geo): no surface
-// is in the cell, so continue from its exit, or by its constant if that is longer.
+// is in the cell nor in the box of cells its clearance in the ray's octant gives, so continue
+// from the exit of that box, or by the cell's constant if that is longer.
 float far_field_advance(const Lane& l, float4 p, float4 lo, const LevelGeometry& geo,
                         const PrunedCell& c, float inv_lipschitz) {
-    const float4 exit = l.up ? lo + geo.size : lo;
+    const float r = float(clearance_in(c, l.octant));
+    const float4 exit = l.up ? lo + geo.size * splat(r + 1.0f) : lo - geo.size * splat(r);
     float4 t_axis = (exit - l.o) * l.inv_dir;
     // NaN (0·inf): the ray runs in the face's plane, which it never leaves. Which of equal
     // candidates wins (+0 or -0) does not matter: only t_exit + tiny is used.
@@ -263,6 +265,7 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
         l.dir = load4(r.dir);
         l.inv_dir = load4(vec3(1.0f / r.dir.x, 1.0f / r.dir.y, 1.0f / r.dir.z));
         l.up = l.dir > 0;
+        l.octant = (l.up[0] & 1) | (l.up[1] & 2) | (l.up[2] & 4);
         l.t = r.t0;
         l.step = 0;
         l.near_lo = splat(INFINITY);

@@ -42,6 +42,9 @@ void add_prune_options(CLI::App* sub, PruneOptions& o, bool& lipschitz_bounds) {
     sub->add_flag("--lipschitz-bounds", lipschitz_bounds,
                   "the paper's rule: centre ± L·R ranges only (no exact primitive ranges, no "
                   "sub-box refinement)");
+    sub->add_flag("--no-clearance{false}", o.clearance,
+                  "no far-field clearances: faster pruning, the tracer steps one far-field cell "
+                  "at a time");
     sub->add_option("--threads", o.threads, "worker threads (0 = all cores)")
         ->capture_default_str()
         ->check(CLI::Range(0, 1024));
@@ -181,6 +184,7 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                      .add("hierarchy", o.hierarchy)
                      .add("farfield_c", o.far_field_c)
                      .add("refine", o.refine)
+                     .add("clearance", o.clearance)
                      .add("cells", s.cells)
                      .add("near_field_cells", s.near_field_cells)
                      .add("active_avg", s.active_avg)
@@ -193,6 +197,8 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                      .add("prune_peak_bytes", s.prune_peak_bytes)
                      .add("tape_bytes", s.tape_bytes)
                      .add("tape_words_visited", s.tape_words_visited)
+                     .add("clearance_ms", s.clearance_ms)
+                     .add("clearance_bytes", s.clearance_bytes)
                      .add("peak_rss_bytes", peak_rss_bytes());
                  if (device) {
                      std::vector<JsonLine> steps;
