@@ -91,6 +91,7 @@ TEST(Clearance, MatchesBruteForce) {
         for (const auto& [res, factor] :
              std::vector<std::pair<uint32_t, uint32_t>>{{64, 4}, {32, 2}, {54, 3}, {128, 4}}) {
             PruneOptions o;
+            o.clearance = true;
             o.resolution = res;
             o.factor = factor;
             const PrunedGrid g = prune(sc, o);
@@ -107,6 +108,7 @@ TEST(Clearance, EmptyGridIsClearEverywhere) {
     sc.aabb.min = sc.aabb.min + vec3(100.0f);
     sc.aabb.max = sc.aabb.max + vec3(100.0f);
     PruneOptions o;
+    o.clearance = true;
     o.resolution = 16;
     const PrunedGrid g = prune(sc, o);
     for (const PrunedCell& c : g.level_cells(0)) {

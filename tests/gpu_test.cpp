@@ -307,26 +307,30 @@ TEST(Gpu, RenderMatchesCpu) {
     cut.plane_cut = true;
     cut.union_share = 1.0f;  // a union of solids, half of it cut away: something to hit
     const Scene scenes[] = {builtin_scene("demo"), random_scene(77, spec), random_scene(78, cut)};
-    for (const Scene& sc : scenes) {
-        PruneOptions o;
-        o.resolution = 64;
-        const PrunedGrid cpu = prune(sc, o);
-        const gpu::Grid gpu = gpu::prune(*dev, sc, o);
-        for (Shading shading : {Shading::kShaded, Shading::kNormals, Shading::kHeatmap}) {
-            RenderOptions ro;
-            ro.width = 160;
-            ro.height = 96;
-            ro.shading = shading;
-            ro.camera = orbit_camera(sc.aabb, 35, 20, 0, 40);
-            RenderStats cs, gs;
-            const Image a = render(cpu, ro, &cs);
-            const Image b = gpu::render(*dev, gpu, ro, &gs);
-            expect_similar(a, b, "shading " + std::to_string(int(shading)));
-            EXPECT_NEAR(cs.hit_fraction, gs.hit_fraction, 1e-3);
-            EXPECT_NEAR(cs.steps_avg, gs.steps_avg, 0.01 * cs.steps_avg);
-            EXPECT_GT(gs.hit_fraction, 0.0);
+    for (const Scene& sc : scenes)
+        for (const bool clearance : {false, true}) {  // with and without the far-field skips
+            PruneOptions o;
+            o.resolution = 64;
+            o.clearance = clearance;
+            const PrunedGrid cpu = prune(sc, o);
+            const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+            for (Shading shading : {Shading::kShaded, Shading::kNormals, Shading::kHeatmap}) {
+                RenderOptions ro;
+                ro.width = 160;
+                ro.height = 96;
+                ro.shading = shading;
+                ro.camera = orbit_camera(sc.aabb, 35, 20, 0, 40);
+                RenderStats cs, gs;
+                const Image a = render(cpu, ro, &cs);
+                const Image b = gpu::render(*dev, gpu, ro, &gs);
+                expect_similar(
+                    a, b,
+                    "shading " + std::to_string(int(shading)) + (clearance ? ", clearances" : ""));
+                EXPECT_NEAR(cs.hit_fraction, gs.hit_fraction, 1e-3);
+                EXPECT_NEAR(cs.steps_avg, gs.steps_avg, 0.01 * cs.steps_avg);
+                EXPECT_GT(gs.hit_fraction, 0.0);
+            }
         }
-    }
 }
 
 // Samples of an n³ discretization on which the backends differ beyond float rounding.

@@ -264,10 +264,12 @@ TEST(PruneBandRender, PrunedAndNaiveRendersAgreeUnderScale) {
         RenderStats ns;
         const Image naive = render_naive(sc, ro, &ns);
         EXPECT_GT(ns.hit_fraction, 0.03) << transform_name(t);
-        for (const bool far_field : {false, true}) {
+        for (const int variant : {0, 1, 2}) {  // no far field; far field; and its clearances
+            const bool far_field = variant > 0;
             PruneOptions po;
             po.resolution = 128;
             po.far_field = far_field;
+            po.clearance = variant == 2;
             RenderStats ps;
             const Image pruned = render(prune(sc, po), ro, &ps);
             ASSERT_EQ(pruned.rgb.size(), naive.rgb.size());
@@ -280,7 +282,8 @@ TEST(PruneBandRender, PrunedAndNaiveRendersAgreeUnderScale) {
             }
             const double fraction = double(differ) / double(pruned.rgb.size() / 3);
             EXPECT_LE(fraction, far_field ? 0.005 : 0.0)
-                << transform_name(t) << (far_field ? "" : ", no far field");
+                << transform_name(t) << (far_field ? "" : ", no far field")
+                << (variant == 2 ? ", clearances" : "");
         }
     }
 }

@@ -35,18 +35,21 @@ double differing_fraction(const Image& a, const Image& b, int tolerance) {
 
 TEST(Render, PrunedAndNaiveAgreeOnDemo) {
     const Scene sc = builtin_scene("demo");
-    PruneOptions po;
-    po.resolution = 128;
-    const PrunedGrid g = prune(sc, po);
-    for (Shading s : {Shading::kShaded, Shading::kNormals}) {
-        RenderStats ps, ns;
-        const Image pruned = render(g, small_options(sc, s), &ps);
-        const Image naive = render_naive(sc, small_options(sc, s), &ns);
-        EXPECT_LE(differing_fraction(pruned, naive, 8), 0.001);
-        EXPECT_GT(ps.hit_fraction, 0.05);
-        EXPECT_DOUBLE_EQ(ps.hit_fraction, ns.hit_fraction);
-        // Pruning is what makes the difference in work.
-        EXPECT_LT(ps.evals_avg * 5, ns.evals_avg);
+    for (const bool clearance : {false, true}) {  // with and without the far-field skips
+        PruneOptions po;
+        po.resolution = 128;
+        po.clearance = clearance;
+        const PrunedGrid g = prune(sc, po);
+        for (Shading s : {Shading::kShaded, Shading::kNormals}) {
+            RenderStats ps, ns;
+            const Image pruned = render(g, small_options(sc, s), &ps);
+            const Image naive = render_naive(sc, small_options(sc, s), &ns);
+            EXPECT_LE(differing_fraction(pruned, naive, 8), 0.001) << clearance;
+            EXPECT_GT(ps.hit_fraction, 0.05);
+            EXPECT_DOUBLE_EQ(ps.hit_fraction, ns.hit_fraction) << clearance;
+            // Pruning is what makes the difference in work.
+            EXPECT_LT(ps.evals_avg * 5, ns.evals_avg);
+        }
     }
 }
 

@@ -54,10 +54,12 @@ struct PruneOptions {
     // finest level's tapes: every lookup is the same, memory is far smaller on large scenes.
     bool coarse_tapes = false;
     // Far-field clearances (set_clearance): tracers skip whole boxes of far-field cells (about
-    // a third fewer steps on molecule and trees). Costs pruning time, a fixed ~1G instructions
-    // at 256³ over 8 threads at most (the clearance_ms statistic); false: every far-field cell's
-    // clearance is 0 and the tracer steps cell by cell.
-    bool clearance = true;
+    // a third fewer steps on molecule and trees). Costs pruning time, about 1G instructions at
+    // 256³ (the clearance_ms statistic: +100-120 ms on 2 cores, a third to a half more on
+    // molecule and trees), which pays only for tracing: off by default; `sdfprune render` and
+    // `sdfprune bench` turn it on. False: every far-field cell's clearance is 0 and the tracer
+    // steps cell by cell.
+    bool clearance = false;
     int threads = 0;  // 0 = all hardware threads
     // Called from the calling thread with the fraction done in [0, 1]; may be empty.
     std::function<void(double)> progress;

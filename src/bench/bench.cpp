@@ -236,6 +236,7 @@ PruneOptions prune_options(Variant v, const BenchOptions& o) {
     po.far_field = v != Variant::kNoFarField;
     po.hierarchy = v != Variant::kNoHierarchy;
     po.threads = o.threads;
+    po.clearance = true;  // as `sdfprune render`: the tracer's far-field skips, in T_p
     return po;
 }
 

@@ -55,6 +55,7 @@ void add_render(CLI::App& app, std::vector<Command>& commands) {
         ->capture_default_str()
         ->check(CLI::IsMember({"shaded", "normals", "heatmap"}));
     sub->add_flag("--no-shadows", a->no_shadows, "trace primary rays only");
+    a->app.prune.clearance = true;  // the tracer's far-field skips (--no-clearance: off)
     add_app_options(sub, a->app);
     add_backend_option(sub, a->app.backend);
     sub->footer(

@@ -42,9 +42,9 @@ void add_prune_options(CLI::App* sub, PruneOptions& o, bool& lipschitz_bounds) {
     sub->add_flag("--lipschitz-bounds", lipschitz_bounds,
                   "the paper's rule: centre ± L·R ranges only (no exact primitive ranges, no "
                   "sub-box refinement)");
-    sub->add_flag("--no-clearance{false}", o.clearance,
-                  "no far-field clearances: faster pruning, the tracer steps one far-field cell "
-                  "at a time");
+    sub->add_flag("--clearance,!--no-clearance", o.clearance,
+                  "far-field clearances, so that the tracer skips whole boxes of far-field cells "
+                  "(costs pruning time; on by default for render only)");
     sub->add_option("--threads", o.threads, "worker threads (0 = all cores)")
         ->capture_default_str()
         ->check(CLI::Range(0, 1024));
