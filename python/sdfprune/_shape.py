@@ -283,19 +283,22 @@ class Shape:
     def prune(self, grid: int = 256, *, backend: str = "cpu", bounds: Optional[Bounds] = None,
               far_field: bool = True, hierarchy: bool = True, far_field_c: float = 2.0,
               refine: int = 3, lipschitz_bounds: bool = False, factor: int = 4,
-              threads: int = 0, progress: Any = None) -> "PrunedGrid":
+              clearance: bool = False, threads: int = 0,
+              progress: Any = None) -> "PrunedGrid":
         """Prunes the shape over a grid³ grid (cached per options): a PrunedGrid reusable for
         many queries, with .stats (the figures of `sdfprune stats --json`).
 
         backend="vulkan" prunes on the GPU (when this build has the Vulkan backend; otherwise
         a GpuError, a RuntimeError, says so). far_field=False gives exact values everywhere
-        (slower); the other options are the CLI's (--farfield-c, --refine, ...)."""
+        (slower); clearance=True stores the far-field clearances that let rendering skip whole
+        boxes of far-field cells (render() asks for them, as `sdfprune render`); the other
+        options are the CLI's (--farfield-c, --refine, ...)."""
         from ._grid import PrunedGrid
         if backend not in ("cpu", "vulkan"):
             raise ValueError(f"backend must be 'cpu' or 'vulkan' (got {backend!r})")
         scene = self.scene(bounds)
         opts = (int(grid), bool(far_field), bool(hierarchy), float(far_field_c), int(refine),
-                bool(lipschitz_bounds), int(factor))
+                bool(lipschitz_bounds), int(factor), bool(clearance))
         key = ("grid", backend, scene.aabb, opts)
         g = self._cache.get(key)
         if g is None:
@@ -356,7 +359,7 @@ class Shape:
         """A sphere-traced picture, (height, width, 3) uint8, with the CLI's camera: orbiting
         the bounds' centre (or `target`) at yaw/pitch degrees, `distance` (default: frames
         the bounds), vertical `fov` degrees; shading 'shaded', 'normals' or 'heatmap'."""
-        return self.prune(grid, threads=threads).render(
+        return self.prune(grid, clearance=True, threads=threads).render(
             width, height, yaw=yaw, pitch=pitch, distance=distance, fov=fov, target=target,
             shading=shading, shadows=shadows, threads=threads, progress=progress)
 
@@ -368,7 +371,8 @@ class Shape:
         .png (render; width, height and the camera as in render())."""
         path, ext = _check_ext(path, _SAVE_EXTS)
         if ext == ".png":
-            grid = self.prune(render_options.pop("grid", 256), bounds=bounds, threads=threads)
+            grid = self.prune(render_options.pop("grid", 256), bounds=bounds, clearance=True,
+                              threads=threads)
         else:
             grid_res = _mesh_grid(int(res)) if ext in _MESH_EXTS else int(res)
             grid = self.prune(grid_res, bounds=bounds, refine=ONE_SHOT_REFINE, threads=threads)

@@ -64,7 +64,8 @@ auto run_hooked(Hook& hook, F&& work) -> decltype(work()) {
 }
 
 PruneOptions prune_options(uint32_t grid, bool far_field, bool hierarchy, float far_field_c,
-                           uint32_t refine, bool lipschitz_bounds, uint32_t factor, int threads) {
+                           uint32_t refine, bool lipschitz_bounds, uint32_t factor, bool clearance,
+                           int threads) {
     if (grid < 1 || grid > 4096) throw py::value_error("grid must be in 1..4096");
     if (factor < 2 || factor > 64) throw py::value_error("factor must be in 2..64");
     if (!(far_field_c >= 1 && far_field_c <= 1000))
@@ -78,6 +79,7 @@ PruneOptions prune_options(uint32_t grid, bool far_field, bool hierarchy, float 
     o.far_field_c = far_field_c;
     o.refine = lipschitz_bounds ? 1 : refine;
     o.bounds = lipschitz_bounds ? CellBounds::kLipschitz : CellBounds::kInterval;
+    o.clearance = clearance;
     o.factor = factor;
     o.threads = threads;
     return o;
@@ -284,11 +286,11 @@ void bind_queries(py::module_& m) {
 
     m.def(
         "prune",
-        [](ScenePtr scene, uint32_t grid, bool far_field, bool hierarchy, float c,
-           uint32_t refine, bool lipschitz, uint32_t factor, int threads,
+        [](ScenePtr scene, uint32_t grid, bool far_field, bool hierarchy, float c, uint32_t refine,
+           bool lipschitz, uint32_t factor, bool clearance, int threads,
            const py::object& progress) {
-            PruneOptions o =
-                prune_options(grid, far_field, hierarchy, c, refine, lipschitz, factor, threads);
+            PruneOptions o = prune_options(grid, far_field, hierarchy, c, refine, lipschitz, factor,
+                                           clearance, threads);
             Hook hook(progress);
             o.progress = hook.fn();
             o.cancel = hook.cancel();
@@ -300,19 +302,19 @@ void bind_queries(py::module_& m) {
             return g;
         },
         py::arg("scene"), py::arg("grid"), py::arg("far_field"), py::arg("hierarchy"),
-        py::arg("far_field_c"), py::arg("refine"), py::arg("lipschitz_bounds"),
-        py::arg("factor"), py::arg("threads"), py::arg("progress"));
+        py::arg("far_field_c"), py::arg("refine"), py::arg("lipschitz_bounds"), py::arg("factor"),
+        py::arg("clearance"), py::arg("threads"), py::arg("progress"));
 
     m.def(
         "prune_gpu",
-        [](ScenePtr scene, uint32_t grid, bool far_field, bool hierarchy, float c,
-           uint32_t refine, bool lipschitz, uint32_t factor) {
+        [](ScenePtr scene, uint32_t grid, bool far_field, bool hierarchy, float c, uint32_t refine,
+           bool lipschitz, uint32_t factor, bool clearance) {
             if (!gpu::built_with_vulkan())
                 throw gpu::GpuError(
                     "backend='vulkan': this sdfprune was built without the Vulkan backend "
                     "(install with SDFPRUNE_VULKAN=1 in the environment, or use backend='cpu')");
-            const PruneOptions o =
-                prune_options(grid, far_field, hierarchy, c, refine, lipschitz, factor, 0);
+            const PruneOptions o = prune_options(grid, far_field, hierarchy, c, refine, lipschitz,
+                                                 factor, clearance, 0);
             py::gil_scoped_release nogil;
             auto g = std::make_shared<GpuGrid>();
             g->scene = scene;
@@ -321,8 +323,8 @@ void bind_queries(py::module_& m) {
             return g;
         },
         py::arg("scene"), py::arg("grid"), py::arg("far_field"), py::arg("hierarchy"),
-        py::arg("far_field_c"), py::arg("refine"), py::arg("lipschitz_bounds"),
-        py::arg("factor"));
+        py::arg("far_field_c"), py::arg("refine"), py::arg("lipschitz_bounds"), py::arg("factor"),
+        py::arg("clearance"));
 
     m.def(
         "eval_grid",
