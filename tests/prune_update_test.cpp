@@ -159,6 +159,7 @@ TEST(PruneUpdate, RandomEditsEqualAFullPrune) {
         o.factor = i % 4 == 3 ? 2 : 4;
         o.coarse_tapes = true;
         o.bounds = i % 5 == 4 ? CellBounds::kLipschitz : CellBounds::kInterval;
+        o.clearance = i % 2 == 0;  // updates keep the far-field clearances right
         const PrunedGrid before = prune(sc, o);
         Rng r(40 + i);
         for (const Edit e :
@@ -227,6 +228,7 @@ TEST(PruneUpdate, ASessionOfEditsInPlace) {
         PruneOptions o;
         o.resolution = 64;
         o.coarse_tapes = true;
+        o.clearance = i != 1;  // the viewer's edits, with clearances as it prunes them
         PrunedGrid g = prune(scene, o);
         std::shared_ptr<const Scene> current = scene;
         Rng r(77 + i);

@@ -33,6 +33,7 @@ void add_view(CLI::App& app, std::vector<Command>& commands) {
         ->capture_default_str()
         ->check(CLI::IsMember({"cpu", "vulkan"}));
     sub->add_flag("--open", a->open, "open the page in the desktop's browser (xdg-open)");
+    a->prune.clearance = true;  // a tracing app, as `render` (--no-clearance: off)
     add_prune_options(sub, a->prune, a->lipschitz);
     sub->footer(
         "The page orbits (drag), zooms (wheel or pinch) and pans (right or shift drag); renders "
