@@ -196,6 +196,11 @@ struct Brick {
 
 using BitField = uint64_t (Brick::*)[kB];
 
+// The grid coordinates of corner l of brick b.
+inline CellCoord corner_at(const Brick& b, uint32_t l) {
+    return {b.bx * kB + (l & 7), b.by * kB + ((l >> 3) & 7), b.bz * kB + (l >> 6)};
+}
+
 constexpr uint32_t near_slot(int dx, int dy, int dz) {
     return uint32_t((dx + 1) + 3 * (dy + 1) + 9 * (dz + 1));
 }
@@ -253,32 +258,14 @@ class CornerBricks {
         slot_of_.assign(size_t(nb_) * nb_ * nb_, kNone);
     }
 
-    // Stage 1, serial: marks the cubes [x0, x0 + m) × [y0, y0 + m) × [z0, z0 + m) as
-    // candidates, within one brick (m divides kB, x0, y0, z0 are multiples of m), and allocates
-    // the bricks holding their corners. `tape` is stored when the bricks keep tapes.
-    void add_cubes(uint32_t x0, uint32_t y0, uint32_t z0, uint32_t m, uint32_t tape = kNone) {
-        Brick& b = allocate(x0 / kB, y0 / kB, z0 / kB);
-        const uint32_t lx = x0 % kB, ly = y0 % kB, lz = z0 % kB;
-        uint64_t square = 0;
-        for (uint32_t y = 0; y < m; ++y) square |= ((1ull << m) - 1) << (lx + kB * (ly + y));
-        for (uint32_t z = 0; z < m; ++z) b.cand[lz + z] |= square;
-        if (with_tapes_)
-            for (uint32_t z = 0; z < m; ++z)
-                for (uint32_t y = 0; y < m; ++y)
-                    for (uint32_t x = 0; x < m; ++x)
-                        b.tape[local_index(lx + x, ly + y, lz + z)] = tape;
-        const uint32_t ex = lx + m == kB, ey = ly + m == kB, ez = lz + m == kB;
-        if (ex | ey | ez)
-            for (uint32_t dz = 0; dz <= ez; ++dz)
-                for (uint32_t dy = 0; dy <= ey; ++dy)
-                    for (uint32_t dx = 0; dx <= ex; ++dx)
-                        allocate(x0 / kB + dx, y0 / kB + dy, z0 / kB + dz);
-    }
+    // Stage 1, serial: marks cube (x, y, z) as a candidate and allocates the bricks holding its
+    // corners. `tape` is stored when the bricks keep tapes.
     void add_candidate(uint32_t x, uint32_t y, uint32_t z, uint32_t tape = kNone) {
-        add_cubes(x, y, z, 1, tape);
+        const uint64_t one = 1;
+        add_kept_cubes(x, y, z, 1, &one, tape);
     }
-    // The same for some of the cubes [x0, x0 + m)³ (as add_cubes): those of `keep`, bit
-    // x + m·y + m²·z for cube (x0 + x, y0 + y, z0 + z).
+    // The same for some of the cubes [x0, x0 + m)³, within one brick (m divides kB, x0, y0, z0
+    // are multiples of m): those of `keep`, bit x + m·y + m²·z for cube (x0 + x, y0 + y, z0 + z).
     void add_kept_cubes(uint32_t x0, uint32_t y0, uint32_t z0, uint32_t m, const uint64_t* keep,
                         uint32_t tape) {
         Brick* b = nullptr;
@@ -600,15 +587,14 @@ void add_candidates(const PrunedGrid& grid, uint32_t n, CornerBricks& bricks,
         bricks.add_kept_cubes(cell.x * m, cell.y * m, cell.z * m, m, cell.keep.data(), cell.tape);
 }
 
-// A tape for corner (x, y, z) when the grid's cells are not unions of cubes: a near-field cell
+// A tape for a corner when the grid's cells are not unions of cubes: a near-field cell
 // holding the corner, or (empty) the full tree.
-std::span<const uint32_t> held_tape(const PrunedGrid& grid, uint32_t n, uint32_t x, uint32_t y,
-                                    uint32_t z) {
+std::span<const uint32_t> held_tape(const PrunedGrid& grid, uint32_t n, CellCoord corner) {
     const uint32_t g = grid.resolution();
     uint32_t x0, x1, y0, y1, z0, z1;
-    cell_range(x, g, n, x0, x1);
-    cell_range(y, g, n, y0, y1);
-    cell_range(z, g, n, z0, z1);
+    cell_range(corner.x, g, n, x0, x1);
+    cell_range(corner.y, g, n, y0, y1);
+    cell_range(corner.z, g, n, z0, z1);
     for (uint32_t cz = z0; cz <= z1; ++cz)
         for (uint32_t cy = y0; cy <= y1; ++cy)
             for (uint32_t cx = x0; cx <= x1; ++cx) {
@@ -641,9 +627,8 @@ class CornerBatch {
             (count_ == kEvalLanes || tape.data() != tape_.data() || tape.size() != tape_.size()))
             flush();
         tape_ = tape;
-        const uint32_t x = b_.bx * kB + (l & 7), y = b_.by * kB + ((l >> 3) & 7),
-                       z = b_.bz * kB + (l >> 6);
-        const vec3 p = origin_ + vec3(float(x), float(y), float(z)) * h_;
+        const CellCoord c = corner_at(b_, l);
+        const vec3 p = origin_ + vec3(float(c.x), float(c.y), float(c.z)) * h_;
         points_.x[count_] = p.x;
         points_.y[count_] = p.y;
         points_.z[count_] = p.z;
@@ -665,9 +650,10 @@ class CornerBatch {
     // Corners on the AABB count as outside: shapes cut by it are capped.
     float capped(uint32_t l, float v) const {
         if (!on_aabb_) return v;
-        const uint32_t x = b_.bx * kB + (l & 7), y = b_.by * kB + ((l >> 3) & 7),
-                       z = b_.bz * kB + (l >> 6);
-        return x == 0 || y == 0 || z == 0 || x == n_ || y == n_ || z == n_ ? std::max(v, 0.0f) : v;
+        const CellCoord c = corner_at(b_, l);
+        const bool on_aabb =
+            c.x == 0 || c.y == 0 || c.z == 0 || c.x == n_ || c.y == n_ || c.z == n_;
+        return on_aabb ? std::max(v, 0.0f) : v;
     }
 
     const Scene& sc_;
@@ -798,8 +784,7 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
                         for (uint64_t bits = b.need[word]; bits; bits &= bits - 1) {
                             const uint32_t l = word * 64 + uint32_t(std::countr_zero(bits));
                             const std::span<const uint32_t> t =
-                                held_tape(*grid, n, b.bx * kB + (l & 7), b.by * kB + ((l >> 3) & 7),
-                                          b.bz * kB + (l >> 6));
+                                held_tape(*grid, n, corner_at(b, l));
                             batch.add(t.empty() ? std::span<const uint32_t>(sc.full_tape) : t, l);
                         }
                 } else {
@@ -857,10 +842,9 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
                                 batch.add(sc.full_tape, l);
                                 continue;
                             }
-                            const uint32_t x = b.bx * kB + (l & 7), y = b.by * kB + ((l >> 3) & 7),
-                                           z = b.bz * kB + (l >> 6);
-                            batch.set(l, grid->cell(std::min(x, n - 1), std::min(y, n - 1),
-                                                    std::min(z, n - 1))
+                            const CellCoord c = corner_at(b, l);
+                            batch.set(l, grid->cell(std::min(c.x, n - 1), std::min(c.y, n - 1),
+                                                    std::min(c.z, n - 1))
                                              .constant);
                         }
                 }
@@ -904,10 +888,9 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
             for (uint32_t word = 0; word < kB; ++word) {
                 for (uint64_t bits = b.has_vertex[word]; bits; bits &= bits - 1) {
                     const uint32_t l = word * 64 + uint32_t(std::countr_zero(bits));
-                    const uint32_t x = b.bx * kB + (l & 7), y = b.by * kB + ((l >> 3) & 7),
-                                   z = b.bz * kB + (l >> 6);
+                    const CellCoord c = corner_at(b, l);
                     const float fu = b.value[l];
-                    const vec3 pu = corner(x, y, z);
+                    const vec3 pu = corner(c.x, c.y, c.z);
                     uint32_t id = b.vbase + b.voff[l];
                     for (uint32_t mask = b.vmask[l]; mask; mask &= mask - 1) {
                         const uint32_t d = uint32_t(std::countr_zero(mask)) + 1;
@@ -915,7 +898,7 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
                         const float fv = v.brick->value[v.local];
                         const float t =
                             std::clamp(fu / (fu - fv), kMinEdgeFraction, 1.0f - kMinEdgeFraction);
-                        const vec3 pv = corner(x + (d & 1), y + ((d >> 1) & 1), z + (d >> 2));
+                        const vec3 pv = corner(c.x + (d & 1), c.y + ((d >> 1) & 1), c.z + (d >> 2));
                         mesh.vertices[id++] = pu + (pv - pu) * t;
                     }
                 }
