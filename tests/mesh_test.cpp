@@ -264,12 +264,7 @@ TEST(MeshShapes, RandomScenesUnderEveryPlacementMatchNaive) {
     // cuts, meshed at the default pruning grid and at one of 2³ cubes per cell.
     for (uint32_t i = 0; i < 10; ++i) {
         SCOPED_TRACE("random scene " + std::to_string(i));
-        test::RandomSceneSpec spec;
-        spec.primitives = 4 + 3 * i;
-        spec.tree = test::TreeShape(i % 4);
-        spec.placement = test::Placement(i % 5);
-        spec.smooth_prob = (i % 3) * 0.5f;
-        spec.plane_cut = i % 5 == 3;
+        test::RandomSceneSpec spec = test::varied_spec(i, 4 + 3 * i);
         spec.union_share = 0.8f;
         spec.clip_aabb = i % 4 == 2;
         const Scene sc = test::random_scene(9300 + i, spec);

@@ -66,6 +66,18 @@ struct RandomSceneSpec {
     bool plane_cut = false;      // the tree intersected with, or minus, a random half-space
 };
 
+// The i-th of a series of specs that cycles through every tree shape, placement, smoothness
+// and plane cut, with `primitives` primitives.
+inline RandomSceneSpec varied_spec(uint32_t i, uint32_t primitives) {
+    RandomSceneSpec spec;
+    spec.primitives = primitives;
+    spec.tree = TreeShape(i % 4);
+    spec.placement = Placement(i % 5);
+    spec.smooth_prob = float(i % 3) * 0.5f;
+    spec.plane_cut = i % 5 == 3;
+    return spec;
+}
+
 inline vec3 random_in_box(Rng& r, vec3 lo, vec3 hi) {
     return {r.uniform(lo.x, hi.x), r.uniform(lo.y, hi.y), r.uniform(lo.z, hi.z)};
 }

@@ -58,12 +58,7 @@ TEST(PruneLanes, BaselineIsAlwaysAvailable) {
 TEST(PruneLanes, Avx2EqualsBaselineOnRandomScenes) {
     if (!has_avx2()) GTEST_SKIP() << "this processor has no AVX2: only the baseline runs";
     for (uint32_t i = 0; i < 24; ++i) {
-        test::RandomSceneSpec spec;
-        spec.primitives = 3 + i * 2;
-        spec.tree = test::TreeShape(i % 4);
-        spec.placement = test::Placement(i % 5);
-        spec.smooth_prob = (i % 3) * 0.5f;
-        spec.plane_cut = i % 5 == 3;
+        const test::RandomSceneSpec spec = test::varied_spec(i, 3 + i * 2);
         const Scene sc = test::random_scene(4200 + i, spec);
         PruneOptions o;
         o.resolution = i % 2 ? 64 : 48;
@@ -82,12 +77,7 @@ TEST(PruneLanes, PointLanesEqualEvalTape) {
     std::vector<LaneIsa> isas = {LaneIsa::kBaseline};
     if (has_avx2()) isas.push_back(LaneIsa::kAvx2);
     for (uint32_t i = 0; i < 12; ++i) {
-        test::RandomSceneSpec spec;
-        spec.primitives = 2 + i * 3;
-        spec.tree = test::TreeShape(i % 4);
-        spec.placement = test::Placement(i % 5);
-        spec.smooth_prob = (i % 3) * 0.5f;
-        spec.plane_cut = i % 5 == 3;
+        const test::RandomSceneSpec spec = test::varied_spec(i, 2 + i * 3);
         const Scene sc = test::random_scene(5100 + i, spec);
         PruneOptions o;
         o.resolution = 16;
