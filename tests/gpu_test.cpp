@@ -131,6 +131,18 @@ void expect_same_cells(const PrunedGrid& cpu, const gpu::Grid& gpu, const std::s
     EXPECT_EQ(mismatches, 0u);
 }
 
+// The GPU's grid against the CPU's: the statistics, and every finest cell bit for bit where the
+// device rounds as the CPU does (lavapipe), else what every device must give.
+void expect_matches_cpu(const Scene& sc, const PrunedGrid& cpu, const gpu::Grid& gpu,
+                        const gpu::Device& dev, const std::string& what) {
+    const bool exact = exact_device(dev);
+    expect_same_stats(cpu.stats(), gpu.stats(), what, exact);
+    if (exact)
+        expect_same_cells(cpu, gpu, what);
+    else
+        expect_valid_cells(sc, gpu, what);
+}
+
 TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const TreeShape shapes[] = {TreeShape::kBalanced, TreeShape::kLeftDeep, TreeShape::kRightDeep,
@@ -180,11 +192,7 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
         const gpu::Grid gpu = gpu::prune(*dev, sc, o);
         EXPECT_GE(gpu.stats().submissions, 3u);
         EXPECT_LE(gpu.stats().submissions, 6u + gpu.stats().pool_grows);
-        expect_same_stats(cpu.stats(), gpu.stats(), "demo 64³, presized", exact_device(*dev));
-        if (exact_device(*dev))
-            expect_same_cells(cpu, gpu, "demo 64³, presized");
-        else
-            expect_valid_cells(sc, gpu, "demo 64³, presized");
+        expect_matches_cpu(sc, cpu, gpu, *dev, "demo 64³, presized");
     }
     // Without that, the demo's tapes at 64³ outgrow the initial pools (1 Mi words, 64 Ki for
     // the octants'): they grow and their levels are redone.
@@ -194,11 +202,7 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
     EXPECT_GT(gpu.stats().pool_grows, 0u);
     EXPECT_GT(gpu.stats().submissions, 3u);
     EXPECT_LE(gpu.stats().submissions, 6u + gpu.stats().pool_grows);
-    expect_same_stats(cpu.stats(), gpu.stats(), "demo 64³", exact_device(*dev));
-    if (exact_device(*dev))
-        expect_same_cells(cpu, gpu, "demo 64³");
-    else
-        expect_valid_cells(sc, gpu, "demo 64³");
+    expect_matches_cpu(sc, cpu, gpu, *dev, "demo 64³");
 }
 
 // The steps' work shapes (GpuStepShape) follow the hierarchy: per level the octants then the
@@ -262,11 +266,7 @@ TEST(Gpu, DeepChainPrunes) {
         const PrunedGrid cpu = prune(sc, o);
         const gpu::Grid gpu = gpu::prune(*dev, sc, o);
         const std::string what = "chain of " + std::to_string(depth);
-        expect_same_stats(cpu.stats(), gpu.stats(), what, exact_device(*dev));
-        if (exact_device(*dev))
-            expect_same_cells(cpu, gpu, what);
-        else
-            expect_valid_cells(sc, gpu, what);
+        expect_matches_cpu(sc, cpu, gpu, *dev, what);
     }
 }
 
