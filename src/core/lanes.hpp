@@ -22,6 +22,11 @@ namespace sdfprune::lanes {
 // what they compute.
 inline constexpr uint32_t kBlock = 8;
 
+// The lanes that `count` points or boxes take: 1 for a single one (no loop), else whole blocks.
+inline uint32_t lanes_for(uint32_t count) {
+    return count == 1 ? 1 : (count + kBlock - 1) / kBlock * kBlock;
+}
+
 // The lanes to compute, as the loops see them: W = 1, a single point (the loop disappears);
 // W = kBlock, a multiple of kBlock.
 template <uint32_t W>

@@ -64,8 +64,7 @@ inline void eval_any_rows(const Scene& sc, std::span<const uint32_t> tape, const
 
 void eval_tape_lanes(const Scene& sc, std::span<const uint32_t> tape, PointLanes& p, uint32_t count,
                      float* out, float* stack) {
-    const uint32_t lanes =
-        count == 1 ? 1 : (count + lanes::kBlock - 1) / lanes::kBlock * lanes::kBlock;
+    const uint32_t lanes = lanes::lanes_for(count);
     for (uint32_t i = count; i < lanes; ++i) {
         p.x[i] = p.x[count - 1];
         p.y[i] = p.y[count - 1];

@@ -57,6 +57,7 @@ constexpr uint32_t kLanes = 32;
 // over structure-of-arrays data to a multiple of the block, with the same results bit for bit as
 // one box at a time. The lanes past the boxes repeat the last box; nothing reads them.
 using lanes::kBlock;
+using lanes::lanes_for;
 using lanes::lanes_of;
 
 // The centres of up to kLanes boxes, coordinate by coordinate, and the lanes to compute.
@@ -66,11 +67,6 @@ struct BoxLanes {
     alignas(32) float z[kLanes];
     uint32_t lanes = 0;  // 1 for a single box, else the boxes rounded up to whole blocks
 };
-
-// The lanes that `count` boxes take: 1 for a single box, else whole blocks.
-uint32_t lanes_for(uint32_t count) {
-    return count == 1 ? 1 : (count + kBlock - 1) / kBlock * kBlock;
-}
 
 BoxLanes box_lanes(const vec3* centres, uint32_t count) {
     BoxLanes c;
