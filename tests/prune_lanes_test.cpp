@@ -127,6 +127,85 @@ TEST(PruneLanes, Avx2EqualsBaselineOnReferenceScenes) {
     }
 }
 
+// refine_cell (prune_cell.cpp) evaluates its sub-boxes in batches and, after the first, only the
+// subtrees of the operators still decided alike: its results must be those of deciding every
+// sub-box on its own (evaluate_cell on each) and combining them. Random scenes (every kind,
+// operator and placement), random boxes, S = 2-4, both bounds, with and without the far field.
+TEST(PruneLanes, RefineCellEqualsEverySubBoxAlone) {
+    LaneIsaScope scope;
+    uint32_t far = 0, decided = 0, undecided = 0;
+    for (uint32_t i = 0; i < 24; ++i) {
+        const test::RandomSceneSpec spec = test::varied_spec(i, 3 + i * 2);
+        const Scene sc = test::random_scene(4400 + i, spec);
+        const std::span<const uint32_t> tape = sc.full_tape;
+        ASSERT_LE(tape.size(), size_t(math::kRefineMaxTape));
+        const uint32_t n = uint32_t(tape.size());
+        const float L = sc.lipschitz[math::tape_node(tape.back())];
+        const vec3 extent = sc.aabb.max - sc.aabb.min;
+        Rng r(4500 + i);
+        CellScratch s, one;
+        for (uint32_t k = 0; k < 60; ++k) {
+            const float size = std::max({extent.x, extent.y, extent.z}) * r.uniform(0.004f, 0.2f);
+            const vec3 half = vec3(r.uniform(0.5f, 1.0f), r.uniform(0.5f, 1.0f), 1.0f) * size;
+            const CellBox box{test::random_in_box(r, sc.aabb.min, sc.aabb.max), half,
+                              math::length(half)};
+            const uint32_t S = 2 + k % 3;
+            const CellBounds bounds = k % 4 == 1 ? CellBounds::kLipschitz : CellBounds::kInterval;
+            const bool far_field = k % 5 != 4;
+            const float C = k % 7 == 3 ? 4.0f : 2.0f;
+            set_lane_isa(k % 2 == 0 || !has_avx2() ? LaneIsa::kBaseline : LaneIsa::kAvx2);
+
+            // Every sub-box alone: its decisions, and its root's far-field range.
+            const vec3 sub_half = box.half / float(S);
+            const float sub_radius = math::length(sub_half);
+            const float clearance = math::far_field_clearance(C, L, box.radius);
+            std::vector<uint32_t> common(n, math::kKeepBoth);
+            bool above = far_field, below = far_field;
+            float lowest = INFINITY, highest = -INFINITY;
+            for (uint32_t b = 0; b < S * S * S; ++b) {
+                const CellBox sub{sub_box_centre(box, S, b % S, b / S % S, b / (S * S)), sub_half,
+                                  sub_radius};
+                evaluate_cell(sc, tape, sub, bounds, one);
+                for (uint32_t e = 0; e < n; ++e) {
+                    if (sc.is_primitive(math::tape_node(tape[e]))) continue;
+                    if (b == 0)
+                        common[e] = one.decision[e];
+                    else if (common[e] != one.decision[e])
+                        common[e] = math::kKeepBoth;
+                }
+                const vec2 range = math::far_field_range(one.value[n - 1], one.lo[n - 1],
+                                                         one.hi[n - 1], L, sub_radius);
+                above = above && math::clears_above(range.x, clearance);
+                below = below && math::clears_below(range.y, clearance);
+                lowest = std::min(lowest, range.x);
+                highest = std::max(highest, range.y);
+            }
+
+            float constant = 0;
+            const bool near = refine_cell(sc, tape, box, S, bounds, far_field, C, s, constant);
+            const std::string what = "scene " + std::to_string(i) + ", box " + std::to_string(k);
+            ASSERT_EQ(near, !(above || below)) << what;
+            if (!near) {
+                EXPECT_EQ(std::bit_cast<uint32_t>(constant),
+                          std::bit_cast<uint32_t>(above ? lowest : highest))
+                    << what;
+                ++far;
+                continue;
+            }
+            bool any = false;
+            for (uint32_t e = 0; e < n; ++e) {
+                ASSERT_EQ(s.decision[e], common[e]) << what << ", entry " << e;
+                any = any || common[e] != math::kKeepBoth;
+            }
+            ++(any ? decided : undecided);
+        }
+    }
+    // Every outcome was met: far-field, some operator decided, nothing decided.
+    EXPECT_GT(far, 20u);
+    EXPECT_GT(decided, 20u);
+    EXPECT_GT(undecided, 20u);
+}
+
 // Parent tapes longer than kSiblingMaxTape are pruned one cell at a time (prune_level.cpp): a
 // scene of 40,000 primitives, whose top levels' tapes exceed it, still prunes exactly.
 TEST(PruneLanes, LongParentTapesPruneExactly) {

@@ -527,6 +527,8 @@ struct CellScratch {
     std::vector<uint32_t> refined;    // refine_cell's input tape (prune_level.cpp)
     std::vector<uint32_t> sub_order;  // refine_cell: the sub-boxes in visiting order ...
     uint32_t sub_order_of = 0;        // ... for this S
+    // refine_cell: the operators still decided alike in every sub-box, and their subtrees
+    std::vector<uint32_t> refine_candidates, refine_needed;
     // refine_cell: per tape entry, the values, ranges and decisions of a batch of sub-boxes
     std::vector<float> lane_value, lane_lo, lane_hi;
     std::vector<uint32_t> lane_decision;

@@ -37,7 +37,7 @@ size_t CellScratch::bytes() const {
          {&value, &lo, &hi, &lane_value, &lane_lo, &lane_hi, &sib_value, &sib_lo, &sib_hi})
         add(*v);
     for (const auto* v : {&left, &right, &decision, &stack, &combined, &refined, &sub_order,
-                          &lane_decision, &sib_decision})
+                          &lane_decision, &sib_decision, &refine_candidates, &refine_needed})
         add(*v);
     add(alive);
     add(negate);
@@ -144,13 +144,16 @@ void decide_boxes(uint32_t lanes, float sgn, float k, float spread, const float*
 // Evaluates `tape` at the centres of the boxes `c` (all of half sizes `half`), bounds every
 // entry over each box and decides every operator in each: entry by entry, across the boxes, so
 // that an entry's operands are fetched once. Also fills s.left and s.right.
+// With `only` (entries of the tape in tape order, closed under operands: whole subtrees), just
+// those entries, their operands found in s.left and s.right as an earlier call over the whole
+// tape left them; the other entries' rows are left alone.
 template <uint32_t W>
 void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLanes& c, vec3 half,
-                    float radius, CellBounds bounds, LaneArrays out, CellScratch& s) {
-    const uint32_t n = uint32_t(tape.size()), lanes = c.lanes;
+                    float radius, CellBounds bounds, LaneArrays out, CellScratch& s,
+                    std::span<const uint32_t> only) {
+    const uint32_t lanes = c.lanes;
     const bool interval = bounds == CellBounds::kInterval;
-    uint32_t top = 0;
-    for (uint32_t i = 0; i < n; ++i) {
+    const auto entry = [&](uint32_t i, uint32_t left, uint32_t right) {
         const uint32_t w = tape[i];
         const uint32_t node = math::tape_node(w);
         const uint32_t kind = sc.kind[node];
@@ -164,10 +167,6 @@ void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLa
             lanes::primitive_values_any<W>(kind, sc.params[p], c.x, c.y, c.z, c.lanes, v);
             primitive_ranges<W>(sc.bound[p], c, half, spread, interval, v, l, h);
         } else {
-            const uint32_t right = s.stack[--top];
-            const uint32_t left = s.stack[--top];
-            s.left[i] = left;
-            s.right[i] = right;
             const float sgn = math::operator_s(kind), k = sc.blend[node];
             const size_t ia = size_t(left) * out.stride, ib = size_t(right) * out.stride;
             // Rows of other entries than this one: no aliasing.
@@ -190,6 +189,22 @@ void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLa
                 l[b] = -h[b];
                 h[b] = -old_lo;
             }
+    };
+    if (!only.empty()) {
+        for (const uint32_t i : only) entry(i, s.left[i], s.right[i]);
+        return;
+    }
+    uint32_t top = 0;
+    for (uint32_t i = 0; i < uint32_t(tape.size()); ++i) {
+        if (sc.is_primitive(math::tape_node(tape[i]))) {
+            entry(i, 0, 0);
+        } else {
+            const uint32_t right = s.stack[--top];
+            const uint32_t left = s.stack[--top];
+            s.left[i] = left;
+            s.right[i] = right;
+            entry(i, left, right);
+        }
         s.stack[top++] = i;
     }
 }
@@ -197,11 +212,11 @@ void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLa
 // evaluate_lanes for one box (no loops) or for whole blocks.
 inline void evaluate_any_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLanes& c,
                                vec3 half, float radius, CellBounds bounds, LaneArrays out,
-                               CellScratch& s) {
+                               CellScratch& s, std::span<const uint32_t> only) {
     if (c.lanes == 1)
-        evaluate_lanes<1>(sc, tape, c, half, radius, bounds, out, s);
+        evaluate_lanes<1>(sc, tape, c, half, radius, bounds, out, s, only);
     else
-        evaluate_lanes<kBlock>(sc, tape, c, half, radius, bounds, out, s);
+        evaluate_lanes<kBlock>(sc, tape, c, half, radius, bounds, out, s, only);
 }
 
 // evaluate_lanes compiled twice, each with everything it calls inlined (flatten): for the
@@ -210,12 +225,10 @@ inline void evaluate_any_lanes(const Scene& sc, std::span<const uint32_t> tape, 
 // results bit for bit (PruneLanes tests compare them).
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 #define SDFPRUNE_AVX2_LANES 1
-[[gnu::target("avx2"), gnu::flatten]] void evaluate_lanes_avx2(const Scene& sc,
-                                                               std::span<const uint32_t> tape,
-                                                               const BoxLanes& c, vec3 half,
-                                                               float radius, CellBounds bounds,
-                                                               LaneArrays out, CellScratch& s) {
-    evaluate_any_lanes(sc, tape, c, half, radius, bounds, out, s);
+[[gnu::target("avx2"), gnu::flatten]] void evaluate_lanes_avx2(
+    const Scene& sc, std::span<const uint32_t> tape, const BoxLanes& c, vec3 half, float radius,
+    CellBounds bounds, LaneArrays out, CellScratch& s, std::span<const uint32_t> only) {
+    evaluate_any_lanes(sc, tape, c, half, radius, bounds, out, s, only);
 }
 #else
 #define SDFPRUNE_AVX2_LANES 0
@@ -223,8 +236,9 @@ inline void evaluate_any_lanes(const Scene& sc, std::span<const uint32_t> tape, 
 
 [[gnu::flatten]] void evaluate_lanes_baseline(const Scene& sc, std::span<const uint32_t> tape,
                                               const BoxLanes& c, vec3 half, float radius,
-                                              CellBounds bounds, LaneArrays out, CellScratch& s) {
-    evaluate_any_lanes(sc, tape, c, half, radius, bounds, out, s);
+                                              CellBounds bounds, LaneArrays out, CellScratch& s,
+                                              std::span<const uint32_t> only) {
+    evaluate_any_lanes(sc, tape, c, half, radius, bounds, out, s, only);
 }
 
 LaneIsa best_lane_isa() {
@@ -239,12 +253,13 @@ LaneIsa best_lane_isa() {
 std::atomic<int> g_lane_isa{-1};
 
 void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const BoxLanes& c, vec3 half,
-                    float radius, CellBounds bounds, LaneArrays out, CellScratch& s) {
+                    float radius, CellBounds bounds, LaneArrays out, CellScratch& s,
+                    std::span<const uint32_t> only = {}) {
 #if SDFPRUNE_AVX2_LANES
     if (lane_isa() == LaneIsa::kAvx2)
-        return evaluate_lanes_avx2(sc, tape, c, half, radius, bounds, out, s);
+        return evaluate_lanes_avx2(sc, tape, c, half, radius, bounds, out, s, only);
 #endif
-    evaluate_lanes_baseline(sc, tape, c, half, radius, bounds, out, s);
+    evaluate_lanes_baseline(sc, tape, c, half, radius, bounds, out, s, only);
 }
 
 }  // namespace
@@ -347,6 +362,25 @@ void sub_box_order(uint32_t S, std::vector<uint32_t>& order) {
     order.erase(std::unique(order.begin(), order.end()), order.end());
 }
 
+// refine_cell's entries to evaluate: the subtrees of its candidates (operators of `tape`, whose
+// links s.left and s.right hold), in tape order. A reverse sweep, parents before their operands;
+// the marks borrow s.alive, which compaction sets afresh.
+void candidates_subtrees(const Scene& sc, std::span<const uint32_t> tape, CellScratch& s,
+                         std::vector<uint32_t>& needed) {
+    const uint32_t n = uint32_t(tape.size());
+    uint8_t* mark = s.alive.data();
+    std::fill_n(mark, n, uint8_t(0));
+    for (const uint32_t e : s.refine_candidates) mark[e] = 1;
+    for (uint32_t i = n; i-- > 0;) {
+        if (mark[i] == 0 || sc.is_primitive(math::tape_node(tape[i]))) continue;
+        mark[s.left[i]] = 1;
+        mark[s.right[i]] = 1;
+    }
+    needed.clear();
+    for (uint32_t i = 0; i < n; ++i)
+        if (mark[i] != 0) needed.push_back(i);
+}
+
 }  // namespace
 
 bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box, uint32_t S,
@@ -371,6 +405,14 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
     // The sub-boxes' centres from the cell's corner and the sub-box size, computed once.
     const vec3 corner = box.centre - box.half;
     const uint32_t total = S * S * S;
+    // After the first batch, the operators still decided the same way in every sub-box so far
+    // (the candidates), and what a later batch evaluates: the whole tape while the far-field
+    // test is open (it reads the root), else only the candidates' subtrees, often a few words
+    // of a long tape. The results are the same: every entry a decision reads is evaluated.
+    std::vector<uint32_t>& candidates = s.refine_candidates;
+    std::vector<uint32_t>& needed = s.refine_needed;
+    candidates.clear();
+    needed.clear();
     bool first = true;
     for (uint32_t at = 0; at < total;) {
         // The first batch is one block, the others kLanes (sub_box_order).
@@ -384,25 +426,29 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
             c.y[b] = p.y;
             c.z[b] = p.z;
         }
+        const bool whole = at == 0 || all_above || all_below;
         evaluate_boxes(sc, tape, c, sub_half, sub_radius, bounds,
                        {s.lane_value.data(), s.lane_lo.data(), s.lane_hi.data(),
                         s.lane_decision.data(), kLanes},
-                       s);
-        at += count;
+                       s, whole ? std::span<const uint32_t>() : std::span<const uint32_t>(needed));
         // Whether some operator is still decided the same way in every sub-box so far. The
         // lanes past the batch repeat its last sub-box, so they may be folded in too (here and
         // below), and an operator kept in some sub-box stays kept.
-        bool any_decided = false;
-        for (uint32_t e = 0; e < n; ++e) {
-            if (sc.is_primitive(math::tape_node(tape[e]))) continue;
+        if (at == 0) {
+            for (uint32_t e = 0; e < n; ++e)
+                if (!sc.is_primitive(math::tape_node(tape[e]))) candidates.push_back(e);
+        }
+        at += count;
+        size_t kept = 0;
+        for (const uint32_t e : candidates) {
             const uint32_t* d = s.lane_decision.data() + size_t(e) * kLanes;
             const uint32_t common = first ? d[0] : s.combined[e];
-            if (common == math::kKeepBoth) continue;
             uint32_t differ = 0;
             for (uint32_t b = 0; b < c.lanes; ++b) differ |= d[b] ^ common;
             s.combined[e] = differ == 0 ? common : math::kKeepBoth;
-            any_decided = any_decided || differ == 0;
+            if (s.combined[e] != math::kKeepBoth) candidates[kept++] = e;
         }
+        candidates.resize(kept);
         first = false;
         // The far-field test of is_near_field on each sub-box's root range, against the whole
         // cell's clearance, while every sub-box so far has cleared it.
@@ -418,7 +464,8 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
                 highest = std::max(highest, range.y);
             }
         }
-        if (!any_decided && !all_above && !all_below) break;
+        if (candidates.empty() && !all_above && !all_below) break;
+        if (!all_above && !all_below && at < total) candidates_subtrees(sc, tape, s, needed);
     }
     if (all_above || all_below) {
         constant = all_above ? lowest : highest;

@@ -124,6 +124,19 @@ class StepPruner {
                        constant[c], s.cell_tapes[c], prims[c]);
     }
 
+    // Whether refine_cell could change a near-field cell of value `value` with this tape; when
+    // it could not, it is not run, with the same results. A tape of one primitive has no
+    // operator to decide, so only the far-field test can change it, and that needs every
+    // sub-box's range to clear the cell's clearance: also the range of the sub-box that holds
+    // the cell's centre, a range that holds the value there, `value` within rounding. So |value|
+    // well inside the clearance (0.9 of it: rounding is far below a tenth of it) settles it.
+    bool refinement_may_pay(std::span<const uint32_t> tape, const CellBox& box, float value) const {
+        if (tape.size() != 1) return true;
+        if (!opt_.far_field) return false;
+        const float L = sc_.lipschitz[math::tape_node(tape[0])];
+        return std::fabs(value) > 0.9f * math::far_field_clearance(opt_.far_field_c, L, box.radius);
+    }
+
     // Stores a cell pruned from a parent tape of `parent_size` words: its centre value, its
     // far-field test, and its compacted tape, which the finest level refines first.
     void store_cell(PrunedCell& cell, const CellBox& box, size_t parent_size, float value, bool far,
@@ -141,7 +154,8 @@ class StepPruner {
         const size_t at = out.words.size();
         out.words.push_back(0);
         out.words.push_back(0);
-        if (geo_.finest && opt_.refine > 1 && compacted.size() <= math::kRefineMaxTape) {
+        if (geo_.finest && opt_.refine > 1 && compacted.size() <= math::kRefineMaxTape &&
+            refinement_may_pay(compacted, box, value)) {
             // Decided again over the cell's sub-boxes, from the tape just made.
             s.refined.assign(compacted.begin(), compacted.end());
             float refined_constant = 0;
