@@ -128,9 +128,11 @@ TEST(PruneLanes, Avx2EqualsBaselineOnReferenceScenes) {
 }
 
 // refine_cell (prune_cell.cpp) evaluates its sub-boxes in batches and, after the first, only the
-// subtrees of the operators still decided alike: its results must be those of deciding every
-// sub-box on its own (evaluate_cell on each) and combining them. Random scenes (every kind,
-// operator and placement), random boxes, S = 2-4, both bounds, with and without the far field.
+// subtrees of the operators still decided alike; given the centre's value and the may_decide hint
+// (blend_may_decide), it skips the work they rule out. Its results
+// must be those of deciding every sub-box on its own (evaluate_cell on each) and combining them,
+// with hints and without. Random scenes (every kind, operator and placement), random boxes,
+// S = 2-4, both bounds, with and without the far field.
 TEST(PruneLanes, RefineCellEqualsEverySubBoxAlone) {
     LaneIsaScope scope;
     uint32_t far = 0, decided = 0, undecided = 0;
@@ -159,7 +161,7 @@ TEST(PruneLanes, RefineCellEqualsEverySubBoxAlone) {
             const vec3 sub_half = box.half / float(S);
             const float sub_radius = math::length(sub_half);
             const float clearance = math::far_field_clearance(C, L, box.radius);
-            std::vector<uint32_t> common(n, math::kKeepBoth);
+            std::vector<uint32_t> common(n, uint32_t(math::kKeepBoth));
             bool above = far_field, below = far_field;
             float lowest = INFINITY, highest = -INFINITY;
             for (uint32_t b = 0; b < S * S * S; ++b) {
@@ -181,8 +183,19 @@ TEST(PruneLanes, RefineCellEqualsEverySubBoxAlone) {
                 highest = std::max(highest, range.y);
             }
 
+            // The hints, from the values at the box's centre.
+            evaluate_cell(sc, tape, box, bounds, one);
+            bool may_decide = k % 3 == 0;
+            for (uint32_t e = 0; e < n; ++e) {
+                const uint32_t node = math::tape_node(tape[e]);
+                if (!sc.is_primitive(node))
+                    may_decide =
+                        may_decide || blend_may_decide(one.value[one.left[e]],
+                                                       one.value[one.right[e]], sc.blend[node]);
+            }
             float constant = 0;
-            const bool near = refine_cell(sc, tape, box, S, bounds, far_field, C, s, constant);
+            const bool near = refine_cell(sc, tape, box, S, bounds, far_field, C, one.value[n - 1],
+                                          may_decide, s, constant);
             const std::string what = "scene " + std::to_string(i) + ", box " + std::to_string(k);
             ASSERT_EQ(near, !(above || below)) << what;
             if (!near) {

@@ -580,16 +580,33 @@ bool sibling_is_near_field(const Scene& scene, std::span<const uint32_t> tape, u
 // Stage 3 for the lanes whose bit is set in `lanes` (bit c: lane c < kSiblingLanes), in one
 // sweep of the tape: appends lane c's pruned tape to out[c] and sets prims[c] to its number of
 // primitives (out and prims: kSiblingLanes entries; other lanes' are left alone but prims).
+// With `decidable`, also the lanes (bits) whose tape has an operator that refine_cell might
+// decide (blend_may_decide on its operands' values at the cell's centre).
 void compact_siblings(const Scene& scene, std::span<const uint32_t> tape, uint32_t lanes,
-                      CellScratch& s, std::vector<uint32_t>* out, uint32_t* prims);
+                      CellScratch& s, std::vector<uint32_t>* out, uint32_t* prims,
+                      uint32_t* decidable = nullptr);
 
 // Stage 1b, for finest cells with PruneOptions::refine = S > 1, on the tape stage 3 made for the
 // cell: decides every operator over each of the cell's S³ sub-boxes and keeps a decision only
 // where all agree (leaving `s` ready for compact_tape); returns false when every sub-box's range
 // clears the cell's far-field margin, with the constant (the sub-boxes' tightest common bound).
+// `value` is the tree's value at the cell's centre; `may_decide` false says that no operator of
+// the tape could be decided in the sub-box holding the centre (blend_may_decide). Neither
+// changes the results, only the work: with neither an operator to try nor a far-field test that
+// could pass, nothing is evaluated.
 bool refine_cell(const Scene& scene, std::span<const uint32_t> tape, const CellBox& box,
                  uint32_t subdivisions, CellBounds bounds, bool far_field, float far_field_c,
-                 CellScratch& s, float& constant);
+                 float value, bool may_decide, CellScratch& s, float& constant);
+
+// Whether an operator of blend radius k whose operands are worth a and b (signs applied) at a
+// cell's centre might be decided in every sub-box of the cell (refine_cell). It must then be
+// decided in the sub-box holding the centre, whose operand ranges hold a and b, so one operand
+// lies below the other there by more than k (prune_decision) plus a margin that covers the
+// rounding of a and b. Operands within 0.9·k of each other, less a rounding allowance, never
+// are: the centre lies deep in the operator's blend.
+inline bool blend_may_decide(float a, float b, float k) {
+    return !(std::fabs(a - b) < 0.9f * k - 1e-5f * (std::fabs(a) + std::fabs(b)));
+}
 
 // The centre of sub-box (i, j, k) of a box with min corner `corner` split into sub-boxes of
 // half sizes `sub_half` ...

@@ -384,18 +384,37 @@ void candidates_subtrees(const Scene& sc, std::span<const uint32_t> tape, CellSc
 }  // namespace
 
 bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box, uint32_t S,
-                 CellBounds bounds, bool far_field, float far_field_c, CellScratch& s,
-                 float& constant) {
+                 CellBounds bounds, bool far_field, float far_field_c, float value, bool may_decide,
+                 CellScratch& s, float& constant) {
     const uint32_t n = uint32_t(tape.size());
     s.reserve(n);
+    const float L = sc.lipschitz[math::tape_node(tape[n - 1])];
+    const float clearance = math::far_field_clearance(far_field_c, L, box.radius);
+    // The far-field test passes only if every sub-box's range clears the clearance, also the
+    // range of the sub-box that holds the cell's centre, which holds the value there: `value`
+    // within rounding. So |value| well inside the clearance (0.9 of it: rounding is far below a
+    // tenth of it) settles that it fails, before any sub-box is evaluated.
+    const bool far_possible = far_field && std::fabs(value) > 0.9f * clearance;
+    bool all_above = far_possible, all_below = far_possible;
+    float lowest = INFINITY, highest = -INFINITY;
+    if (!may_decide && !far_possible) {
+        std::fill_n(s.decision.begin(), n, math::kKeepBoth);
+        return true;
+    }
+    s.combined.assign(n, math::kKeepBoth);
+    // The candidates: the operators that may yet be decided alike in every sub-box, and what a
+    // batch evaluates: the whole tape at first and while the far-field test is open (it reads
+    // the root), else only the candidates' subtrees, often a few words of a long tape. The
+    // results are the same: every entry a decision reads is evaluated.
+    std::vector<uint32_t>& candidates = s.refine_candidates;
+    std::vector<uint32_t>& needed = s.refine_needed;
+    candidates.clear();
+    for (uint32_t e = 0; e < n; ++e)
+        if (!sc.is_primitive(math::tape_node(tape[e]))) candidates.push_back(e);
+    bool subset = false;
     for (auto* v : {&s.lane_value, &s.lane_lo, &s.lane_hi})
         if (v->size() < size_t(n) * kLanes) v->resize(size_t(n) * kLanes);
     if (s.lane_decision.size() < size_t(n) * kLanes) s.lane_decision.resize(size_t(n) * kLanes);
-    s.combined.assign(n, math::kKeepBoth);
-    const float L = sc.lipschitz[math::tape_node(tape[n - 1])];
-    const float clearance = math::far_field_clearance(far_field_c, L, box.radius);
-    bool all_above = far_field, all_below = far_field;
-    float lowest = INFINITY, highest = -INFINITY;
     const vec3 sub_half = box.half / float(S);
     const float sub_radius = math::length(sub_half);
     if (s.sub_order_of != S) {
@@ -405,14 +424,6 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
     // The sub-boxes' centres from the cell's corner and the sub-box size, computed once.
     const vec3 corner = box.centre - box.half;
     const uint32_t total = S * S * S;
-    // After the first batch, the operators still decided the same way in every sub-box so far
-    // (the candidates), and what a later batch evaluates: the whole tape while the far-field
-    // test is open (it reads the root), else only the candidates' subtrees, often a few words
-    // of a long tape. The results are the same: every entry a decision reads is evaluated.
-    std::vector<uint32_t>& candidates = s.refine_candidates;
-    std::vector<uint32_t>& needed = s.refine_needed;
-    candidates.clear();
-    needed.clear();
     bool first = true;
     for (uint32_t at = 0; at < total;) {
         // The first batch is one block, the others kLanes (sub_box_order).
@@ -426,19 +437,14 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
             c.y[b] = p.y;
             c.z[b] = p.z;
         }
-        const bool whole = at == 0 || all_above || all_below;
         evaluate_boxes(sc, tape, c, sub_half, sub_radius, bounds,
                        {s.lane_value.data(), s.lane_lo.data(), s.lane_hi.data(),
                         s.lane_decision.data(), kLanes},
-                       s, whole ? std::span<const uint32_t>() : std::span<const uint32_t>(needed));
-        // Whether some operator is still decided the same way in every sub-box so far. The
+                       s, subset ? std::span<const uint32_t>(needed) : std::span<const uint32_t>());
+        at += count;
+        // Whether each candidate is still decided the same way in every sub-box so far. The
         // lanes past the batch repeat its last sub-box, so they may be folded in too (here and
         // below), and an operator kept in some sub-box stays kept.
-        if (at == 0) {
-            for (uint32_t e = 0; e < n; ++e)
-                if (!sc.is_primitive(math::tape_node(tape[e]))) candidates.push_back(e);
-        }
-        at += count;
         size_t kept = 0;
         for (const uint32_t e : candidates) {
             const uint32_t* d = s.lane_decision.data() + size_t(e) * kLanes;
@@ -465,7 +471,10 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
             }
         }
         if (candidates.empty() && !all_above && !all_below) break;
-        if (!all_above && !all_below && at < total) candidates_subtrees(sc, tape, s, needed);
+        if (!all_above && !all_below && at < total) {
+            candidates_subtrees(sc, tape, s, needed);
+            subset = true;
+        }
     }
     if (all_above || all_below) {
         constant = all_above ? lowest : highest;
@@ -487,9 +496,13 @@ namespace {
 //     parent's composed sign along (the parent is then not emitted);
 //   - elsewhere it is dead.
 // A forward sweep emits each alive entry's word to the lanes it is alive in, in tape order.
+// With `values` (the entries' values at the lanes' centres, as `decision`), also `decidable`:
+// the lanes where refine_cell might decide some operator of their tapes (blend_may_decide).
 template <uint32_t kL>
 void compact_lanes(const Scene& sc, std::span<const uint32_t> tape, const uint32_t* decision,
-                   uint32_t lanes, CellScratch& s, std::vector<uint32_t>* out, uint32_t* prims) {
+                   uint32_t lanes, CellScratch& s, std::vector<uint32_t>* out, uint32_t* prims,
+                   const float* values = nullptr, uint32_t* decidable = nullptr) {
+    uint32_t may_decide = 0;
     const uint32_t n = uint32_t(tape.size());
     uint8_t* __restrict alive = s.alive.data();
     uint8_t* __restrict negate = s.negate.data();
@@ -516,6 +529,13 @@ void compact_lanes(const Scene& sc, std::span<const uint32_t> tape, const uint32
         negate[l] = uint8_t((keep & nl) | (left_wins & (negate[i] ^ nl)));
         negate[r] = uint8_t((keep & nr) | (right_wins & (negate[i] ^ nr)));
         alive[i] = uint8_t(keep);  // from here on: the lanes that emit entry i
+        if (values) {
+            const float k = sc.blend[math::tape_node(tape[i])];
+            for (uint32_t c = 0; c < kL; ++c)
+                if ((keep >> c & 1) != 0 &&
+                    blend_may_decide(values[size_t(l) * kL + c], values[size_t(r) * kL + c], k))
+                    may_decide |= 1u << c;
+        }
     }
     for (uint32_t c = 0; c < kL; ++c) prims[c] = 0;
     for (uint32_t i = 0; i < n; ++i) {
@@ -529,6 +549,7 @@ void compact_lanes(const Scene& sc, std::span<const uint32_t> tape, const uint32
             prims[c] += prim;
         }
     }
+    if (decidable) *decidable = may_decide;
 }
 
 }  // namespace
@@ -541,8 +562,10 @@ uint32_t compact_tape(const Scene& sc, std::span<const uint32_t> tape, CellScrat
 }
 
 void compact_siblings(const Scene& sc, std::span<const uint32_t> tape, uint32_t lanes,
-                      CellScratch& s, std::vector<uint32_t>* out, uint32_t* prims) {
-    compact_lanes<kSiblingLanes>(sc, tape, s.sib_decision.data(), lanes, s, out, prims);
+                      CellScratch& s, std::vector<uint32_t>* out, uint32_t* prims,
+                      uint32_t* decidable) {
+    compact_lanes<kSiblingLanes>(sc, tape, s.sib_decision.data(), lanes, s, out, prims,
+                                 decidable ? s.sib_value.data() : nullptr, decidable);
 }
 
 }  // namespace sdfprune

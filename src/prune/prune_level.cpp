@@ -91,7 +91,7 @@ class StepPruner {
         float value, constant;
         bool far;
         const uint32_t prims = prune_box(parent, box, value, far, constant, s_.cell_tapes[0]);
-        store_cell(cell, box, parent.size(), value, far, constant, s_.cell_tapes[0], prims);
+        store_cell(cell, box, parent.size(), value, far, constant, s_.cell_tapes[0], prims, true);
     }
 
     // Prunes `count` <= kSiblingLanes cells of this level from one `parent` in one pass over
@@ -118,29 +118,20 @@ class StepPruner {
             near |= far[c] ? 0u : 1u << c;
         }
         // Every lane's compaction before any refinement: refine_cell reuses the entry links.
-        compact_siblings(sc_, parent, near, s, s.cell_tapes, prims);
+        uint32_t decidable = ~0u;
+        compact_siblings(sc_, parent, near, s, s.cell_tapes, prims,
+                         geo_.finest && opt_.refine > 1 ? &decidable : nullptr);
         for (uint32_t c = 0; c < count; ++c)
             store_cell(*cells[c], boxes[c], parent.size(), sibling_value(s, parent, c), far[c],
-                       constant[c], s.cell_tapes[c], prims[c]);
-    }
-
-    // Whether refine_cell could change a near-field cell of value `value` with this tape; when
-    // it could not, it is not run, with the same results. A tape of one primitive has no
-    // operator to decide, so only the far-field test can change it, and that needs every
-    // sub-box's range to clear the cell's clearance: also the range of the sub-box that holds
-    // the cell's centre, a range that holds the value there, `value` within rounding. So |value|
-    // well inside the clearance (0.9 of it: rounding is far below a tenth of it) settles it.
-    bool refinement_may_pay(std::span<const uint32_t> tape, const CellBox& box, float value) const {
-        if (tape.size() != 1) return true;
-        if (!opt_.far_field) return false;
-        const float L = sc_.lipschitz[math::tape_node(tape[0])];
-        return std::fabs(value) > 0.9f * math::far_field_clearance(opt_.far_field_c, L, box.radius);
+                       constant[c], s.cell_tapes[c], prims[c], (decidable >> c & 1) != 0);
     }
 
     // Stores a cell pruned from a parent tape of `parent_size` words: its centre value, its
     // far-field test, and its compacted tape, which the finest level refines first.
+    // `may_decide`: refine_cell's hint, whether some operator of the tape might be decided.
     void store_cell(PrunedCell& cell, const CellBox& box, size_t parent_size, float value, bool far,
-                    float constant, std::span<const uint32_t> compacted, uint32_t prims) {
+                    float constant, std::span<const uint32_t> compacted, uint32_t prims,
+                    bool may_decide) {
         CellScratch& s = s_;
         LevelChunk& out = out_;
         cell.value = value;
@@ -154,13 +145,12 @@ class StepPruner {
         const size_t at = out.words.size();
         out.words.push_back(0);
         out.words.push_back(0);
-        if (geo_.finest && opt_.refine > 1 && compacted.size() <= math::kRefineMaxTape &&
-            refinement_may_pay(compacted, box, value)) {
+        if (geo_.finest && opt_.refine > 1 && compacted.size() <= math::kRefineMaxTape) {
             // Decided again over the cell's sub-boxes, from the tape just made.
             s.refined.assign(compacted.begin(), compacted.end());
             float refined_constant = 0;
             if (!refine_cell(sc_, s.refined, box, opt_.refine, opt_.bounds, opt_.far_field,
-                             opt_.far_field_c, s, refined_constant)) {
+                             opt_.far_field_c, value, may_decide, s, refined_constant)) {
                 out.words.resize(at);
                 cell.tape = PrunedCell::kFarField;
                 cell.bound = refined_constant;
