@@ -173,6 +173,8 @@ struct Lane {
         kEval,  // evaluate `tape` (prefetched) at p
     };
     Ray* ray = nullptr;
+    float t1 = 0;             // the ray's t1 and max_steps, held here to save a load per step
+    uint32_t max_steps = 0;
     float4 o, dir, inv_dir;
     int4 up;  // all ones on the axes where the ray leaves cells by their upper face
     uint32_t octant;  // the same as bits: x 1, y 2, z 4 (see clearance_in)
@@ -192,7 +194,7 @@ struct Lane {
 // Whether p lies in the closed box [lo, hi] (x, y, z; the unused lane is ignored).
 bool in_box(float4 p, float4 lo, float4 hi) {
     const int4 in = (p >= lo) & (p <= hi);
-    return in[0] && in[1] && in[2];
+    return (in[0] & in[1] & in[2]) != 0;
 }
 
 // The next t of lane l at p in far-field cell c (corner lo, level geometry geo): no surface
@@ -201,7 +203,9 @@ bool in_box(float4 p, float4 lo, float4 hi) {
 float far_field_advance(const Lane& l, float4 p, float4 lo, const LevelGeometry& geo,
                         const PrunedCell& c, float inv_lipschitz) {
     const float r = float(clearance_in(c, l.octant));
-    const float4 exit = l.up ? lo + geo.size * splat(r + 1.0f) : lo - geo.size * splat(r);
+    // lo + size·(r + 1) on the axes the ray goes up, lo - size·r on the others: lo + size·(-r)
+    // is the same float (negation is exact), so one multiply-add serves both.
+    const float4 exit = lo + geo.size * (l.up ? splat(r + 1.0f) : splat(-r));
     float4 t_axis = (exit - l.o) * l.inv_dir;
     // NaN (0·inf): the ray runs in the face's plane, which it never leaves. Which of equal
     // candidates wins (+0 or -0) does not matter: only t_exit + tiny is used.
@@ -239,7 +243,7 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
     // The first half of lane l's next step; false when its ray is done (left the AABB or out
     // of steps).
     const auto begin_step = [&](Lane& l) -> bool {
-        if (l.step >= l.ray->max_steps || !(l.t <= l.ray->t1)) return finish(l);
+        if (l.step >= l.max_steps || !(l.t <= l.t1)) return finish(l);
         ++l.step;
         // [t0, t1] lies in the AABB: clamp away the rounding that would put p just outside.
         l.p = min4(max4(l.o + l.dir * l.t, aabb_lo), aabb_hi);
@@ -261,6 +265,8 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
     const auto start = [&](Lane& l) {
         Ray& r = rays[next++];
         l.ray = &r;
+        l.t1 = r.t1;
+        l.max_steps = r.max_steps;
         l.o = load4(r.o);
         l.dir = load4(r.dir);
         l.inv_dir = load4(vec3(1.0f / r.dir.x, 1.0f / r.dir.y, 1.0f / r.dir.z));
@@ -290,8 +296,12 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
                 }
                 const PrunedGrid::Located at = field.g.walk_located(l.walk);
                 const LevelGeometry& geo = field.levels[at.level];
+                // (one conversion of the three coordinates, each exact: below 2^24)
                 const float4 lo =
-                    aabb_lo + float4{float(at.x), float(at.y), float(at.z), 0} * geo.size;
+                    aabb_lo +
+                    __builtin_convertvector((int4{int32_t(at.x), int32_t(at.y), int32_t(at.z), 0}),
+                                            float4) *
+                        geo.size;
                 if (at.far_field()) {
                     l.t = far_field_advance(l, l.p, lo, geo, *at.cell, ctx.inv_lipschitz);
                     return begin_step(l);
@@ -334,10 +344,41 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
 
 }  // namespace
 
+namespace {
+// pixel_direction's image-plane coordinates of column x and row y.
+float pixel_u(const CameraFrame& f, uint32_t W, uint32_t x) {
+    return (2.0f * (float(x) + 0.5f) / float(W) - 1.0f) * f.tan_half * f.aspect;
+}
+float pixel_v(const CameraFrame& f, uint32_t H, uint32_t y) {
+    return (1.0f - 2.0f * (float(y) + 0.5f) / float(H)) * f.tan_half;
+}
+
+// ray_box for rays from one origin (an image's primary rays): the box's corners relative to
+// the origin are worked out once, and the slabs of the three axes are taken in vector lanes.
+// The same operations in the same order as ray_box, so the same t0, t1 bit for bit.
+struct BoxFromOrigin {
+    float4 lo, hi;  // box corners - origin
+    BoxFromOrigin(vec3 origin, vec3 box_lo, vec3 box_hi)
+        : lo(load4(box_lo) - load4(origin)), hi(load4(box_hi) - load4(origin)) {}
+    bool hit(vec3 dir, float& t0, float& t1) const {
+        const float4 inv = float4{1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z, 0};
+        const float4 ta = lo * inv, tb = hi * inv;
+        // ray_box's swap when ta > tb (not when either is NaN)
+        const int4 swap = ta > tb;
+        const float4 near = swap ? tb : ta, far = swap ? ta : tb;
+        t0 = 0;
+        t1 = INFINITY;
+        for (int a = 0; a < 3; ++a) {
+            t0 = std::max(t0, near[a]);
+            t1 = std::min(t1, far[a]);
+        }
+        return t0 <= t1;
+    }
+};
+}  // namespace
+
 vec3 pixel_direction(const CameraFrame& f, uint32_t W, uint32_t H, uint32_t x, uint32_t y) {
-    const float u = (2.0f * (float(x) + 0.5f) / float(W) - 1.0f) * f.tan_half * f.aspect;
-    const float v = (1.0f - 2.0f * (float(y) + 0.5f) / float(H)) * f.tan_half;
-    return normalize(f.forward + f.right * u + f.up * v);
+    return normalize(f.forward + f.right * pixel_u(f, W, x) + f.up * pixel_v(f, H, y));
 }
 
 CameraFrame camera_frame(const Scene& sc, const RenderOptions& opt) {
@@ -369,6 +410,7 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
     const CameraFrame frame = camera_frame(sc, opt);
     const vec3 light = frame.light;
     const float tan_half = frame.tan_half, normal_h = frame.normal_h;
+    const BoxFromOrigin box_from_eye(cam.eye, ctx.aabb_lo, ctx.aabb_hi);
 
     std::atomic<uint64_t> total_steps{0}, total_evals{0}, hits{0};
     // Square tiles rather than rows: neighbouring rays visit the same cells and tapes.
@@ -413,16 +455,21 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
         uint32_t* ray_pixel = scratch.ray_pixel;
         vec3* out = scratch.out;
         uint32_t n_rays = 0;
-        for (uint32_t j = 0; j < h * w; ++j) {
-            const uint32_t x = x0 + j % w, y = y0 + j / w;
-            const float v = (1.0f - 2.0f * (float(y) + 0.5f) / float(H)) * tan_half;
-            out[j] = background(v / tan_half);
-            const vec3 dir = pixel_direction(frame, W, H, x, y);
-            const vec3 inv(1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z);
-            float t0, t1;
-            if (!ray_box(cam.eye, inv, ctx.aabb_lo, ctx.aabb_hi, t0, t1)) continue;
-            rays[n_rays] = {cam.eye, dir, t0, t1, 1024, -1, &counters[j]};
-            ray_pixel[n_rays++] = j;
+        // pixel_direction's sum split at its order of operations: (forward + right·u) per
+        // column, + up·v per row; the rays are pixel_direction's bit for bit.
+        vec3 column[kTile];
+        for (uint32_t i = 0; i < w; ++i) column[i] = frame.forward + frame.right * pixel_u(frame, W, x0 + i);
+        for (uint32_t row = 0, j = 0; row < h; ++row) {
+            const float v = pixel_v(frame, H, y0 + row);
+            const vec3 background_color = background(v / tan_half), up_v = frame.up * v;
+            for (uint32_t i = 0; i < w; ++i, ++j) {
+                out[j] = background_color;
+                const vec3 dir = normalize(column[i] + up_v);
+                float t0, t1;
+                if (!box_from_eye.hit(dir, t0, t1)) continue;
+                rays[n_rays] = {cam.eye, dir, t0, t1, 1024, -1, &counters[j]};
+                ray_pixel[n_rays++] = j;
+            }
         }
         march(field, ctx, std::span(rays, n_rays), stack.data());
 
@@ -477,12 +524,14 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
             out[hit.pixel] = o;
         }
         Counters sum;
-        for (uint32_t j = 0; j < h * w; ++j) {
-            const size_t i = size_t(y0 + j / w) * W + x0 + j % w;
-            color[i] = out[j];
-            evals[i] = uint32_t(std::min<uint64_t>(counters[j].evals, 0xffffffffu));
-            sum.steps += counters[j].steps;
-            sum.evals += counters[j].evals;
+        for (uint32_t row = 0, j = 0; row < h; ++row) {
+            const size_t first = size_t(y0 + row) * W + x0;
+            for (uint32_t i = 0; i < w; ++i, ++j) {
+                color[first + i] = out[j];
+                evals[first + i] = uint32_t(std::min<uint64_t>(counters[j].evals, 0xffffffffu));
+                sum.steps += counters[j].steps;
+                sum.evals += counters[j].evals;
+            }
         }
         total_steps += sum.steps;
         total_evals += sum.evals;
