@@ -142,8 +142,8 @@ TEST(PruneLanes, OneWordTapesEqualTheLoop) {
                 PointLanes q = p;
                 eval_tape_lanes(sc, tape, q, kEvalLanes, out, lane_stack.data());
                 for (uint32_t k = 0; k < kEvalLanes; ++k) {
-                    const float v = math::eval_primitive(sc.kind[n], sc.params[sc.primitive[n]],
-                                                         pts[k]);
+                    const float v =
+                        math::eval_primitive(sc.kind[n], sc.params[sc.primitive[n]], pts[k]);
                     const float got = eval_tape(sc, tape, pts[k], stack.data());
                     ASSERT_EQ(std::bit_cast<uint32_t>(got), std::bit_cast<uint32_t>(out[k]))
                         << "scene " << i << ", node " << n << ", point " << k;

@@ -389,7 +389,8 @@ class PrunedGrid {
     vec3 inv_cell_size_;
     std::vector<vec3> level_size_;  // cell size of each level
     // Lookup shortcut: for every cell of level shortcut_level_ (the one above the finest), the
-    // deciding cell at or above it, as level << kShortcutLevelShift | index; empty when not worth it.
+    // deciding cell at or above it, as level << kShortcutLevelShift | index; empty when not
+    // worth it.
     std::vector<uint32_t> shortcut_;
     uint32_t shortcut_level_ = 0;
     void build_shortcut();
