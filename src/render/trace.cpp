@@ -4,8 +4,8 @@
 // that is longer; in a near-field cell it steps by the value of the cell's tape. Both fields
 // run the same loop, so their time ratio is the pruning's alone.
 #include <algorithm>
-#include <bit>
 #include <atomic>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <numbers>
@@ -103,9 +103,9 @@ struct NaiveField {
 // What a far-field step needs of a level of the grid, worked out once per image with the
 // expressions a step would use (so the steps stay bit for bit the same).
 struct LevelGeometry {
-    float4 size;  // cell size
-    float4 half;  // size · 0.5: from a cell's corner to its centre
-    float tiny;   // how far past a cell's exit a far-field step lands: 1e-4 · smallest side
+    float4 size;         // cell size
+    float4 half;         // size · 0.5: from a cell's corner to its centre
+    float tiny;          // how far past a cell's exit a far-field step lands: 1e-4 · smallest side
     uint32_t shift = 0;  // grids with a shortcut: log2 of the finest cells per cell and axis
 };
 
@@ -119,10 +119,10 @@ struct PrunedField {
     // two), inlined here: the shortcut's entry, then at most one finest cell, found with shifts
     // and the levels' cell arrays held here. PrunedGrid::walk_step finds the same cells
     // through its general case; it took 1/5 of the tracer's instructions on small scenes.
-    const uint32_t* shortcut = nullptr;  // null: no shortcut, walk with PrunedGrid::walk_step
-    uint32_t shortcut_shift = 0;         // finest index >> shortcut_shift: shortcut's cell
-    uint32_t shortcut_bits = 0;          // log2 of the shortcut level's resolution
-    uint32_t finest_bits = 0;            // log2 of the finest level's block factor
+    const uint32_t* shortcut = nullptr;    // null: no shortcut, walk with PrunedGrid::walk_step
+    uint32_t shortcut_shift = 0;           // finest index >> shortcut_shift: shortcut's cell
+    uint32_t shortcut_bits = 0;            // log2 of the shortcut level's resolution
+    uint32_t finest_bits = 0;              // log2 of the finest level's block factor
     std::vector<const PrunedCell*> cells;  // level_cells(level).data()
     explicit PrunedField(const PrunedGrid& grid)
         : g(grid),
@@ -164,9 +164,9 @@ struct PrunedField {
     // the level above (PrunedGrid::Level::local_index_pow2 at the finest level).
     const PrunedCell* finest_child(const PrunedCell& parent, int4 i) const {
         const uint32_t m = (1u << finest_bits) - 1;
-        const uint32_t local =
-            ((uint32_t(i[2]) & m) << finest_bits | (uint32_t(i[1]) & m)) << finest_bits |
-            (uint32_t(i[0]) & m);
+        const uint32_t local = ((uint32_t(i[2]) & m) << finest_bits | (uint32_t(i[1]) & m))
+                                   << finest_bits |
+                               (uint32_t(i[0]) & m);
         return cells.back() + parent.children + local;
     }
     std::span<const uint32_t> tape_at(vec3 p) const {
@@ -210,10 +210,10 @@ struct Lane {
         kEval,  // evaluate `tape` (prefetched) at p
     };
     Ray* ray = nullptr;
-    float t1 = 0;             // the ray's t1 and max_steps, held here to save a load per step
+    float t1 = 0;  // the ray's t1 and max_steps, held here to save a load per step
     uint32_t max_steps = 0;
     float4 o, dir, inv_dir;
-    int4 up;  // all ones on the axes where the ray leaves cells by their upper face
+    int4 up;          // all ones on the axes where the ray leaves cells by their upper face
     uint32_t octant;  // the same as bits: x 1, y 2, z 4 (see clearance_in)
     float t = 0;
     uint32_t step = 0;
@@ -250,8 +250,7 @@ float far_field_advance(const Lane& l, float4 p, float4 lo, const LevelGeometry&
     t_axis = t_axis == t_axis ? t_axis : splat(INFINITY);
     const float t_exit = std::min(std::min(t_axis[0], t_axis[1]), t_axis[2]);
     // |f(p)| >= |f(centre)| - L·|p - centre|: often far beyond the cell.
-    const float from_centre =
-        std::fabs(c.value) * inv_lipschitz - length3(p - (lo + geo.half));
+    const float from_centre = std::fabs(c.value) * inv_lipschitz - length3(p - (lo + geo.half));
     const float step = std::max(std::fabs(c.bound) * inv_lipschitz, from_centre);
     return std::max(l.t + step, t_exit + geo.tiny);
 }
@@ -465,8 +464,18 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
     const auto t_start = std::chrono::steady_clock::now();
     const uint32_t W = opt.width, H = opt.height;
     if (W == 0 || H == 0) throw std::invalid_argument("image size must be positive");
-    std::vector<uint32_t> evals(size_t(W) * H, 0);
-    std::vector<vec3> color(size_t(W) * H);
+    // Tiles write their pixels' final bytes: 3 bytes a pixel rather than a float color and an
+    // evaluation count (16 bytes) filled in, converted and scanned after. Freshly allocated
+    // memory costs page faults: 8 MB at 960x540 took 2-5 ms, a tenth of a small scene's trace.
+    // Only the heatmap, colored by the counts after all tiles, keeps a count per pixel.
+    const bool heatmap = opt.shading == Shading::kHeatmap;
+    std::vector<uint32_t> evals(heatmap ? size_t(W) * H : 0);
+    Image img;
+    img.width = W;
+    img.height = H;
+    if (!heatmap) img.rgb.resize(size_t(W) * H * 3);
+    const uint8_t* curve = rgb8_curve();
+    std::atomic<uint32_t> max_evals{0};
 
     const TraceContext ctx{sc, 1.0f / sc.lipschitz[sc.root()], sc.aabb.min, sc.aabb.max};
     const Camera& cam = opt.camera;
@@ -521,7 +530,8 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
         // pixel_direction's sum split at its order of operations: (forward + right·u) per
         // column, + up·v per row; the rays are pixel_direction's bit for bit.
         vec3 column[kTile];
-        for (uint32_t i = 0; i < w; ++i) column[i] = frame.forward + frame.right * pixel_u(frame, W, x0 + i);
+        for (uint32_t i = 0; i < w; ++i)
+            column[i] = frame.forward + frame.right * pixel_u(frame, W, x0 + i);
         for (uint32_t row = 0, j = 0; row < h; ++row) {
             const float v = pixel_v(frame, H, y0 + row);
             const vec3 background_color = background(v / tan_half), up_v = frame.up * v;
@@ -587,14 +597,22 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
             out[hit.pixel] = o;
         }
         Counters sum;
+        uint32_t tile_max = 0;
         for (uint32_t row = 0, j = 0; row < h; ++row) {
             const size_t first = size_t(y0 + row) * W + x0;
             for (uint32_t i = 0; i < w; ++i, ++j) {
-                color[first + i] = out[j];
-                evals[first + i] = uint32_t(std::min<uint64_t>(counters[j].evals, 0xffffffffu));
+                const uint32_t e = uint32_t(std::min<uint64_t>(counters[j].evals, 0xffffffffu));
+                if (heatmap)
+                    evals[first + i] = e;
+                else
+                    store_rgb8(curve, out[j], &img.rgb[3 * (first + i)]);
+                tile_max = std::max(tile_max, e);
                 sum.steps += counters[j].steps;
                 sum.evals += counters[j].evals;
             }
+        }
+        uint32_t seen = max_evals.load();
+        while (seen < tile_max && !max_evals.compare_exchange_weak(seen, tile_max)) {
         }
         total_steps += sum.steps;
         total_evals += sum.evals;
@@ -605,7 +623,13 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
     const double trace_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start)
             .count();
-    return finish_image(opt, color, evals, {trace_ms, total_steps, total_evals, hits}, stats);
+    const TraceTotals totals{trace_ms, total_steps, total_evals, hits};
+    if (heatmap) {
+        std::vector<vec3> color(size_t(W) * H);  // finish_image colors it from `evals`
+        return finish_image(opt, color, evals, totals, stats);
+    }
+    set_render_stats(opt, totals, max_evals.load(), stats);
+    return img;
 }
 
 }  // namespace
@@ -626,15 +650,19 @@ Image finish_image(const RenderOptions& opt, std::vector<vec3>& color,
     } else {
         to_rgb8(color, img);
     }
-    if (stats) {
-        const double px = double(opt.width) * opt.height;
-        stats->trace_ms = totals.trace_ms;
-        stats->steps_avg = double(totals.steps) / px;
-        stats->evals_avg = double(totals.evals) / px;
-        stats->hit_fraction = double(totals.hits) / px;
-        stats->evals_max = max_evals;
-    }
+    set_render_stats(opt, totals, max_evals, stats);
     return img;
+}
+
+void set_render_stats(const RenderOptions& opt, const TraceTotals& totals, double max_evals,
+                      RenderStats* stats) {
+    if (!stats) return;
+    const double px = double(opt.width) * opt.height;
+    stats->trace_ms = totals.trace_ms;
+    stats->steps_avg = double(totals.steps) / px;
+    stats->evals_avg = double(totals.evals) / px;
+    stats->hit_fraction = double(totals.hits) / px;
+    stats->evals_max = max_evals;
 }
 
 Image render(const PrunedGrid& grid, const RenderOptions& options, RenderStats* stats) {
