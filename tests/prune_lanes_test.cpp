@@ -117,6 +117,44 @@ TEST(PruneLanes, PointLanesEqualEvalTape) {
     }
 }
 
+// A tape of one word (most near-field cells' tapes) takes eval_tape's shortcut past its stack
+// loop: the same value bit for bit as the loop of eval_tape_lanes and as the primitive itself,
+// for every primitive of random scenes (every kind and placement), with and without its sign.
+TEST(PruneLanes, OneWordTapesEqualTheLoop) {
+    for (uint32_t i = 0; i < 12; ++i) {
+        const Scene sc = test::random_scene(5300 + i, test::varied_spec(i, 2 + i * 3));
+        Rng r(91 + i);
+        std::vector<float> stack(sc.max_stack), lane_stack(size_t(sc.max_stack) * kEvalLanes);
+        const vec3 lo = sc.aabb.min, size = sc.aabb.max - sc.aabb.min;
+        for (uint32_t n = 0; n < sc.size(); ++n) {
+            if (sc.kind[n] >= math::kPrimitiveKindCount) continue;
+            PointLanes p;
+            vec3 pts[kEvalLanes];
+            for (uint32_t k = 0; k < kEvalLanes; ++k) {
+                pts[k] = lo + vec3(r.uniform(0, 1), r.uniform(0, 1), r.uniform(0, 1)) * size;
+                p.x[k] = pts[k].x;
+                p.y[k] = pts[k].y;
+                p.z[k] = pts[k].z;
+            }
+            for (const bool negated : {false, true}) {
+                const uint32_t tape[1] = {math::tape_word(n, negated)};
+                float out[kEvalLanes];
+                PointLanes q = p;
+                eval_tape_lanes(sc, tape, q, kEvalLanes, out, lane_stack.data());
+                for (uint32_t k = 0; k < kEvalLanes; ++k) {
+                    const float v =
+                        math::eval_primitive(sc.kind[n], sc.params[sc.primitive[n]], pts[k]);
+                    const float got = eval_tape(sc, tape, pts[k], stack.data());
+                    ASSERT_EQ(std::bit_cast<uint32_t>(got), std::bit_cast<uint32_t>(out[k]))
+                        << "scene " << i << ", node " << n << ", point " << k;
+                    ASSERT_EQ(std::bit_cast<uint32_t>(got),
+                              std::bit_cast<uint32_t>(negated ? -v : v));
+                }
+            }
+        }
+    }
+}
+
 TEST(PruneLanes, Avx2EqualsBaselineOnReferenceScenes) {
     if (!has_avx2()) GTEST_SKIP() << "this processor has no AVX2: only the baseline runs";
     for (const char* file : {"molecule.json", "trees.json"}) {

@@ -314,6 +314,14 @@ class PrunedGrid {
     uint32_t level_count() const { return uint32_t(levels_.size()); }
     uint32_t level_resolution(uint32_t level) const { return levels_[level].res; }
     std::span<const uint32_t> tape_pool() const { return {pool_.data, pool_.size}; }
+    // The lookup shortcut walk_begin reads first, for a tracer that inlines its own walk:
+    // for every cell of level shortcut_level() (the one above the finest; z-major) the deciding
+    // cell at or above it, as level << kShortcutLevelShift | index in level_cells(level). Empty
+    // when the grid has none; when it has one, every level's resolution and block factor are
+    // powers of two.
+    static constexpr uint32_t kShortcutLevelShift = 27;
+    std::span<const uint32_t> shortcut() const { return shortcut_; }
+    uint32_t shortcut_level() const { return shortcut_level_; }
     std::span<const uint32_t> tape_at(uint32_t offset) const {
         return {pool_.data + offset + 2, pool_.data[offset]};
     }
@@ -381,7 +389,8 @@ class PrunedGrid {
     vec3 inv_cell_size_;
     std::vector<vec3> level_size_;  // cell size of each level
     // Lookup shortcut: for every cell of level shortcut_level_ (the one above the finest), the
-    // deciding cell at or above it, as level << 27 | index; empty when not worth it.
+    // deciding cell at or above it, as level << kShortcutLevelShift | index; empty when not
+    // worth it.
     std::vector<uint32_t> shortcut_;
     uint32_t shortcut_level_ = 0;
     void build_shortcut();
@@ -435,8 +444,8 @@ class PrunedGrid {
         const Level& s = levels_[shortcut_level_];
         const uint32_t entry =
             shortcut_[(size_t(iz >> s.shift) * s.res + (iy >> s.shift)) * s.res + (ix >> s.shift)];
-        uint32_t level = entry >> 27;
-        const PrunedCell* c = &levels_[level].cells[entry & ((1u << 27) - 1)];
+        uint32_t level = entry >> kShortcutLevelShift;
+        const PrunedCell* c = &levels_[level].cells[entry & ((1u << kShortcutLevelShift) - 1)];
         if (c->tape != PrunedCell::kFarField) {
             const Level& f = levels_[++level];
             c = &f.cells[c->children + f.local_index_pow2(ix, iy, iz)];
@@ -480,8 +489,8 @@ class PrunedGrid {
         // descend's result down to the shortcut's level (see locate_cell)
         const uint32_t entry = *w.entry;
         w.entry = nullptr;
-        w.level = entry >> 27;
-        w.cell = &levels_[w.level].cells[entry & ((1u << 27) - 1)];
+        w.level = entry >> kShortcutLevelShift;
+        w.cell = &levels_[w.level].cells[entry & ((1u << kShortcutLevelShift) - 1)];
         return false;
     }
     // (the address of the finest level rather than the level count: a size() divides)

@@ -16,6 +16,14 @@ float eval_tape(const Scene& sc, std::span<const uint32_t> tape, vec3 p, float* 
     const uint32_t* prim = sc.primitive.data();
     const float* blend = sc.blend.data();
     const math::PrimitiveParams* params = sc.params.data();
+    // A tape of one word is one primitive (an operator needs two operands before it): most
+    // near-field cells of a pruned grid hold one, and a tracer evaluates them at every step.
+    // The loop's result without the loop.
+    if (tape.size() == 1) {
+        const uint32_t n = math::tape_node(tape[0]);
+        const float v = math::eval_primitive(kind[n], params[prim[n]], p);
+        return math::tape_negated(tape[0]) ? -v : v;
+    }
     uint32_t top = 0;
     for (const uint32_t w : tape) {
         const uint32_t n = math::tape_node(w);

@@ -181,7 +181,8 @@ void GridUpdate::refresh_shortcut(PrunedGrid& g, uint32_t level, CellCoord at) {
         for (uint32_t y = at.y * span; y < (at.y + 1) * span; ++y)
             for (uint32_t x = at.x * span; x < (at.x + 1) * span; ++x) {
                 const PrunedGrid::CellRef c = g.descend(x * scale, y * scale, z * scale, S);
-                g.shortcut_[(size_t(z) * r + y) * r + x] = c.level << 27 | c.index;
+                g.shortcut_[(size_t(z) * r + y) * r + x] =
+                    c.level << PrunedGrid::kShortcutLevelShift | c.index;
             }
 }
 

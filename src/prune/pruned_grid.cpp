@@ -58,7 +58,7 @@ void PrunedGrid::build_shortcut() {
     const uint32_t S = uint32_t(levels_.size() - 2), r = levels_[S].res;
     if (uint64_t(r) * r * r > kMaxEntries) return;
     for (const Level& l : levels_)
-        if (l.cells.size() >= (1u << 27) || !l.pow2) return;
+        if (l.cells.size() >= (1u << kShortcutLevelShift) || !l.pow2) return;
     shortcut_level_ = S;
     shortcut_.resize(size_t(r) * r * r);
     const uint32_t scale = resolution() / r;
@@ -66,7 +66,7 @@ void PrunedGrid::build_shortcut() {
         for (uint32_t y = 0; y < r; ++y)
             for (uint32_t x = 0; x < r; ++x) {
                 const CellRef at = descend(x * scale, y * scale, z * scale, S);
-                shortcut_[(size_t(z) * r + y) * r + x] = at.level << 27 | at.index;
+                shortcut_[(size_t(z) * r + y) * r + x] = at.level << kShortcutLevelShift | at.index;
             }
 }
 

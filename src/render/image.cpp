@@ -34,18 +34,20 @@ vec3 heat_color(double value, double top) {
     return {std::pow(c.x, 2.2f), std::pow(c.y, 2.2f), std::pow(c.z, 2.2f)};
 }
 
-void to_rgb8(const std::vector<vec3>& color, Image& img) {
+const uint8_t* rgb8_curve() {
     // The sRGB-like curve through a table: pow per channel would cost as much as tracing.
-    constexpr int kSteps = 4096;
     static const std::vector<uint8_t> curve = [] {
-        std::vector<uint8_t> t(kSteps + 1);
-        for (int i = 0; i <= kSteps; ++i)
-            t[i] = uint8_t(std::lround(std::pow(float(i) / kSteps, 1.0f / 2.2f) * 255.0f));
+        std::vector<uint8_t> t(kRgb8CurveSteps + 1);
+        for (int i = 0; i <= kRgb8CurveSteps; ++i)
+            t[i] = uint8_t(std::lround(std::pow(float(i) / kRgb8CurveSteps, 1.0f / 2.2f) * 255.0f));
         return t;
     }();
-    for (size_t i = 0; i < color.size(); ++i)
-        for (int c = 0; c < 3; ++c)
-            img.rgb[3 * i + c] = curve[size_t(std::clamp(color[i][c], 0.0f, 1.0f) * kSteps + 0.5f)];
+    return curve.data();
+}
+
+void to_rgb8(const std::vector<vec3>& color, Image& img) {
+    const uint8_t* curve = rgb8_curve();
+    for (size_t i = 0; i < color.size(); ++i) store_rgb8(curve, color[i], &img.rgb[3 * i]);
 }
 
 namespace {

@@ -2,6 +2,7 @@
 // legend, conversion to 8-bit sRGB.
 #pragma once
 
+#include <algorithm>
 #include <span>
 #include <vector>
 
@@ -35,8 +36,18 @@ Image finish_image(const RenderOptions& options, std::vector<vec3>& color,
 vec3 background(float v);
 // Heatmap color of `value` on a log scale up to `top`.
 vec3 heat_color(double value, double top);
-// Linear [0, 1] colors to 8-bit sRGB.
+// Linear [0, 1] colors to 8-bit sRGB: through a table of kRgb8CurveSteps + 1 entries
+// (rgb8_curve(), built once, thread-safe), one pixel at a time or a whole image.
+inline constexpr int kRgb8CurveSteps = 4096;
+const uint8_t* rgb8_curve();
+inline void store_rgb8(const uint8_t* curve, vec3 color, uint8_t* out) {
+    for (int c = 0; c < 3; ++c)
+        out[c] = curve[size_t(std::clamp(color[c], 0.0f, 1.0f) * kRgb8CurveSteps + 0.5f)];
+}
 void to_rgb8(const std::vector<vec3>& color, Image& img);
+// RenderStats from a traced image's totals and its largest per-pixel evaluation count.
+void set_render_stats(const RenderOptions& options, const TraceTotals& totals, double max_evals,
+                      RenderStats* stats);
 // A color bar with its range and the label "node evals/pixel", bottom right.
 void draw_heatmap_legend(Image& img, double top);
 

@@ -5,6 +5,7 @@
 // run the same loop, so their time ratio is the pruning's alone.
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <numbers>
@@ -102,9 +103,10 @@ struct NaiveField {
 // What a far-field step needs of a level of the grid, worked out once per image with the
 // expressions a step would use (so the steps stay bit for bit the same).
 struct LevelGeometry {
-    float4 size;  // cell size
-    float4 half;  // size · 0.5: from a cell's corner to its centre
-    float tiny;   // how far past a cell's exit a far-field step lands: 1e-4 · smallest side
+    float4 size;         // cell size
+    float4 half;         // size · 0.5: from a cell's corner to its centre
+    float tiny;          // how far past a cell's exit a far-field step lands: 1e-4 · smallest side
+    uint32_t shift = 0;  // grids with a shortcut: log2 of the finest cells per cell and axis
 };
 
 // The pruned grid.
@@ -113,24 +115,59 @@ struct PrunedField {
     std::vector<LevelGeometry> levels;
     // PrunedGrid::cell_index's terms: the grid's corner, 1 / cell size, the last index
     float4 grid_lo, inv_cell, last_index;
+    // The walk of a grid with a lookup shortcut (PrunedGrid::shortcut(): every level a power of
+    // two), inlined here: the shortcut's entry, then at most one finest cell, found with shifts
+    // and the levels' cell arrays held here. PrunedGrid::walk_step finds the same cells
+    // through its general case; it took 1/5 of the tracer's instructions on small scenes.
+    const uint32_t* shortcut = nullptr;    // null: no shortcut, walk with PrunedGrid::walk_step
+    uint32_t shortcut_shift = 0;           // finest index >> shortcut_shift: shortcut's cell
+    uint32_t shortcut_bits = 0;            // log2 of the shortcut level's resolution
+    uint32_t finest_bits = 0;              // log2 of the finest level's block factor
+    std::vector<const PrunedCell*> cells;  // level_cells(level).data()
     explicit PrunedField(const PrunedGrid& grid)
         : g(grid),
           grid_lo(load4(grid.aabb().min)),
           inv_cell(load4(grid.inv_cell_size())),
           last_index(splat(float(grid.resolution() - 1))) {
-        for (uint32_t l = 0; l < g.level_count(); ++l) {
+        const uint32_t n = g.resolution(), last = g.level_count() - 1;
+        for (uint32_t l = 0; l <= last; ++l) {
             const vec3 size = g.level_cell_size(l);
             levels.push_back({load4(size), load4(size * 0.5f),
-                              1e-4f * std::min({size.x, size.y, size.z})});
+                              1e-4f * std::min({size.x, size.y, size.z}),
+                              uint32_t(std::countr_zero(n / g.level_resolution(l)))});
+            cells.push_back(g.level_cells(l).data());
+        }
+        const uint32_t s = g.shortcut_level();
+        if (!g.shortcut().empty() && s + 1 == last) {
+            shortcut = g.shortcut().data();
+            shortcut_shift = levels[s].shift;
+            shortcut_bits = uint32_t(std::countr_zero(g.level_resolution(s)));
+            finest_bits = uint32_t(std::countr_zero(g.level_factor(last)));
         }
     }
-    // The walk to the cell deciding a point in the grid's closed box. Its finest cell is
-    // PrunedGrid::cell_index's, min(uint(x), last) for x = (p - corner) / size, computed as
-    // uint(min(x, last)): the same for x >= 0 (and resolutions below 2^24), in a few vector
-    // instructions.
-    PrunedGrid::Walk walk_begin(float4 p) const {
-        const int4 i = __builtin_convertvector(min4((p - grid_lo) * inv_cell, last_index), int4);
-        return g.walk_begin(uint32_t(i[0]), uint32_t(i[1]), uint32_t(i[2]));
+    // The finest cell holding p in the grid's closed box: PrunedGrid::cell_index's,
+    // min(uint(x), last) for x = (p - corner) / size, computed as uint(min(x, last)): the same
+    // for x >= 0 (and resolutions below 2^24), in a few vector instructions.
+    int4 finest_index(float4 p) const {
+        return __builtin_convertvector(min4((p - grid_lo) * inv_cell, last_index), int4);
+    }
+    // The walk to the cell deciding finest cell i.
+    PrunedGrid::Walk walk_begin(int4 i) const {
+        if (!shortcut) return g.walk_begin(uint32_t(i[0]), uint32_t(i[1]), uint32_t(i[2]));
+        const int4 c = i >> int(shortcut_shift);
+        PrunedGrid::Walk w;
+        w.entry = shortcut + ((uint32_t(c[2]) << shortcut_bits | uint32_t(c[1])) << shortcut_bits |
+                              uint32_t(c[0]));
+        return w;
+    }
+    // With the shortcut: the finest cell i among the children of near-field cell `parent` of
+    // the level above (PrunedGrid::Level::local_index_pow2 at the finest level).
+    const PrunedCell* finest_child(const PrunedCell& parent, int4 i) const {
+        const uint32_t m = (1u << finest_bits) - 1;
+        const uint32_t local = ((uint32_t(i[2]) & m) << finest_bits | (uint32_t(i[1]) & m))
+                                   << finest_bits |
+                               (uint32_t(i[0]) & m);
+        return cells.back() + parent.children + local;
     }
     std::span<const uint32_t> tape_at(vec3 p) const {
         PrunedGrid::Located at;
@@ -173,8 +210,10 @@ struct Lane {
         kEval,  // evaluate `tape` (prefetched) at p
     };
     Ray* ray = nullptr;
+    float t1 = 0;  // the ray's t1 and max_steps, held here to save a load per step
+    uint32_t max_steps = 0;
     float4 o, dir, inv_dir;
-    int4 up;  // all ones on the axes where the ray leaves cells by their upper face
+    int4 up;          // all ones on the axes where the ray leaves cells by their upper face
     uint32_t octant;  // the same as bits: x 1, y 2, z 4 (see clearance_in)
     float t = 0;
     uint32_t step = 0;
@@ -182,6 +221,7 @@ struct Lane {
     float4 p;
     std::span<const uint32_t> tape;
     PrunedGrid::Walk walk;  // kWalk: the lookup of p's cell
+    int4 index;             // kWalk: p's finest cell
     // The last near-field cell and its tape: consecutive steps near the surface often stay in
     // one cell, and then need no lookup.
     std::span<const uint32_t> near_tape;
@@ -192,7 +232,7 @@ struct Lane {
 // Whether p lies in the closed box [lo, hi] (x, y, z; the unused lane is ignored).
 bool in_box(float4 p, float4 lo, float4 hi) {
     const int4 in = (p >= lo) & (p <= hi);
-    return in[0] && in[1] && in[2];
+    return (in[0] & in[1] & in[2]) != 0;
 }
 
 // The next t of lane l at p in far-field cell c (corner lo, level geometry geo): no surface
@@ -201,15 +241,16 @@ bool in_box(float4 p, float4 lo, float4 hi) {
 float far_field_advance(const Lane& l, float4 p, float4 lo, const LevelGeometry& geo,
                         const PrunedCell& c, float inv_lipschitz) {
     const float r = float(clearance_in(c, l.octant));
-    const float4 exit = l.up ? lo + geo.size * splat(r + 1.0f) : lo - geo.size * splat(r);
+    // lo + size·(r + 1) on the axes the ray goes up, lo - size·r on the others: lo + size·(-r)
+    // is the same float (negation is exact), so one multiply-add serves both.
+    const float4 exit = lo + geo.size * (l.up ? splat(r + 1.0f) : splat(-r));
     float4 t_axis = (exit - l.o) * l.inv_dir;
     // NaN (0·inf): the ray runs in the face's plane, which it never leaves. Which of equal
     // candidates wins (+0 or -0) does not matter: only t_exit + tiny is used.
     t_axis = t_axis == t_axis ? t_axis : splat(INFINITY);
     const float t_exit = std::min(std::min(t_axis[0], t_axis[1]), t_axis[2]);
     // |f(p)| >= |f(centre)| - L·|p - centre|: often far beyond the cell.
-    const float from_centre =
-        std::fabs(c.value) * inv_lipschitz - length3(p - (lo + geo.half));
+    const float from_centre = std::fabs(c.value) * inv_lipschitz - length3(p - (lo + geo.half));
     const float step = std::max(std::fabs(c.bound) * inv_lipschitz, from_centre);
     return std::max(l.t + step, t_exit + geo.tiny);
 }
@@ -239,7 +280,7 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
     // The first half of lane l's next step; false when its ray is done (left the AABB or out
     // of steps).
     const auto begin_step = [&](Lane& l) -> bool {
-        if (l.step >= l.ray->max_steps || !(l.t <= l.ray->t1)) return finish(l);
+        if (l.step >= l.max_steps || !(l.t <= l.t1)) return finish(l);
         ++l.step;
         // [t0, t1] lies in the AABB: clamp away the rounding that would put p just outside.
         l.p = min4(max4(l.o + l.dir * l.t, aabb_lo), aabb_hi);
@@ -250,7 +291,8 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
                 return true;
             }
             // p lies in the grid's box: every lookup finds a cell.
-            l.walk = field.walk_begin(l.p);
+            l.index = field.finest_index(l.p);
+            l.walk = field.walk_begin(l.index);
             __builtin_prefetch(l.walk.next());
             l.next = Lane::Next::kWalk;
         } else {
@@ -261,6 +303,8 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
     const auto start = [&](Lane& l) {
         Ray& r = rays[next++];
         l.ray = &r;
+        l.t1 = r.t1;
+        l.max_steps = r.max_steps;
         l.o = load4(r.o);
         l.dir = load4(r.dir);
         l.inv_dir = load4(vec3(1.0f / r.dir.x, 1.0f / r.dir.y, 1.0f / r.dir.z));
@@ -279,24 +323,52 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
     const auto advance = [&](Lane& l) -> bool {
         if constexpr (kPruned) {
             if (l.next == Lane::Next::kWalk) {
-                const bool at_entry = l.walk.entry != nullptr;
-                bool found = field.g.walk_step(l.walk);
-                // The shortcut's entry names a cell of the coarse levels, often in cache: read
-                // it now rather than at another turn.
-                if (!found && at_entry) found = field.g.walk_step(l.walk);
-                if (!found) {
-                    __builtin_prefetch(l.walk.next());
-                    return true;
+                // The deciding cell, its level and its coordinates at that level.
+                const PrunedCell* cell;
+                uint32_t level;
+                int4 at;
+                if (field.shortcut) {
+                    if (l.walk.entry) {
+                        const uint32_t e = *l.walk.entry;
+                        l.walk.entry = nullptr;
+                        level = e >> PrunedGrid::kShortcutLevelShift;
+                        cell = field.cells[level] +
+                               (e & ((1u << PrunedGrid::kShortcutLevelShift) - 1));
+                        // The shortcut names a cell of the coarse levels, often in cache: read
+                        // it now. A near-field one is of the level above the finest.
+                        if (cell->tape != PrunedCell::kFarField) {
+                            l.walk.level = level + 1;
+                            l.walk.cell = field.finest_child(*cell, l.index);
+                            __builtin_prefetch(l.walk.cell);
+                            return true;
+                        }
+                    } else {
+                        level = l.walk.level;
+                        cell = l.walk.cell;
+                    }
+                    at = l.index >> int(field.levels[level].shift);
+                } else {
+                    const bool at_entry = l.walk.entry != nullptr;
+                    bool found = field.g.walk_step(l.walk);
+                    // (as above: the shortcut's coarse cell now)
+                    if (!found && at_entry) found = field.g.walk_step(l.walk);
+                    if (!found) {
+                        __builtin_prefetch(l.walk.next());
+                        return true;
+                    }
+                    const PrunedGrid::Located located = field.g.walk_located(l.walk);
+                    level = located.level;
+                    cell = located.cell;
+                    at = int4{int32_t(located.x), int32_t(located.y), int32_t(located.z), 0};
                 }
-                const PrunedGrid::Located at = field.g.walk_located(l.walk);
-                const LevelGeometry& geo = field.levels[at.level];
-                const float4 lo =
-                    aabb_lo + float4{float(at.x), float(at.y), float(at.z), 0} * geo.size;
-                if (at.far_field()) {
-                    l.t = far_field_advance(l, l.p, lo, geo, *at.cell, ctx.inv_lipschitz);
+                const LevelGeometry& geo = field.levels[level];
+                // (one conversion of the three coordinates, each exact: below 2^24)
+                const float4 lo = aabb_lo + __builtin_convertvector(at, float4) * geo.size;
+                if (cell->tape == PrunedCell::kFarField) {
+                    l.t = far_field_advance(l, l.p, lo, geo, *cell, ctx.inv_lipschitz);
                     return begin_step(l);
                 }
-                l.tape = field.g.tape_at(at.cell->tape);
+                l.tape = field.g.tape_at(cell->tape);
                 l.near_tape = l.tape;
                 l.near_lo = lo;
                 l.near_hi = lo + geo.size;
@@ -334,10 +406,41 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
 
 }  // namespace
 
+namespace {
+// pixel_direction's image-plane coordinates of column x and row y.
+float pixel_u(const CameraFrame& f, uint32_t W, uint32_t x) {
+    return (2.0f * (float(x) + 0.5f) / float(W) - 1.0f) * f.tan_half * f.aspect;
+}
+float pixel_v(const CameraFrame& f, uint32_t H, uint32_t y) {
+    return (1.0f - 2.0f * (float(y) + 0.5f) / float(H)) * f.tan_half;
+}
+
+// ray_box for rays from one origin (an image's primary rays): the box's corners relative to
+// the origin are worked out once, and the slabs of the three axes are taken in vector lanes.
+// The same operations in the same order as ray_box, so the same t0, t1 bit for bit.
+struct BoxFromOrigin {
+    float4 lo, hi;  // box corners - origin
+    BoxFromOrigin(vec3 origin, vec3 box_lo, vec3 box_hi)
+        : lo(load4(box_lo) - load4(origin)), hi(load4(box_hi) - load4(origin)) {}
+    bool hit(vec3 dir, float& t0, float& t1) const {
+        const float4 inv = float4{1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z, 0};
+        const float4 ta = lo * inv, tb = hi * inv;
+        // ray_box's swap when ta > tb (not when either is NaN)
+        const int4 swap = ta > tb;
+        const float4 near = swap ? tb : ta, far = swap ? ta : tb;
+        t0 = 0;
+        t1 = INFINITY;
+        for (int a = 0; a < 3; ++a) {
+            t0 = std::max(t0, near[a]);
+            t1 = std::min(t1, far[a]);
+        }
+        return t0 <= t1;
+    }
+};
+}  // namespace
+
 vec3 pixel_direction(const CameraFrame& f, uint32_t W, uint32_t H, uint32_t x, uint32_t y) {
-    const float u = (2.0f * (float(x) + 0.5f) / float(W) - 1.0f) * f.tan_half * f.aspect;
-    const float v = (1.0f - 2.0f * (float(y) + 0.5f) / float(H)) * f.tan_half;
-    return normalize(f.forward + f.right * u + f.up * v);
+    return normalize(f.forward + f.right * pixel_u(f, W, x) + f.up * pixel_v(f, H, y));
 }
 
 CameraFrame camera_frame(const Scene& sc, const RenderOptions& opt) {
@@ -361,14 +464,25 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
     const auto t_start = std::chrono::steady_clock::now();
     const uint32_t W = opt.width, H = opt.height;
     if (W == 0 || H == 0) throw std::invalid_argument("image size must be positive");
-    std::vector<uint32_t> evals(size_t(W) * H, 0);
-    std::vector<vec3> color(size_t(W) * H);
+    // Tiles write their pixels' final bytes: 3 bytes a pixel rather than a float color and an
+    // evaluation count (16 bytes) filled in, converted and scanned after. Freshly allocated
+    // memory costs page faults: 8 MB at 960x540 took 2-5 ms, a tenth of a small scene's trace.
+    // Only the heatmap, colored by the counts after all tiles, keeps a count per pixel.
+    const bool heatmap = opt.shading == Shading::kHeatmap;
+    std::vector<uint32_t> evals(heatmap ? size_t(W) * H : 0);
+    Image img;
+    img.width = W;
+    img.height = H;
+    if (!heatmap) img.rgb.resize(size_t(W) * H * 3);
+    const uint8_t* curve = rgb8_curve();
+    std::atomic<uint32_t> max_evals{0};
 
     const TraceContext ctx{sc, 1.0f / sc.lipschitz[sc.root()], sc.aabb.min, sc.aabb.max};
     const Camera& cam = opt.camera;
     const CameraFrame frame = camera_frame(sc, opt);
     const vec3 light = frame.light;
     const float tan_half = frame.tan_half, normal_h = frame.normal_h;
+    const BoxFromOrigin box_from_eye(cam.eye, ctx.aabb_lo, ctx.aabb_hi);
 
     std::atomic<uint64_t> total_steps{0}, total_evals{0}, hits{0};
     // Square tiles rather than rows: neighbouring rays visit the same cells and tapes.
@@ -413,16 +527,22 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
         uint32_t* ray_pixel = scratch.ray_pixel;
         vec3* out = scratch.out;
         uint32_t n_rays = 0;
-        for (uint32_t j = 0; j < h * w; ++j) {
-            const uint32_t x = x0 + j % w, y = y0 + j / w;
-            const float v = (1.0f - 2.0f * (float(y) + 0.5f) / float(H)) * tan_half;
-            out[j] = background(v / tan_half);
-            const vec3 dir = pixel_direction(frame, W, H, x, y);
-            const vec3 inv(1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z);
-            float t0, t1;
-            if (!ray_box(cam.eye, inv, ctx.aabb_lo, ctx.aabb_hi, t0, t1)) continue;
-            rays[n_rays] = {cam.eye, dir, t0, t1, 1024, -1, &counters[j]};
-            ray_pixel[n_rays++] = j;
+        // pixel_direction's sum split at its order of operations: (forward + right·u) per
+        // column, + up·v per row; the rays are pixel_direction's bit for bit.
+        vec3 column[kTile];
+        for (uint32_t i = 0; i < w; ++i)
+            column[i] = frame.forward + frame.right * pixel_u(frame, W, x0 + i);
+        for (uint32_t row = 0, j = 0; row < h; ++row) {
+            const float v = pixel_v(frame, H, y0 + row);
+            const vec3 background_color = background(v / tan_half), up_v = frame.up * v;
+            for (uint32_t i = 0; i < w; ++i, ++j) {
+                out[j] = background_color;
+                const vec3 dir = normalize(column[i] + up_v);
+                float t0, t1;
+                if (!box_from_eye.hit(dir, t0, t1)) continue;
+                rays[n_rays] = {cam.eye, dir, t0, t1, 1024, -1, &counters[j]};
+                ray_pixel[n_rays++] = j;
+            }
         }
         march(field, ctx, std::span(rays, n_rays), stack.data());
 
@@ -477,12 +597,22 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
             out[hit.pixel] = o;
         }
         Counters sum;
-        for (uint32_t j = 0; j < h * w; ++j) {
-            const size_t i = size_t(y0 + j / w) * W + x0 + j % w;
-            color[i] = out[j];
-            evals[i] = uint32_t(std::min<uint64_t>(counters[j].evals, 0xffffffffu));
-            sum.steps += counters[j].steps;
-            sum.evals += counters[j].evals;
+        uint32_t tile_max = 0;
+        for (uint32_t row = 0, j = 0; row < h; ++row) {
+            const size_t first = size_t(y0 + row) * W + x0;
+            for (uint32_t i = 0; i < w; ++i, ++j) {
+                const uint32_t e = uint32_t(std::min<uint64_t>(counters[j].evals, 0xffffffffu));
+                if (heatmap)
+                    evals[first + i] = e;
+                else
+                    store_rgb8(curve, out[j], &img.rgb[3 * (first + i)]);
+                tile_max = std::max(tile_max, e);
+                sum.steps += counters[j].steps;
+                sum.evals += counters[j].evals;
+            }
+        }
+        uint32_t seen = max_evals.load();
+        while (seen < tile_max && !max_evals.compare_exchange_weak(seen, tile_max)) {
         }
         total_steps += sum.steps;
         total_evals += sum.evals;
@@ -493,7 +623,13 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
     const double trace_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start)
             .count();
-    return finish_image(opt, color, evals, {trace_ms, total_steps, total_evals, hits}, stats);
+    const TraceTotals totals{trace_ms, total_steps, total_evals, hits};
+    if (heatmap) {
+        std::vector<vec3> color(size_t(W) * H);  // finish_image colors it from `evals`
+        return finish_image(opt, color, evals, totals, stats);
+    }
+    set_render_stats(opt, totals, max_evals.load(), stats);
+    return img;
 }
 
 }  // namespace
@@ -514,15 +650,19 @@ Image finish_image(const RenderOptions& opt, std::vector<vec3>& color,
     } else {
         to_rgb8(color, img);
     }
-    if (stats) {
-        const double px = double(opt.width) * opt.height;
-        stats->trace_ms = totals.trace_ms;
-        stats->steps_avg = double(totals.steps) / px;
-        stats->evals_avg = double(totals.evals) / px;
-        stats->hit_fraction = double(totals.hits) / px;
-        stats->evals_max = max_evals;
-    }
+    set_render_stats(opt, totals, max_evals, stats);
     return img;
+}
+
+void set_render_stats(const RenderOptions& opt, const TraceTotals& totals, double max_evals,
+                      RenderStats* stats) {
+    if (!stats) return;
+    const double px = double(opt.width) * opt.height;
+    stats->trace_ms = totals.trace_ms;
+    stats->steps_avg = double(totals.steps) / px;
+    stats->evals_avg = double(totals.evals) / px;
+    stats->hit_fraction = double(totals.hits) / px;
+    stats->evals_max = max_evals;
 }
 
 Image render(const PrunedGrid& grid, const RenderOptions& options, RenderStats* stats) {
