@@ -12,6 +12,9 @@ namespace {
 const uint32_t kPruneSpv[] = {
 #include "prune.spv.inc"
 };
+const uint32_t kPruneWideSpv[] = {
+#include "prune_wide.spv.inc"
+};
 const uint32_t kExpandSpv[] = {
 #include "expand.spv.inc"
 };
@@ -33,9 +36,9 @@ struct KernelCode {
 
 // Binding counts must match the shaders' layouts (shaders/gpu/*.comp).
 const KernelCode kKernels[] = {
-    {kPruneSpv, sizeof(kPruneSpv), 10},          {kExpandSpv, sizeof(kExpandSpv), 4},
-    {kCellInfoSpv, sizeof(kCellInfoSpv), 3},     {kTraceSpv, sizeof(kTraceSpv), 9},
-    {kDiscretizeSpv, sizeof(kDiscretizeSpv), 9},
+    {kPruneSpv, sizeof(kPruneSpv), 10},  {kPruneWideSpv, sizeof(kPruneWideSpv), 11},
+    {kExpandSpv, sizeof(kExpandSpv), 4}, {kCellInfoSpv, sizeof(kCellInfoSpv), 3},
+    {kTraceSpv, sizeof(kTraceSpv), 9},   {kDiscretizeSpv, sizeof(kDiscretizeSpv), 9},
 };
 static_assert(std::size(kKernels) == size_t(KernelId::kCount));
 

@@ -16,11 +16,19 @@
 
 namespace sdfprune::gpu {
 
-// local_size_x of every kernel.
+// local_size_x of every kernel but prune_wide.comp (kPruneWide, device_layout.hpp).
 inline constexpr uint32_t kWorkgroupSize = 64;
 
 // The kernels, one per compute shader in shaders/gpu/.
-enum class KernelId : uint32_t { kPrune, kExpand, kCellInfo, kTrace, kDiscretize, kCount };
+enum class KernelId : uint32_t {
+    kPrune,
+    kPruneWide,
+    kExpand,
+    kCellInfo,
+    kTrace,
+    kDiscretize,
+    kCount
+};
 
 struct Buffer {
     VkBuffer buffer = VK_NULL_HANDLE;
