@@ -149,6 +149,10 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
                                 TreeShape::kMixed};
     const Placement places[] = {Placement::kRigid, Placement::kUniform, Placement::kNonUniform,
                                 Placement::kSheared, Placement::kMixed};
+    // The same device without subgroup operations (their setting is read when it opens).
+    ::setenv("SDFPRUNE_VULKAN_SUBGROUPS", "0", 1);
+    gpu::Device plain;
+    ::unsetenv("SDFPRUNE_VULKAN_SUBGROUPS");
     for (uint64_t seed = 1; seed <= 12; ++seed) {
         RandomSceneSpec spec;
         spec.primitives = 4 + uint32_t(seed * 7 % 29);
@@ -173,12 +177,18 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
             (o.far_field ? "" : " no-farfield") + (o.hierarchy ? "" : " no-hierarchy");
         const PrunedGrid cpu = prune(sc, o);
         // These tapes are short: the team kernel by default, then the wide kernel wherever
-        // it fits (prune_wide.comp: a workgroup per parent tape).
-        for (const char* wide : {"", "1"}) {
-            if (*wide) ::setenv("SDFPRUNE_VULKAN_WIDE", wide, 1);
-            const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+        // it fits (prune_wide.comp: a workgroup per parent tape), with subgroup operations
+        // where the device has them, and without.
+        for (int variant = 0; variant < 3; ++variant) {
+            if (variant > 0) ::setenv("SDFPRUNE_VULKAN_WIDE", "1", 1);
+            const gpu::Grid gpu = gpu::prune(variant == 2 ? plain : *dev, sc, o);
             ::unsetenv("SDFPRUNE_VULKAN_WIDE");
-            const std::string how = what + (*wide ? ", wide" : "");
+            if (variant == 2) {
+                EXPECT_FALSE(gpu.stats().subgroups);
+            }
+            const std::string how = what + (variant == 1   ? ", wide"
+                                            : variant == 2 ? ", wide without subgroups"
+                                                           : "");
             const bool exact = exact_device(*dev);
             expect_same_stats(cpu.stats(), gpu.stats(), how, exact);
             if (exact) expect_same_cells(cpu, gpu, how);

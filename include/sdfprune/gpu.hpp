@@ -90,6 +90,9 @@ struct DevicePruneStats : PruneStats {
     double wall_ms = 0;
     uint32_t pool_grows = 0;
     uint32_t submissions = 0;
+    // Whether the wide steps used subgroup operations (the device has them and
+    // SDFPRUNE_VULKAN_SUBGROUPS is not 0), else shared memory.
+    bool subgroups = false;
     std::vector<GpuStepShape> steps;  // in the order they ran
 };
 

@@ -328,10 +328,11 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                 push.jobs = uint32_t(std::min<uint64_t>(s.team_jobs, first + s.per_dispatch));
                 push.round = round;
                 if (s.wide)
-                    ctx.dispatch(KernelId::kPruneWide,
-                                 {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, s.octants,
-                                  s.cells, &counters, &scratch, &octant_pool, &node_spans},
-                                 &push, sizeof(push), s.groups);
+                    ctx.dispatch(
+                        ctx.subgroups() ? KernelId::kPruneWideSubgroups : KernelId::kPruneWide,
+                        {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, s.octants, s.cells,
+                         &counters, &scratch, &octant_pool, &node_spans},
+                        &push, sizeof(push), s.groups);
                 else
                     ctx.dispatch(KernelId::kPrune,
                                  {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, s.octants,
@@ -511,6 +512,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                 .count();
     }
     st.prune_ms = gpu_ms;
+    st.subgroups = ctx.subgroups();
     st.prune_peak_bytes = ctx.bytes_peak() - live_before;
     st.wall_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start)

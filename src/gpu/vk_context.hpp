@@ -23,6 +23,7 @@ inline constexpr uint32_t kWorkgroupSize = 64;
 enum class KernelId : uint32_t {
     kPrune,
     kPruneWide,
+    kPruneWideSubgroups,  // needs subgroups() (else not built)
     kExpand,
     kCellInfo,
     kTrace,
@@ -53,6 +54,9 @@ class Context {
     // all; kernels must then keep each invocation's work under it (or report that they can't).
     static constexpr uint64_t kLoopLimit = 65535;
     bool loop_limited() const { return loop_limited_; }
+    // Subgroup arithmetic and ballot in compute shaders (Vulkan 1.1), for the kernels that use
+    // them; SDFPRUNE_VULKAN_SUBGROUPS=0 turns them off (the fallbacks, for tests).
+    bool subgroups() const { return subgroups_; }
     // Workgroups for a grid-stride loop over n items: all of them, or the most one dispatch
     // may have.
     uint32_t groups_for(uint64_t n) const;
@@ -125,6 +129,7 @@ class Context {
     uint64_t max_range_ = 0;
     uint32_t max_groups_ = 65535;
     bool loop_limited_ = false;
+    bool subgroups_ = false;
     uint64_t live_ = 0, peak_ = 0;
     uint32_t sets_used_ = 0;
     double carried_ms_ = 0;  // GPU time of the parts already submitted

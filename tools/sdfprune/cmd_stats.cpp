@@ -216,6 +216,7 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                      j.add("device", device->name())
                          .add("wall_ms", device_grid->stats().wall_ms)
                          .add("submissions", device_grid->stats().submissions)
+                         .add("subgroups", device_grid->stats().subgroups)
                          .add("pool_grows", device_grid->stats().pool_grows)
                          .add("gpu_steps", steps);
                  }
