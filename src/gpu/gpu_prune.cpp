@@ -269,7 +269,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         // the dispatch that starts it, within lavapipe's loop limit; only where twice that
         // count fits (a deep chain near the limit came out wrong on lavapipe: the count is
         // taken as approximate).
-        if (mode != 3 && wide_override != 0) {
+        if (mode != 3 && wide_override != 0 && ctx.can_run(KernelId::kPruneWide)) {
             const auto ceil_div = [](uint64_t a, uint64_t b) { return (a + b - 1) / b; };
             const uint64_t len = max_len, heights = uint64_t(scene_height) + 1;
             const uint64_t rounds = std::min<uint64_t>(heights, len / 2 + 1);
@@ -328,11 +328,12 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                 push.jobs = uint32_t(std::min<uint64_t>(s.team_jobs, first + s.per_dispatch));
                 push.round = round;
                 if (s.wide)
-                    ctx.dispatch(
-                        ctx.subgroups() ? KernelId::kPruneWideSubgroups : KernelId::kPruneWide,
-                        {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, s.octants, s.cells,
-                         &counters, &scratch, &octant_pool, &node_spans},
-                        &push, sizeof(push), s.groups);
+                    ctx.dispatch(ctx.can_run(KernelId::kPruneWideSubgroups)
+                                     ? KernelId::kPruneWideSubgroups
+                                     : KernelId::kPruneWide,
+                                 {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, s.octants,
+                                  s.cells, &counters, &scratch, &octant_pool, &node_spans},
+                                 &push, sizeof(push), s.groups);
                 else
                     ctx.dispatch(KernelId::kPrune,
                                  {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, s.octants,
@@ -512,7 +513,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                 .count();
     }
     st.prune_ms = gpu_ms;
-    st.subgroups = ctx.subgroups();
+    st.subgroups = ctx.can_run(KernelId::kPruneWideSubgroups);
     st.prune_peak_bytes = ctx.bytes_peak() - live_before;
     st.wall_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start)

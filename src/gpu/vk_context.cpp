@@ -5,6 +5,8 @@
 #include <cstdlib>
 #include <cstring>
 
+#include "device_layout.hpp"
+
 namespace sdfprune::gpu {
 namespace {
 
@@ -34,15 +36,16 @@ const uint32_t kDiscretizeSpv[] = {
 struct KernelCode {
     const uint32_t* words;
     size_t bytes;
-    uint32_t bindings;       // storage buffers 0 .. bindings-1
+    uint32_t bindings;                     // storage buffers 0 .. bindings-1
+    uint32_t local_size = kWorkgroupSize;  // local_size_x: built only where the device allows it
     bool subgroups = false;  // built only where the device has them (Context::subgroups)
 };
 
 // Binding counts must match the shaders' layouts (shaders/gpu/*.comp).
 const KernelCode kKernels[] = {
     {kPruneSpv, sizeof(kPruneSpv), 10},
-    {kPruneWideSpv, sizeof(kPruneWideSpv), 11},
-    {kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 11, true},
+    {kPruneWideSpv, sizeof(kPruneWideSpv), 11, uint32_t(kPruneWide)},
+    {kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 11, uint32_t(kPruneWide), true},
     {kExpandSpv, sizeof(kExpandSpv), 4},
     {kCellInfoSpv, sizeof(kCellInfoSpv), 3},
     {kTraceSpv, sizeof(kTraceSpv), 9},
@@ -237,8 +240,11 @@ Context::Context() {
     for (const KernelCode& code : kKernels) {
         Kernel k;
         k.bindings = code.bindings;
-        if (code.subgroups && !subgroups_) {
-            kernels_.push_back(k);  // no pipeline: never dispatched
+        // (Vulkan guarantees workgroups of 128 invocations only.)
+        if ((code.subgroups && !subgroups_) ||
+            code.local_size > props.limits.maxComputeWorkGroupInvocations ||
+            code.local_size > props.limits.maxComputeWorkGroupSize[0]) {
+            kernels_.push_back(k);  // no pipeline: never dispatched (can_run)
             continue;
         }
         VkDescriptorSetLayoutBinding b[kMaxBindings];

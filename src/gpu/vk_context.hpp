@@ -57,6 +57,9 @@ class Context {
     // Subgroup arithmetic and ballot in compute shaders (Vulkan 1.1), for the kernels that use
     // them; SDFPRUNE_VULKAN_SUBGROUPS=0 turns them off (the fallbacks, for tests).
     bool subgroups() const { return subgroups_; }
+    // Whether this device runs kernel k (prune_wide's 256-lane workgroups need a device that
+    // allows them; the subgroup kernels need subgroups()).
+    bool can_run(KernelId k) const { return kernels_[size_t(k)].pipeline != VK_NULL_HANDLE; }
     // Workgroups for a grid-stride loop over n items: all of them, or the most one dispatch
     // may have.
     uint32_t groups_for(uint64_t n) const;
