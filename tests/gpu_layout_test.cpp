@@ -207,8 +207,11 @@ Mirror mirror(std::string name, std::vector<std::string> kernels, std::vector<Me
 const std::vector<Mirror>& mirrors() {
     using namespace gpu;
     using math::PrimitiveParams;
-    const std::vector<std::string> all = {"prune", "expand", "cell_info", "trace", "discretize"};
-    const std::vector<std::string> scene = {"prune", "trace", "discretize"};
+    const std::vector<std::string> all = {"prune",     "prune_wide", "prune_wide_subgroups",
+                                          "expand",    "cell_info",  "trace",
+                                          "discretize"};
+    const std::vector<std::string> scene = {"prune", "prune_wide", "prune_wide_subgroups", "trace",
+                                            "discretize"};
     const std::vector<std::string> grid = {"trace", "discretize"};
     static const std::vector<Mirror> table = {
         mirror<GpuNode>("Node", scene,
@@ -227,7 +230,7 @@ const std::vector<Mirror>& mirrors() {
             "Cell", all,
             {SDFPRUNE_MEMBER(PrunedCell, tape), SDFPRUNE_MEMBER(PrunedCell, children),
              SDFPRUNE_MEMBER(PrunedCell, value), SDFPRUNE_MEMBER(PrunedCell, bound)}),
-        mirror<GpuBlock>("Block", {"prune", "expand"},
+        mirror<GpuBlock>("Block", {"prune", "prune_wide", "prune_wide_subgroups", "expand"},
                          {SDFPRUNE_MEMBER(GpuBlock, x), SDFPRUNE_MEMBER(GpuBlock, y),
                           SDFPRUNE_MEMBER(GpuBlock, z), SDFPRUNE_MEMBER(GpuBlock, tape)}),
         mirror<GpuLevel>("Level", grid,
@@ -239,7 +242,7 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(GpuGridParams, cell_size), SDFPRUNE_MEMBER(GpuGridParams, inv_cell)}),
         // GpuCounters' trailing pad is the host's only.
         mirror<GpuCounters>(
-            "Counters", {"prune"},
+            "Counters", {"prune", "prune_wide", "prune_wide_subgroups"},
             {SDFPRUNE_MEMBER(GpuCounters, pool_used), SDFPRUNE_MEMBER(GpuCounters, pool_capacity),
              SDFPRUNE_MEMBER(GpuCounters, overflow), SDFPRUNE_MEMBER(GpuCounters, max_len),
              SDFPRUNE_MEMBER(GpuCounters, near_jobs), SDFPRUNE_MEMBER(GpuCounters, next_blocks),
@@ -265,7 +268,7 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(DiscretizeParams, pad0), SDFPRUNE_MEMBER(DiscretizeParams, pad1),
              SDFPRUNE_MEMBER(DiscretizeParams, pad2)}),
         mirror<PrunePush>(
-            "Push", {"prune"},
+            "Push", {"prune", "prune_wide", "prune_wide_subgroups"},
             {SDFPRUNE_MEMBER(PrunePush, origin), SDFPRUNE_MEMBER(PrunePush, csize),
              SDFPRUNE_MEMBER(PrunePush, mode), SDFPRUNE_MEMBER(PrunePush, factor),
              SDFPRUNE_MEMBER(PrunePush, jobs), SDFPRUNE_MEMBER(PrunePush, threads),
@@ -372,6 +375,12 @@ struct EmbeddedKernel {
 constexpr uint32_t kPruneSpv[] = {
 #include "prune.reflect.spv.inc"
 };
+constexpr uint32_t kPruneWideSpv[] = {
+#include "prune_wide.reflect.spv.inc"
+};
+constexpr uint32_t kPruneWideSubgroupsSpv[] = {
+#include "prune_wide_subgroups.reflect.spv.inc"
+};
 constexpr uint32_t kExpandSpv[] = {
 #include "expand.reflect.spv.inc"
 };
@@ -385,6 +394,8 @@ constexpr uint32_t kDiscretizeSpv[] = {
 #include "discretize.reflect.spv.inc"
 };
 const EmbeddedKernel kKernels[] = {{"prune", kPruneSpv},
+                                   {"prune_wide", kPruneWideSpv},
+                                   {"prune_wide_subgroups", kPruneWideSubgroupsSpv},
                                    {"expand", kExpandSpv},
                                    {"cell_info", kCellInfoSpv},
                                    {"trace", kTraceSpv},
@@ -452,6 +463,12 @@ void check_kernel(const std::string& kernel) {
 
 TEST(GpuLayout, Prune) {
     check_kernel("prune");
+}
+TEST(GpuLayout, PruneWide) {
+    check_kernel("prune_wide");
+}
+TEST(GpuLayout, PruneWideSubgroups) {
+    check_kernel("prune_wide_subgroups");
 }
 TEST(GpuLayout, Expand) {
     check_kernel("expand");

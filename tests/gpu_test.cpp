@@ -149,6 +149,10 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
                                 TreeShape::kMixed};
     const Placement places[] = {Placement::kRigid, Placement::kUniform, Placement::kNonUniform,
                                 Placement::kSheared, Placement::kMixed};
+    // The same device without subgroup operations (their setting is read when it opens).
+    ::setenv("SDFPRUNE_VULKAN_SUBGROUPS", "0", 1);
+    gpu::Device plain;
+    ::unsetenv("SDFPRUNE_VULKAN_SUBGROUPS");
     for (uint64_t seed = 1; seed <= 12; ++seed) {
         RandomSceneSpec spec;
         spec.primitives = 4 + uint32_t(seed * 7 % 29);
@@ -172,11 +176,24 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
             std::to_string(o.factor) + " refine " + std::to_string(o.refine) +
             (o.far_field ? "" : " no-farfield") + (o.hierarchy ? "" : " no-hierarchy");
         const PrunedGrid cpu = prune(sc, o);
-        const gpu::Grid gpu = gpu::prune(*dev, sc, o);
-        const bool exact = exact_device(*dev);
-        expect_same_stats(cpu.stats(), gpu.stats(), what, exact);
-        if (exact) expect_same_cells(cpu, gpu, what);
-        expect_valid_cells(sc, gpu, what);  // on every device
+        // These tapes are short: the team kernel by default, then the wide kernel wherever
+        // it fits (prune_wide.comp: a workgroup per parent tape), with subgroup operations
+        // where the device has them, and without.
+        for (int variant = 0; variant < 3; ++variant) {
+            if (variant > 0) ::setenv("SDFPRUNE_VULKAN_WIDE", "1", 1);
+            const gpu::Grid gpu = gpu::prune(variant == 2 ? plain : *dev, sc, o);
+            ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+            if (variant == 2) {
+                EXPECT_FALSE(gpu.stats().subgroups);
+            }
+            const std::string how = what + (variant == 1   ? ", wide"
+                                            : variant == 2 ? ", wide without subgroups"
+                                                           : "");
+            const bool exact = exact_device(*dev);
+            expect_same_stats(cpu.stats(), gpu.stats(), how, exact);
+            if (exact) expect_same_cells(cpu, gpu, how);
+            expect_valid_cells(sc, gpu, how);  // on every device
+        }
     }
 }
 
@@ -203,18 +220,31 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
     EXPECT_GT(gpu.stats().submissions, 3u);
     EXPECT_LE(gpu.stats().submissions, 6u + gpu.stats().pool_grows);
     expect_matches_cpu(sc, cpu, gpu, *dev, "demo 64³");
+    // The same through the wide kernel wherever it fits (at 32³, where its tapes outgrow the
+    // pools too: on lavapipe it is slow over many jobs).
+    o.resolution = 32;
+    ::setenv("SDFPRUNE_VULKAN_PRESIZE_WORDS", "0", 1);
+    ::setenv("SDFPRUNE_VULKAN_WIDE", "1", 1);
+    const gpu::Grid wide = gpu::prune(*dev, sc, o);
+    ::unsetenv("SDFPRUNE_VULKAN_PRESIZE_WORDS");
+    ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+    EXPECT_GT(wide.stats().pool_grows, 0u);
+    EXPECT_TRUE(wide.stats().steps[0].wide);
+    expect_matches_cpu(sc, prune(sc, o), wide, *dev, "demo 32³, wide");
 }
 
 // The steps' work shapes (GpuStepShape) follow the hierarchy: per level the octants then the
 // cells from them, then the refinement; jobs are the CPU's cells and octants, lanes come in
 // teams that share a parent tape (one lane per cell or octant, in refinement per sub-box), and
-// the busiest lane walks at least one parent tape.
+// the busiest lane walks at least one parent tape. (Teams only: SDFPRUNE_VULKAN_WIDE=0.)
 TEST(Gpu, StepShapesFollowTheLevels) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = builtin_scene("demo");
     PruneOptions o;
     o.resolution = 64;  // levels 4, 16, 64
+    ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
     const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+    ::unsetenv("SDFPRUNE_VULKAN_WIDE");
     const std::vector<gpu::GpuStepShape>& steps = gpu.stats().steps;
     ASSERT_EQ(steps.size(), 7u);
     const uint32_t levels[] = {0, 0, 1, 1, 2, 2, 2}, modes[] = {1, 2, 1, 2, 1, 2, 3};
@@ -243,6 +273,36 @@ TEST(Gpu, StepShapesFollowTheLevels) {
     EXPECT_EQ(steps[6].jobs, steps[5].jobs);  // every finest cell is refined
     // The root's octants walk the full tape: evaluation and compaction, and one more pass.
     EXPECT_GE(steps[0].longest_walk_words, 3ull * sc.size());
+}
+
+// By default the top levels' steps, few jobs over long parent tapes, run wide: a workgroup
+// per parent tape, and its busiest lane walks less than a team's would.
+TEST(Gpu, TopLevelsRunWide) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Scene sc = builtin_scene("demo");  // 617 nodes
+    PruneOptions o;
+    o.resolution = 64;
+    ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
+    const gpu::Grid teams = gpu::prune(*dev, sc, o);
+    ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+    const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+    const std::vector<gpu::GpuStepShape>& steps = gpu.stats().steps;
+    ASSERT_EQ(steps.size(), teams.stats().steps.size());
+    for (size_t i = 0; i < steps.size(); ++i) {
+        const gpu::GpuStepShape &st = steps[i], &team = teams.stats().steps[i];
+        SCOPED_TRACE("step " + std::to_string(i));
+        EXPECT_EQ(st.jobs, team.jobs);
+        EXPECT_FALSE(team.wide);
+        if (!st.wide) continue;
+        EXPECT_NE(st.mode, 3u);
+        EXPECT_EQ(st.lanes_per_tape, 256u);
+        EXPECT_EQ(st.lanes % 256u, 0u);
+        EXPECT_LE(st.lanes, (st.jobs + 7) / 8 * 256);
+        EXPECT_LT(st.longest_walk_words, team.longest_walk_words);
+    }
+    EXPECT_TRUE(steps[0].wide);  // the root's octants, from the full tape
+    EXPECT_TRUE(steps[1].wide);
+    expect_matches_cpu(sc, prune(sc, o), gpu, *dev, "demo 64³");
 }
 
 TEST(Gpu, DeepChainPrunes) {

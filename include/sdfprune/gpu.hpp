@@ -71,12 +71,18 @@ struct GpuStepShape {
     uint64_t workgroups = 0;  // over all dispatches
     uint64_t jobs = 0;        // cells or octants
     uint64_t lanes = 0;       // invocations with a job (whole teams, see lanes_per_tape)
-    // Lanes that walk one parent tape together in lockstep (a team): one per child box (cell,
-    // octant, or sub-box in refinement).
+    // false: a team of lanes walks one parent tape in lockstep, one lane per child box (cell,
+    // octant, or sub-box in refinement); true ("wide", modes 0–2 only): a whole workgroup
+    // takes one parent tape and its kPruneTeam boxes, the tape's nodes spread over its lanes
+    // and combined height by height.
+    bool wide = false;
+    // Lanes that take one parent tape together: the team (8), or the workgroup (256) when wide.
     uint32_t lanes_per_tape = 1;
-    // The tape words one lane reads in sequence, at most: its team's jobs (rounded up) times
-    // the passes over a parent tape per job (evaluation once per batch of sub-boxes, the
-    // sweep, the write) times the parents' longest tape. A bound, not a count.
+    // The tape words one lane reads in sequence, at most: its jobs (rounded up) times, per job,
+    // in a team the passes over a parent tape (evaluation once per batch of sub-boxes, the
+    // sweep, the write) times the parents' longest tape; when wide, a lane's share of the
+    // tape in each stage plus one step per height of the scene (the operators of one height
+    // after another). A bound, not a count.
     uint64_t longest_walk_words = 0;
 };
 
@@ -84,6 +90,9 @@ struct DevicePruneStats : PruneStats {
     double wall_ms = 0;
     uint32_t pool_grows = 0;
     uint32_t submissions = 0;
+    // Whether the wide steps used subgroup operations (the device has them and
+    // SDFPRUNE_VULKAN_SUBGROUPS is not 0), else shared memory.
+    bool subgroups = false;
     std::vector<GpuStepShape> steps;  // in the order they ran
 };
 

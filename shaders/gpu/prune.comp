@@ -29,67 +29,19 @@ layout(local_size_x = 64) in;
 
 #include "cells.glsl"
 
-const uint kTeam = 8u;     // lanes per team (gpu_prune.cpp: kPruneTeam)
 const uint kTeams = 8u;    // teams per workgroup
 const uint kWindow = 64u;  // tape entries a lane advances per step (gpu_prune.cpp: kPruneWindow)
 // Batches of sub-boxes a step evaluates when the whole tape fits the window
 // (gpu_prune.cpp: kPruneBatchesPerStep).
 const uint kBatchesPerStep = 4u;
 
-layout(std430, binding = 4) readonly buffer Blocks { Block blocks[]; };
-layout(std430, binding = 5) buffer Octants { Cell octants[]; };
-layout(std430, binding = 6) buffer Cells { Cell cells[]; };
-layout(std430, binding = 7) buffer Counters {
-    uint pool_used;
-    uint pool_capacity;
-    uint overflow;
-    uint max_len;  // longest tape written or shared in this step
-    uint near_jobs;  // near-field cells in this step
-    uint next_blocks;
-    uint max_depth;  // deepest evaluation stack of the tapes written or shared in this step
-    uint octant_used;      // the octant pool, as pool_used, pool_capacity
-    uint octant_capacity;
-    uint near_words;  // words of the near-field cells' tapes with their headers (modes 0 and 2)
-};
-// Octants' tapes (mode 1) live in a pool of their own, dropped after the level: a reference
-// with kInOctantPool set points there. So do the finest cells' tapes that refinement (mode 3)
-// replaces (flag 4). Tapes for the main pool never share one of these: they copy it.
-layout(std430, binding = 9) buffer OctantPool { uint octant_pool[]; };
-const uint kInOctantPool = 0x80000000u;
+#include "prune_common.glsl"
 
-uint tape_read(uint ref, uint k) {
-    return (ref & kInOctantPool) != 0u ? octant_pool[(ref & ~kInOctantPool) + k] : pool[ref + k];
-}
-void tape_write(uint ref, uint value) {
-    if ((ref & kInOctantPool) != 0u)
-        octant_pool[ref & ~kInOctantPool] = value;
-    else
-        pool[ref] = value;
-}
 // Per team (see team_words): the lanes' job state (kStateWords each), each parent-tape entry's
 // left operand (one word, the same in every lane), each entry's decision and sweep flags (one
 // word per lane), then 4 words per stack slot and lane (value, lo, hi, entry). Lane l's
-// word of item k is at k · kTeam + l. Coherent: in refinement a team's lanes read each other's
-// decisions and far-field flags, written at earlier steps (a barrier between).
-layout(std430, binding = 8) coherent buffer Scratch { uint scratch[]; };
-
-layout(push_constant) uniform Push {
-    vec4 origin;  // AABB min; w: Lipschitz bound of the root
-    vec4 csize;   // cell size of this level; w: far-field C
-    uint mode;
-    uint factor;  // f: cells per axis of a block
-    uint jobs;    // team jobs (see above)
-    uint threads;  // lanes that take jobs (whole teams; the last workgroup may have idle ones)
-    uint max_len;    // longest parent tape (entry scratch per team)
-    uint max_stack;  // deepest evaluation stack of the parent tapes
-    uint flags;      // 1: far field on; 2: interval bounds; 4: new tapes go to the octant pool
-    uint pool_start;  // pool words in use before this step
-    uint first_job;   // this dispatch's team jobs: [first_job, jobs)
-    uint round;       // 0: start the jobs; later rounds resume them
-    uint budget;      // steps per job and round
-    uint refine;      // mode 3: sub-boxes per axis
-    uint octant_start;  // octant pool words in use before this step
-} pc;
+// word of item k is at k · kTeam + l. In refinement a team's lanes read each other's decisions
+// and far-field flags, written at earlier steps (a barrier between).
 
 // A team's window of its parent tape, staged for the step.
 shared uint s_word[kTeams * kWindow];
@@ -119,30 +71,6 @@ uint team_decision(uint at) {
     uint d6 = scratch[at + 6u] & 3u, d7 = scratch[at + 7u] & 3u;
     uint differ = (d0 ^ d1) | (d0 ^ d2) | (d0 ^ d3) | (d0 ^ d4) | (d0 ^ d5) | (d0 ^ d6) | (d0 ^ d7);
     return differ == 0u ? d0 : kKeepBoth;
-}
-
-// Stores a finished lane's result: `tape` of `words` words (near), or the far-field constant.
-void store(uint dest, bool near, float value, float constant, uint tape, uint words, Cell c) {
-    if (pc.mode == 3u) {
-        if (near) {
-            c.tape = tape;
-        } else {
-            c.tape = kFarField;
-            c.bound = constant;
-        }
-        octants[dest] = c;
-        return;
-    }
-    Cell result = Cell(near ? tape : kFarField, 0u, value, constant);
-    if (pc.mode == 1u) {
-        octants[dest] = result;
-        return;
-    }
-    if (near) {
-        atomicAdd(near_jobs, 1u);
-        atomicAdd(near_words, words + 2u);
-    }
-    cells[dest] = result;
 }
 
 void main() {
@@ -178,81 +106,30 @@ void main() {
         vec3 half_size = half_cell;
         float R = radius;
         Cell c0 = Cell(kFarField, 0u, 0.0, 0.0);
-        if (has_job && pc.mode == 1u) {
-            Block b = blocks[job];
-            uint o = lane;
-            uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
-                             b.z + ((o >> 2) & 1u) * hf);
-            centre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
-            half_size = half_cell * float(hf);
-            R = radius * float(hf);
-            parent = b.tape;
-            dest = job * 8u + o;
-        } else if (has_job) {
-            uint bi, local;
-            if (pc.mode == 3u) {
-                bi = job / per_block;
-                local = job % per_block;
-            } else if (pc.mode == 0u) {
-                uint per_team = (per_block + kTeam - 1u) / kTeam;
-                bi = job / per_team;
-                local = (job % per_team) * kTeam + lane;
-                valid = local < per_block;
-                local = min(local, per_block - 1u);
-            } else {
-                // Mode 2: the octant's cells, kTeam at a time.
-                uint per_octant = hf * hf * hf;
-                uint per_team = (per_octant + kTeam - 1u) / kTeam;
-                bi = job / (8u * per_team);
-                uint o = (job / per_team) % 8u;
-                uint q = (job % per_team) * kTeam + lane;
-                valid = q < per_octant;
-                q = min(q, per_octant - 1u);
-                uvec3 l3 = uvec3((o & 1u) * hf + q % hf, ((o >> 1) & 1u) * hf + (q / hf) % hf,
-                                 ((o >> 2) & 1u) * hf + q / (hf * hf));
-                local = (l3.z * f + l3.y) * f + l3.x;
-            }
+        if (has_job && pc.mode == 3u) {
+            // Reads `cells`, writes the refined cells to `octants` (binding 5): a step
+            // redone after a pool overflow starts again from unchanged cells. Lane 0
+            // stores the cell; the others evaluate sub-boxes.
+            uint bi = job / per_block, local = job % per_block;
             Block b = blocks[bi];
             uvec3 lc = uvec3(local % f, (local / f) % f, local / (f * f));
             centre = origin + (vec3(b.x + lc.x, b.y + lc.y, b.z + lc.z) + 0.5) * cs;
-            dest = bi * per_block + local;
-            parent = b.tape;
-            if (pc.mode == 3u) {
-                // Reads `cells`, writes the refined cells to `octants` (binding 5): a step
-                // redone after a pool overflow starts again from unchanged cells. Lane 0
-                // stores the cell; the others evaluate sub-boxes.
-                dest = job;
-                c0 = cells[job];
-                valid = lane == 0u;
-                if (c0.tape == kFarField) {
-                    walk = false;
-                    if (pc.round == 0u && valid) octants[job] = c0;
-                } else {
-                    parent = c0.tape;
-                    subs = tape_read(parent, 0u) > kRefineMaxTape ? 1u : pc.refine;
-                    nbatch = (subs * subs * subs + kTeam - 1u) / kTeam;
-                }
-            } else if (pc.mode == 2u) {
-                uint o = (lc.x >= hf ? 1u : 0u) | (lc.y >= hf ? 2u : 0u) | (lc.z >= hf ? 4u : 0u);
-                Cell oct = octants[bi * 8u + o];
-                if (oct.tape == kFarField) {
-                    // A far octant makes far cells (prune.cpp): its constant, and its centre
-                    // value moved conservatively to the cell's centre.
-                    walk = false;
-                    if (pc.round == 0u && valid) {
-                        uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
-                                         b.z + ((o >> 2) & 1u) * hf);
-                        precise vec3 ocentre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
-                        float reach = pc.origin.w * length(centre - ocentre);
-                        cells[dest] = Cell(kFarField, 0u,
-                                          oct.value > 0.0 ? max(oct.value - reach, oct.bound)
-                                                          : min(oct.value + reach, oct.bound),
-                                          oct.bound);
-                    }
-                } else {
-                    parent = oct.tape;
-                }
+            dest = job;
+            c0 = cells[job];
+            valid = lane == 0u;
+            if (c0.tape == kFarField) {
+                walk = false;
+                if (pc.round == 0u && valid) octants[job] = c0;
+            } else {
+                parent = c0.tape;
+                subs = tape_read(parent, 0u) > kRefineMaxTape ? 1u : pc.refine;
+                nbatch = (subs * subs * subs + kTeam - 1u) / kTeam;
             }
+        } else if (has_job) {
+            vec3 box_centre;
+            walk = job_box(job, lane, box_centre, half_size, R, parent, dest, valid);
+            centre = box_centre;
+            valid = valid && walk;
         }
 
         // The lane's state: new, or from the previous round.

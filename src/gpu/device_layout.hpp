@@ -46,7 +46,11 @@ inline constexpr uint64_t kPruneStateWords = 16;
 inline constexpr uint64_t kPruneTeam = 8;
 inline constexpr uint64_t kPruneWindow = 64;
 inline constexpr uint64_t kPruneBatchesPerStep = 4;
-struct PrunePush {  // prune.comp: Push
+// prune_wide.comp: kWide, the lanes of a workgroup that takes one team job (kPruneTeam boxes of
+// one parent tape); kWideEntryWords, its scratch words per tape entry and box.
+inline constexpr uint64_t kPruneWide = 256;
+inline constexpr uint64_t kPruneWideEntryWords = 4;
+struct PrunePush {  // prune.comp and prune_wide.comp: Push
     vec4 origin, csize;
     uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
     uint32_t round, budget, refine, octant_start;

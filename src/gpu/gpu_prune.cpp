@@ -1,10 +1,12 @@
 // gpu_prune.cpp — hierarchical pruning on the device (gpu.hpp): the host walks the levels as
 // src/prune/prune.cpp does; each level is one submission of prune.comp's steps (the octants,
 // the cells, the refinement), each over all its jobs in teams of lanes that share a parent
-// tape, then expand.comp to make the next level's blocks. The pools are sized before each level
-// from the parents' tapes; one that overflows all the same grows and the level is redone.
-// Statistics are read back at the end.
+// tape, then expand.comp to make the next level's blocks. Steps with few jobs and long parent
+// tapes (the top levels) run prune_wide.comp instead: a workgroup per parent tape. The pools are
+// sized before each level from the parents' tapes; one that overflows all the same grows and the
+// level is redone. Statistics are read back at the end.
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstddef>
@@ -63,6 +65,16 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     g.nodes = upload_vector(nodes);
     g.params = upload_vector(sc.params);
     g.extras = upload_vector(extras);
+    // For prune_wide.comp: per node the first node of its subtree and its height (post-order:
+    // operands first, so one pass), and the highest, the root's.
+    std::vector<uint32_t> spans(2 * uint64_t(sc.size()));
+    for (uint32_t n = 0; n < sc.size(); ++n) {
+        const bool prim = sc.is_primitive(n);
+        spans[2 * n] = prim ? n : spans[2 * sc.left[n]];
+        spans[2 * n + 1] =
+            prim ? 0 : 1 + std::max(spans[2 * sc.left[n] + 1], spans[2 * sc.right[n] + 1]);
+    }
+    const uint32_t scene_height = spans[2 * sc.root() + 1];
 
     // The pool starts with the full tape; it grows on overflow.
     const uint64_t max_pool_words = std::min<uint64_t>(ctx.max_buffer_bytes() / 4, 0xfffffff0u);
@@ -78,6 +90,9 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
 
     // Temporaries: what is left of them is freed on return, or when an error is thrown.
     LocalBuffers local(ctx);
+    Buffer& node_spans = local.create(spans.size() * 4);
+    ctx.upload(node_spans, spans.data(), spans.size() * 4);
+    std::vector<uint32_t>().swap(spans);
     Buffer& counters = local.create(sizeof(GpuCounters), true);
     auto* counter = static_cast<GpuCounters*>(counters.mapped);
     Buffer& blocks = local.create(sizeof(GpuBlock));
@@ -134,7 +149,15 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     const float L = sc.lipschitz[sc.root()];
     const uint32_t flags =
         (opt.far_field ? 1u : 0u) | (opt.bounds == CellBounds::kInterval ? 2u : 0u);
-    uint32_t level_index = 0;   // the level being made (for the steps' shapes)
+    uint32_t level_index = 0;  // the level being made (for the steps' shapes)
+    // Which steps run wide (prune_wide.comp): those with at most kWideMaxJobs team jobs (a
+    // workgroup each: about what a large GPU holds at once), parent tapes of kWideMinTape
+    // words or more, and a shorter longest walk than in teams. SDFPRUNE_VULKAN_WIDE=0 never,
+    // =1 wherever the kernel fits (for tests).
+    constexpr uint64_t kWideMaxJobs = 1024, kWideMinTape = 256;
+    int wide_override = -1;
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE"); env && *env)
+        wide_override = std::atoi(env) != 0;
 
     // A step of a level (prune.comp): `jobs` cells or octants from their parents' tapes into
     // `octants`/`cells`, run as team jobs that each walk one parent tape with kPruneTeam lanes,
@@ -146,6 +169,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         const Buffer *octants, *cells;
         uint64_t team_jobs, teams, rounds, per_dispatch;
         uint32_t threads, groups;  // lanes that take jobs, and their workgroups
+        bool wide;
         GpuStepShape shape;
     };
     const auto plan_step = [&](uint32_t mode, uint32_t factor, uint64_t jobs, vec3 csize,
@@ -233,9 +257,63 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             s.team_jobs == 0 ? 0
                              : (s.team_jobs + s.teams - 1) / s.teams *
                                    std::max((batches + 2) * batch_len, uint64_t(3) * max_len);
-        if (scratch.size < s.teams * team_bytes) {
+        s.wide = false;
+        uint64_t scratch_bytes = s.teams * team_bytes;
+        // The wide kernel: per job the tape entries a lane takes one after another
+        // (prune_wide.comp): its share of the entries counted, then placed (with a binary
+        // search for an operator's left operand), in the evaluation and the top-down pass its
+        // share of each round's entries and kPruneTeam boxes (at most one more than an even
+        // share per round: a round per height the tape has, no more than its operators plus
+        // one), and the compaction's two passes over a slice. Its loops add the heights
+        // cleared and summed, the rounds themselves and the prefix sums' steps: a job ends in
+        // the dispatch that starts it, within lavapipe's loop limit; only where twice that
+        // count fits (a deep chain near the limit came out wrong on lavapipe: the count is
+        // taken as approximate).
+        if (mode != 3 && wide_override != 0 && ctx.can_run(KernelId::kPruneWide)) {
+            const auto ceil_div = [](uint64_t a, uint64_t b) { return (a + b - 1) / b; };
+            const uint64_t len = max_len, heights = uint64_t(scene_height) + 1;
+            const uint64_t rounds = std::min<uint64_t>(heights, len / 2 + 1);
+            const uint64_t walk_job = ceil_div(len, kPruneWide) * (2 + std::bit_width(len)) +
+                                      2 * (rounds + ceil_div(len * kPruneTeam, kPruneWide)) +
+                                      2 * ceil_div(len, kPruneWide / kPruneTeam);
+            const uint64_t per_job = walk_job + 3 * ceil_div(heights, kPruneWide) + 2 * rounds +
+                                     4 * std::bit_width(kPruneWide);
+            const uint64_t group_bytes =
+                (len * (2 + kPruneWideEntryWords * kPruneTeam) + 5 * heights) * 4;
+            const uint64_t fit_groups = ctx.scratch_budget_bytes() / group_bytes;
+            const bool limited = ctx.loop_limited();
+            if (fit_groups > 0 && (!limited || 2 * per_job + 1024 <= Context::kLoopLimit)) {
+                const uint64_t groups = std::min({std::max<uint64_t>(s.team_jobs, 1), fit_groups,
+                                                  uint64_t(ctx.max_workgroups())});
+                const uint64_t walk =
+                    s.team_jobs == 0 ? 0 : ceil_div(s.team_jobs, groups) * walk_job;
+                const bool pick =
+                    wide_override == 1 || (s.team_jobs <= kWideMaxJobs && len >= kWideMinTape &&
+                                           walk < s.shape.longest_walk_words);
+                if (pick) {
+                    s.wide = true;
+                    s.teams = groups;
+                    s.groups = uint32_t(groups);
+                    s.threads = uint32_t(groups * kPruneWide);
+                    s.rounds = 1;
+                    s.per_dispatch =
+                        limited ? groups * std::max<uint64_t>(
+                                               1, (Context::kLoopLimit - 1024) / (2 * per_job))
+                                : std::max<uint64_t>(s.team_jobs, 1);
+                    s.push.threads = s.threads;
+                    s.push.max_stack = scene_height;
+                    s.push.budget = 0;
+                    s.shape.wide = true;
+                    s.shape.lanes_per_tape = uint32_t(kPruneWide);
+                    s.shape.lanes = std::min<uint64_t>(s.team_jobs, groups) * kPruneWide;
+                    s.shape.longest_walk_words = walk;
+                    scratch_bytes = groups * group_bytes;
+                }
+            }
+        }
+        if (scratch.size < scratch_bytes) {
             ctx.destroy(scratch);
-            scratch = ctx.create_buffer(s.teams * team_bytes);
+            scratch = ctx.create_buffer(scratch_bytes);
         }
         return s;
     };
@@ -249,10 +327,18 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                 push.first_job = uint32_t(first);
                 push.jobs = uint32_t(std::min<uint64_t>(s.team_jobs, first + s.per_dispatch));
                 push.round = round;
-                ctx.dispatch(KernelId::kPrune,
-                             {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, s.octants, s.cells,
-                              &counters, &scratch, &octant_pool},
-                             &push, sizeof(push), s.groups);
+                if (s.wide)
+                    ctx.dispatch(ctx.can_run(KernelId::kPruneWideSubgroups)
+                                     ? KernelId::kPruneWideSubgroups
+                                     : KernelId::kPruneWide,
+                                 {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, s.octants,
+                                  s.cells, &counters, &scratch, &octant_pool, &node_spans},
+                                 &push, sizeof(push), s.groups);
+                else
+                    ctx.dispatch(KernelId::kPrune,
+                                 {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, s.octants,
+                                  s.cells, &counters, &scratch, &octant_pool},
+                                 &push, sizeof(push), s.groups);
                 ++s.shape.dispatches;
                 s.shape.workgroups += s.groups;
             }
@@ -427,6 +513,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                 .count();
     }
     st.prune_ms = gpu_ms;
+    st.subgroups = ctx.can_run(KernelId::kPruneWideSubgroups);
     st.prune_peak_bytes = ctx.bytes_peak() - live_before;
     st.wall_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start)

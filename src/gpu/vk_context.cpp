@@ -5,12 +5,20 @@
 #include <cstdlib>
 #include <cstring>
 
+#include "device_layout.hpp"
+
 namespace sdfprune::gpu {
 namespace {
 
 // SPIR-V of the kernels, compiled by glslc at build time (CMakeLists.txt).
 const uint32_t kPruneSpv[] = {
 #include "prune.spv.inc"
+};
+const uint32_t kPruneWideSpv[] = {
+#include "prune_wide.spv.inc"
+};
+const uint32_t kPruneWideSubgroupsSpv[] = {
+#include "prune_wide_subgroups.spv.inc"
 };
 const uint32_t kExpandSpv[] = {
 #include "expand.spv.inc"
@@ -28,13 +36,19 @@ const uint32_t kDiscretizeSpv[] = {
 struct KernelCode {
     const uint32_t* words;
     size_t bytes;
-    uint32_t bindings;  // storage buffers 0 .. bindings-1
+    uint32_t bindings;                     // storage buffers 0 .. bindings-1
+    uint32_t local_size = kWorkgroupSize;  // local_size_x: built only where the device allows it
+    bool subgroups = false;  // built only where the device has them (Context::subgroups)
 };
 
 // Binding counts must match the shaders' layouts (shaders/gpu/*.comp).
 const KernelCode kKernels[] = {
-    {kPruneSpv, sizeof(kPruneSpv), 10},          {kExpandSpv, sizeof(kExpandSpv), 4},
-    {kCellInfoSpv, sizeof(kCellInfoSpv), 3},     {kTraceSpv, sizeof(kTraceSpv), 9},
+    {kPruneSpv, sizeof(kPruneSpv), 10},
+    {kPruneWideSpv, sizeof(kPruneWideSpv), 11, uint32_t(kPruneWide)},
+    {kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 11, uint32_t(kPruneWide), true},
+    {kExpandSpv, sizeof(kExpandSpv), 4},
+    {kCellInfoSpv, sizeof(kCellInfoSpv), 3},
+    {kTraceSpv, sizeof(kTraceSpv), 9},
     {kDiscretizeSpv, sizeof(kDiscretizeSpv), 9},
 };
 static_assert(std::size(kKernels) == size_t(KernelId::kCount));
@@ -158,6 +172,22 @@ Context::Context() {
     loop_limited_ = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU &&
                     device_name_.find("llvmpipe") != std::string::npos;
     timestamp_ns_ = double(props.limits.timestampPeriod);
+    {
+        auto sg = vk_struct<VkPhysicalDeviceSubgroupProperties>(
+            VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES);
+        auto p2 =
+            vk_struct<VkPhysicalDeviceProperties2>(VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2);
+        p2.pNext = &sg;
+        vkGetPhysicalDeviceProperties2(physical_, &p2);
+        const VkSubgroupFeatureFlags need = VK_SUBGROUP_FEATURE_BASIC_BIT |
+                                            VK_SUBGROUP_FEATURE_ARITHMETIC_BIT |
+                                            VK_SUBGROUP_FEATURE_BALLOT_BIT;
+        subgroups_ = props.apiVersion >= VK_API_VERSION_1_1 &&
+                     (sg.supportedStages & VK_SHADER_STAGE_COMPUTE_BIT) != 0 &&
+                     (sg.supportedOperations & need) == need && sg.subgroupSize >= 1;
+        if (const char* env = std::getenv("SDFPRUNE_VULKAN_SUBGROUPS"); env && *env)
+            subgroups_ = subgroups_ && std::atoi(env) != 0;
+    }
     vkGetPhysicalDeviceMemoryProperties(physical_, &memory_);
 
     const float priority = 1.0f;
@@ -210,6 +240,13 @@ Context::Context() {
     for (const KernelCode& code : kKernels) {
         Kernel k;
         k.bindings = code.bindings;
+        // (Vulkan guarantees workgroups of 128 invocations only.)
+        if ((code.subgroups && !subgroups_) ||
+            code.local_size > props.limits.maxComputeWorkGroupInvocations ||
+            code.local_size > props.limits.maxComputeWorkGroupSize[0]) {
+            kernels_.push_back(k);  // no pipeline: never dispatched (can_run)
+            continue;
+        }
         VkDescriptorSetLayoutBinding b[kMaxBindings];
         for (uint32_t i = 0; i < code.bindings; ++i)
             b[i] = {i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr};
@@ -371,6 +408,8 @@ void Context::dispatch(KernelId id, std::initializer_list<const Buffer*> buffers
     const Kernel& k = kernels_[size_t(id)];
     if (buffers.size() != k.bindings || push_bytes > kPushBytes)
         throw std::logic_error("Context::dispatch: bindings do not match the kernel");
+    if (k.pipeline == VK_NULL_HANDLE)
+        throw std::logic_error("Context::dispatch: a kernel this device cannot run");
     if (sets_used_ == kMaxSets) {
         carried_ms_ += submit_part();
         begin_part();

@@ -16,11 +16,20 @@
 
 namespace sdfprune::gpu {
 
-// local_size_x of every kernel.
+// local_size_x of every kernel but prune_wide.comp (kPruneWide, device_layout.hpp).
 inline constexpr uint32_t kWorkgroupSize = 64;
 
 // The kernels, one per compute shader in shaders/gpu/.
-enum class KernelId : uint32_t { kPrune, kExpand, kCellInfo, kTrace, kDiscretize, kCount };
+enum class KernelId : uint32_t {
+    kPrune,
+    kPruneWide,
+    kPruneWideSubgroups,  // needs subgroups() (else not built)
+    kExpand,
+    kCellInfo,
+    kTrace,
+    kDiscretize,
+    kCount
+};
 
 struct Buffer {
     VkBuffer buffer = VK_NULL_HANDLE;
@@ -45,6 +54,12 @@ class Context {
     // all; kernels must then keep each invocation's work under it (or report that they can't).
     static constexpr uint64_t kLoopLimit = 65535;
     bool loop_limited() const { return loop_limited_; }
+    // Subgroup arithmetic and ballot in compute shaders (Vulkan 1.1), for the kernels that use
+    // them; SDFPRUNE_VULKAN_SUBGROUPS=0 turns them off (the fallbacks, for tests).
+    bool subgroups() const { return subgroups_; }
+    // Whether this device runs kernel k (prune_wide's 256-lane workgroups need a device that
+    // allows them; the subgroup kernels need subgroups()).
+    bool can_run(KernelId k) const { return kernels_[size_t(k)].pipeline != VK_NULL_HANDLE; }
     // Workgroups for a grid-stride loop over n items: all of them, or the most one dispatch
     // may have.
     uint32_t groups_for(uint64_t n) const;
@@ -117,6 +132,7 @@ class Context {
     uint64_t max_range_ = 0;
     uint32_t max_groups_ = 65535;
     bool loop_limited_ = false;
+    bool subgroups_ = false;
     uint64_t live_ = 0, peak_ = 0;
     uint32_t sets_used_ = 0;
     double carried_ms_ = 0;  // GPU time of the parts already submitted

@@ -206,6 +206,7 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          steps.push_back(JsonLine()
                                              .add("level", st.level)
                                              .add("mode", st.mode)
+                                             .add("wide", st.wide)
                                              .add("dispatches", st.dispatches)
                                              .add("workgroups", st.workgroups)
                                              .add("jobs", st.jobs)
@@ -215,6 +216,7 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                      j.add("device", device->name())
                          .add("wall_ms", device_grid->stats().wall_ms)
                          .add("submissions", device_grid->stats().submissions)
+                         .add("subgroups", device_grid->stats().subgroups)
                          .add("pool_grows", device_grid->stats().pool_grows)
                          .add("gpu_steps", steps);
                  }
@@ -254,12 +256,12 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                                                       "refinement"};
                  for (const gpu::GpuStepShape& st : device_grid->stats().steps)
                      std::printf(
-                         "    level %u %-18s %u dispatches, %llu workgroups, %llu jobs "
+                         "    level %u %-18s %s%u dispatches, %llu workgroups, %llu jobs "
                          "on %llu lanes (%u to a tape), longest walk <= %llu words\n",
-                         st.level, kModes[std::min(st.mode, 3u)], st.dispatches,
-                         (unsigned long long)st.workgroups, (unsigned long long)st.jobs,
-                         (unsigned long long)st.lanes, st.lanes_per_tape,
-                         (unsigned long long)st.longest_walk_words);
+                         st.level, kModes[std::min(st.mode, 3u)], st.wide ? "wide: " : "",
+                         st.dispatches, (unsigned long long)st.workgroups,
+                         (unsigned long long)st.jobs, (unsigned long long)st.lanes,
+                         st.lanes_per_tape, (unsigned long long)st.longest_walk_words);
              } else
                  std::printf(
                      "  pruning                   %.1f ms, peak %.1f MB in pruning buffers\n",

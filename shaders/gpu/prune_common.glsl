@@ -1,0 +1,166 @@
+// prune_common.glsl — what the two pruning kernels share: prune.comp (a team of kTeam lanes
+// walks one parent tape, one lane per child box) and prune_wide.comp (a whole workgroup takes
+// one parent tape, its nodes spread over the lanes): the step's buffers (bindings 4–9) and push
+// constants, the tape pools, the boxes of a job (modes 0–2) and the store of a box's result.
+// Include after scene.glsl and cells.glsl.
+
+const uint kTeam = 8u;  // boxes per job: lanes per team (gpu_prune.cpp: kPruneTeam)
+
+layout(std430, binding = 4) readonly buffer Blocks { Block blocks[]; };
+layout(std430, binding = 5) buffer Octants { Cell octants[]; };
+layout(std430, binding = 6) buffer Cells { Cell cells[]; };
+layout(std430, binding = 7) buffer Counters {
+    uint pool_used;
+    uint pool_capacity;
+    uint overflow;
+    uint max_len;  // longest tape written or shared in this step
+    uint near_jobs;  // near-field cells in this step
+    uint next_blocks;
+    uint max_depth;  // deepest evaluation stack of the tapes written or shared in this step
+    uint octant_used;      // the octant pool, as pool_used, pool_capacity
+    uint octant_capacity;
+    uint near_words;  // words of the near-field cells' tapes with their headers (modes 0 and 2)
+};
+// The kernel's scratch (its layout is the kernel's own). Coherent: lanes read what other lanes
+// of their workgroup wrote at earlier steps (a barrier between).
+layout(std430, binding = 8) coherent buffer Scratch { uint scratch[]; };
+// Octants' tapes (mode 1) live in a pool of their own, dropped after the level: a reference
+// with kInOctantPool set points there. So do the finest cells' tapes that refinement (mode 3)
+// replaces (flag 4). Tapes for the main pool never share one of these: they copy it.
+layout(std430, binding = 9) buffer OctantPool { uint octant_pool[]; };
+const uint kInOctantPool = 0x80000000u;
+
+layout(push_constant) uniform Push {
+    vec4 origin;  // AABB min; w: Lipschitz bound of the root
+    vec4 csize;   // cell size of this level; w: far-field C
+    uint mode;
+    uint factor;  // f: cells per axis of a block
+    uint jobs;    // team jobs (see prune.comp)
+    uint threads;  // lanes that take jobs (whole teams or workgroups)
+    uint max_len;    // longest parent tape (scratch per team or workgroup)
+    uint max_stack;  // prune.comp: deepest evaluation stack of the parent tapes;
+                     // prune_wide.comp: the highest node's height (scene_height)
+    uint flags;      // 1: far field on; 2: interval bounds; 4: new tapes go to the octant pool
+    uint pool_start;  // pool words in use before this step
+    uint first_job;   // this dispatch's team jobs: [first_job, jobs)
+    uint round;       // 0: start the jobs; later rounds resume them (prune.comp)
+    uint budget;      // steps per job and round (prune.comp)
+    uint refine;      // mode 3: sub-boxes per axis
+    uint octant_start;  // octant pool words in use before this step
+} pc;
+
+uint tape_read(uint ref, uint k) {
+    return (ref & kInOctantPool) != 0u ? octant_pool[(ref & ~kInOctantPool) + k] : pool[ref + k];
+}
+void tape_write(uint ref, uint value) {
+    if ((ref & kInOctantPool) != 0u)
+        octant_pool[ref & ~kInOctantPool] = value;
+    else
+        pool[ref] = value;
+}
+
+// Stores a finished box's result: `tape` of `words` words (near), or the far-field constant.
+// Mode 3 writes the refined cell `c` (to binding 5).
+void store(uint dest, bool near, float value, float constant, uint tape, uint words, Cell c) {
+    if (pc.mode == 3u) {
+        if (near) {
+            c.tape = tape;
+        } else {
+            c.tape = kFarField;
+            c.bound = constant;
+        }
+        octants[dest] = c;
+        return;
+    }
+    Cell result = Cell(near ? tape : kFarField, 0u, value, constant);
+    if (pc.mode == 1u) {
+        octants[dest] = result;
+        return;
+    }
+    if (near) {
+        atomicAdd(near_jobs, 1u);
+        atomicAdd(near_words, words + 2u);
+    }
+    cells[dest] = result;
+}
+
+// Box `lane` of team job `job` in modes 0–2: mode 0, kTeam cells of a block from the block's
+// tape; mode 1, the 8 octants of a block; mode 2, kTeam cells of an octant from the octant's
+// tape. Gives the box's centre (exact: `precise`, as the CPU computes it), half size and radius,
+// the parent tape, where the result goes, and whether the lane stores one (a lane past a
+// block's or octant's cells does not). Returns false where there is nothing to walk: the
+// octant is far-field, and its cells are then stored far-field here (in round 0).
+bool job_box(uint job, uint lane, out vec3 centre_out, out vec3 half_size, out float R,
+             out uint parent, out uint dest, out bool valid) {
+    uint f = pc.factor;
+    uint per_block = f * f * f;
+    uint hf = f / 2u;
+    vec3 origin = pc.origin.xyz;
+    vec3 cs = pc.csize.xyz;
+    vec3 half_cell = cs * 0.5;
+    float radius = length(half_cell);
+    precise vec3 centre;
+    valid = true;
+    half_size = half_cell;
+    R = radius;
+    if (pc.mode == 1u) {
+        Block b = blocks[job];
+        uint o = lane;
+        uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
+                         b.z + ((o >> 2) & 1u) * hf);
+        centre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
+        centre_out = centre;
+        half_size = half_cell * float(hf);
+        R = radius * float(hf);
+        parent = b.tape;
+        dest = job * 8u + o;
+        return true;
+    }
+    uint bi, local;
+    if (pc.mode == 0u) {
+        uint per_team = (per_block + kTeam - 1u) / kTeam;
+        bi = job / per_team;
+        local = (job % per_team) * kTeam + lane;
+        valid = local < per_block;
+        local = min(local, per_block - 1u);
+    } else {
+        // Mode 2: the octant's cells, kTeam at a time.
+        uint per_octant = hf * hf * hf;
+        uint per_team = (per_octant + kTeam - 1u) / kTeam;
+        bi = job / (8u * per_team);
+        uint o = (job / per_team) % 8u;
+        uint q = (job % per_team) * kTeam + lane;
+        valid = q < per_octant;
+        q = min(q, per_octant - 1u);
+        uvec3 l3 = uvec3((o & 1u) * hf + q % hf, ((o >> 1) & 1u) * hf + (q / hf) % hf,
+                         ((o >> 2) & 1u) * hf + q / (hf * hf));
+        local = (l3.z * f + l3.y) * f + l3.x;
+    }
+    Block b = blocks[bi];
+    uvec3 lc = uvec3(local % f, (local / f) % f, local / (f * f));
+    centre = origin + (vec3(b.x + lc.x, b.y + lc.y, b.z + lc.z) + 0.5) * cs;
+    centre_out = centre;
+    dest = bi * per_block + local;
+    parent = b.tape;
+    if (pc.mode == 2u) {
+        uint o = (lc.x >= hf ? 1u : 0u) | (lc.y >= hf ? 2u : 0u) | (lc.z >= hf ? 4u : 0u);
+        Cell oct = octants[bi * 8u + o];
+        if (oct.tape == kFarField) {
+            // A far octant makes far cells (prune.cpp): its constant, and its centre
+            // value moved conservatively to the cell's centre.
+            if (pc.round == 0u && valid) {
+                uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
+                                 b.z + ((o >> 2) & 1u) * hf);
+                precise vec3 ocentre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
+                float reach = pc.origin.w * length(centre - ocentre);
+                cells[dest] = Cell(kFarField, 0u,
+                                   oct.value > 0.0 ? max(oct.value - reach, oct.bound)
+                                                   : min(oct.value + reach, oct.bound),
+                                   oct.bound);
+            }
+            return false;
+        }
+        parent = oct.tape;
+    }
+    return true;
+}

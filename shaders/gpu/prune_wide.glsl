@@ -1,0 +1,414 @@
+// prune_wide.glsl — prune_wide.comp and prune_wide_subgroups.comp: one pruning step (modes 0–2 of prune.comp) where a whole workgroup takes
+// one team job: the kTeam boxes of one parent tape, its nodes spread over kWide lanes. For the
+// top levels, where a few parents have long tapes: a team would walk every node of them in turn.
+// The same stages as src/prune/prune_cell.cpp (evaluate_cell, is_near_field, compact_tape), the
+// same float operations per node and box, in another order:
+//   1. the tape's entries sorted by their node's height in the scene (a counting sort: the
+//      counts, their prefix sums, the scatter), and each operator's left operand found (the
+//      entry before its right operand's subtree, whose first node the scene gives);
+//   2. evaluation height by height (the heights the tape has, in a round each): first every
+//      primitive's value and range over every box, in parallel, then each height's operators
+//      (their operands are lower), a barrier between;
+//   3. the far-field test per box on the root's range;
+//   4. the top-down pass round by round, from the root down (a parent before its operands);
+//   5. compaction: each lane counts the kept entries of a slice of the tape, a workgroup prefix
+//      sum gives each slice its place in the new tape, and the lanes write their slices.
+// A chain of operators (a left-deep tree) still takes one height after another: the walk of
+// a lane is at least twice the tape's number of distinct heights. gpu_prune.cpp picks this kernel by
+// tape length and scene height, and sizes its dispatches under lavapipe's loop limit (a job is
+// never resumed: it ends in the dispatch that starts it).
+// PRUNE_WIDE_SUBGROUPS (prune_wide_subgroups.comp, for devices with subgroup arithmetic and
+// ballot in compute shaders): the prefix sums and the pool appends on subgroup operations,
+// else on shared memory and an atomic per box.
+#include "scene.glsl"
+#ifdef PRUNE_WIDE_SUBGROUPS
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#endif
+
+const uint kWide = 256u;  // lanes per workgroup (gpu_prune.cpp: kPruneWide)
+layout(local_size_x = kWide) in;
+
+#include "cells.glsl"
+#include "prune_common.glsl"
+
+// Per node: the first node of its subtree (post-order: a subtree is the nodes from it to the
+// node) and its height (0 for primitives).
+layout(std430, binding = 10) readonly buffer NodeSpans { uvec2 node_span[]; };
+
+// A workgroup's scratch (wide_words): per parent-tape entry its left operand and its place in
+// the height order, per height its count, its entries placed so far and its first place, per
+// round (a height the tape has) its first place and count, then per entry and box the value,
+// range and flags (kWideEntryWords, item (e · kTeam + b)).
+const uint kWideEntryWords = 4u;
+uint wide_words() { return pc.max_len * (2u + kWideEntryWords * kTeam) + 5u * (pc.max_stack + 1u); }
+
+// Lanes per box in the compaction (kWide / kTeam), and the workgroup's prefix sums.
+const uint kSlices = kWide / kTeam;
+shared uvec4 s_scan[kWide];
+// Per box: 0 done, 1 near (swept and compacted), 2 writing its new tape; the new tape's place,
+// its length, primitives and deepest stack, the box's value at its centre.
+shared uint s_state[kTeam], s_at[kTeam], s_len[kTeam], s_prims[kTeam], s_depth[kTeam];
+shared float s_value[kTeam];
+shared uint s_rounds;  // the job's rounds: the heights its tape has
+
+#ifdef PRUNE_WIDE_SUBGROUPS
+// Per subgroup its total, then its first sum; whether subgroups hold consecutive lanes.
+shared uvec4 s_sub[kWide];
+shared uint s_linear;
+#endif
+
+// Exclusive prefix sums over the workgroup, in the lanes' order; every lane of the workgroup
+// calls it. After it, s_scan holds the inclusive sums. With subgroups: each subgroup's sums,
+// then the subgroups' totals summed by the first subgroup (where subgroups hold consecutive
+// lanes, as drivers make them; else the shared-memory way). Without: Hillis–Steele in shared
+// memory.
+uvec4 wg_exclusive_scan(uvec4 x) {
+    uint id = gl_LocalInvocationID.x;
+#ifdef PRUNE_WIDE_SUBGROUPS
+    if (s_linear != 0u) {
+        uvec4 inner = subgroupExclusiveAdd(x);
+        uvec4 total = subgroupAdd(x);
+        if (subgroupElect()) s_sub[gl_SubgroupID] = total;
+        memoryBarrierShared();
+        barrier();
+        if (gl_SubgroupID == 0u) {
+            uvec4 carry = uvec4(0u);
+            for (uint j0 = 0u; j0 < gl_NumSubgroups; j0 += gl_SubgroupSize) {
+                uint j = j0 + gl_SubgroupInvocationID;
+                uvec4 t = j < gl_NumSubgroups ? s_sub[j] : uvec4(0u);
+                uvec4 first = carry + subgroupExclusiveAdd(t);
+                carry += subgroupAdd(t);
+                if (j < gl_NumSubgroups) s_sub[j] = first;
+            }
+        }
+        memoryBarrierShared();
+        barrier();
+        uvec4 before = s_sub[gl_SubgroupID] + inner;
+        s_scan[id] = before + x;
+        memoryBarrierShared();
+        barrier();
+        return before;
+    }
+#endif
+    s_scan[id] = x;
+    memoryBarrierShared();
+    barrier();
+    for (uint d = 1u; d < kWide; d <<= 1) {
+        uvec4 add = id >= d ? s_scan[id - d] : uvec4(0u);
+        memoryBarrierShared();
+        barrier();
+        s_scan[id] += add;
+        memoryBarrierShared();
+        barrier();
+    }
+    return s_scan[id] - x;
+}
+
+void sync_all() {
+    memoryBarrierBuffer();
+    memoryBarrierShared();
+    barrier();
+}
+
+void main() {
+    uint id = gl_LocalInvocationID.x;
+#ifdef PRUNE_WIDE_SUBGROUPS
+    if (id == 0u) s_linear = 1u;
+    memoryBarrierShared();
+    barrier();
+    if (id != gl_SubgroupID * gl_SubgroupSize + gl_SubgroupInvocationID) s_linear = 0u;
+    memoryBarrierShared();
+    barrier();
+#endif
+    uint box = id % kTeam;  // the box of this lane in stages 1–4
+    uint groups = pc.threads / kWide;
+    uint base = gl_WorkGroupID.x * wide_words();
+    uint lbase = base;                      // entry e's left operand
+    uint obase = lbase + pc.max_len;        // the height order: entries
+    uint hbase = obase + pc.max_len;        // per height: count, placed, first place
+    uint rbase = hbase + 3u * (pc.max_stack + 1u);  // per round: first place, count
+    uint vbase = rbase + 2u * (pc.max_stack + 1u);  // item (e · kTeam + b): v, lo, hi, flags
+    bool interval = (pc.flags & 2u) != 0u;
+    bool transient = pc.mode == 1u || (pc.flags & 4u) != 0u;
+
+    // Every lane of a workgroup sees the same trip count and the same job.
+    for (uint job = pc.first_job + gl_WorkGroupID.x; job < pc.jobs; job += groups) {
+        vec3 centre, half_size;
+        float R;
+        uint parent, dest;
+        bool valid;
+        bool walk = job_box(job, box, centre, half_size, R, parent, dest, valid);
+        // Every box of a job shares its parent: far or not, all together.
+        if (!walk) continue;
+        uint len = tape_read(parent, 0u);
+        uint root_word = tape_read(parent, 1u + len);
+        uint H = node_span[tape_node(root_word)].y;
+
+        // Stage 1: the counting sort by height, and the left operands.
+        for (uint h = id; h <= H; h += kWide) {
+            scratch[hbase + 3u * h] = 0u;
+            scratch[hbase + 3u * h + 1u] = 0u;
+        }
+        sync_all();
+        for (uint e = id; e < len; e += kWide)
+            atomicAdd(scratch[hbase + 3u * node_span[tape_node(tape_read(parent, 2u + e))].y], 1u);
+        sync_all();
+        // Each lane sums a slice of the heights (entries, and heights with any), a prefix sum
+        // places the slices: each height's first place, and each round's.
+        uint hs = (H + kWide) / kWide;
+        uint h0 = min(id * hs, H + 1u), h1 = min(h0 + hs, H + 1u);
+        uint sum = 0u, present = 0u;
+        for (uint h = h0; h < h1; ++h) {
+            uint count = scratch[hbase + 3u * h];
+            sum += count;
+            present += count != 0u ? 1u : 0u;
+        }
+        uvec4 places = wg_exclusive_scan(uvec4(sum, present, 0u, 0u));
+        if (id == 0u) s_rounds = s_scan[kWide - 1u].y;
+        uint place = places.x, rank = places.y;
+        for (uint h = h0; h < h1; ++h) {
+            uint count = scratch[hbase + 3u * h];
+            scratch[hbase + 3u * h + 2u] = place;
+            if (count != 0u) {
+                scratch[rbase + 2u * rank] = place;
+                scratch[rbase + 2u * rank + 1u] = count;
+                ++rank;
+            }
+            place += count;
+        }
+        sync_all();
+        uint rounds = s_rounds;
+        for (uint e = id; e < len; e += kWide) {
+            uint w = tape_read(parent, 2u + e);
+            uint n = tape_node(w);
+            uint h = node_span[n].y;
+            scratch[obase + scratch[hbase + 3u * h + 2u] + atomicAdd(scratch[hbase + 3u * h + 1u], 1u)] = e;
+            if (h == 0u) continue;
+            // The left operand ends just before the right operand's subtree: the entries of
+            // a subtree are those of its scene subtree's nodes, in the same order.
+            uint first = node_span[tape_node(tape_read(parent, 1u + e))].x;
+            uint lo = 0u, hi = e - 1u;
+            while (lo < hi) {
+                uint mid = (lo + hi) / 2u;
+                if (tape_node(tape_read(parent, 2u + mid)) >= first)
+                    hi = mid;
+                else
+                    lo = mid + 1u;
+            }
+            scratch[lbase + e] = lo - 1u;
+        }
+        sync_all();
+
+        // Stage 2: values and ranges at the boxes' centres, decisions (evaluate_cell), round by
+        // round. Item k of a round: its entry k / kTeam, box k % kTeam (this lane's box).
+        float spread_r = R;
+        for (uint r = 0u; r < rounds; ++r) {
+            uint first_place = scratch[rbase + 2u * r], count = scratch[rbase + 2u * r + 1u];
+            for (uint k = id; k < count * kTeam; k += kWide) {
+                uint e = scratch[obase + first_place + k / kTeam];
+                uint w = tape_read(parent, 2u + e);
+                Node nd = nodes[tape_node(w)];
+                uint kind = nd.kind;
+                float spread = nd.lipschitz * spread_r;
+                float v, lo, hi;
+                uint decision = kKeepBoth;
+                if (kind < kPrimitiveKindCount) {
+                    uint p = nd.primitive;
+                    v = eval_primitive(kind, params[p], centre);
+                    lo = v - spread;
+                    hi = v + spread;
+                    vec4 b0 = extras[p].bound0;
+                    if (interval && b0.w > 0.0) {
+                        vec2 r = similarity_range(b0.xyz, b0.w, extras[p].bound1.x,
+                                                  extras[p].bound1.y, centre, half_size);
+                        lo = max(lo, r.x);
+                        hi = min(hi, r.y);
+                    }
+                } else {
+                    uint sl = vbase + (scratch[lbase + e] * kTeam + box) * kWideEntryWords;
+                    uint sr = vbase + ((e - 1u) * kTeam + box) * kWideEntryWords;
+                    float lv = uintBitsToFloat(scratch[sl]);
+                    float llo = uintBitsToFloat(scratch[sl + 1u]);
+                    float lhi = uintBitsToFloat(scratch[sl + 2u]);
+                    float rv = uintBitsToFloat(scratch[sr]);
+                    float rlo = uintBitsToFloat(scratch[sr + 1u]);
+                    float rhi = uintBitsToFloat(scratch[sr + 2u]);
+                    float sgn = operator_s(kind), k2 = nd.blend;
+                    decision = prune_decision(sgn, k2, llo, lhi, rlo, rhi);
+                    v = apply_operator(sgn, k2, lv, rv);
+                    if (decision == kLeftWins) {
+                        lo = llo;
+                        hi = lhi;
+                    } else if (decision == kRightWins) {
+                        lo = rlo;
+                        hi = rhi;
+                    } else if (interval) {
+                        vec2 r2 = operator_range(sgn, k2, llo, lhi, rlo, rhi);
+                        lo = max(v - spread, r2.x);
+                        hi = min(v + spread, r2.y);
+                    } else {
+                        lo = v - spread;
+                        hi = v + spread;
+                    }
+                }
+                if (tape_negated(w)) {
+                    v = -v;
+                    float tmp = lo;
+                    lo = -hi;
+                    hi = -tmp;
+                }
+                uint so = vbase + (e * kTeam + box) * kWideEntryWords;
+                scratch[so] = floatBitsToUint(v);
+                scratch[so + 1u] = floatBitsToUint(lo);
+                scratch[so + 2u] = floatBitsToUint(hi);
+                scratch[so + 3u] = decision;  // the sweep's flags cleared
+            }
+            sync_all();
+        }
+
+        // Stage 3: the far-field test on each box's root range (is_near_field).
+        if (id < kTeam) {
+            uint s0 = vbase + ((len - 1u) * kTeam + box) * kWideEntryWords;
+            float v = uintBitsToFloat(scratch[s0]);
+            float L = nodes[tape_node(root_word)].lipschitz;
+            float clearance = far_field_clearance(pc.csize.w, L, R);
+            vec2 range = far_field_range(v, uintBitsToFloat(scratch[s0 + 1u]),
+                                         uintBitsToFloat(scratch[s0 + 2u]), L, R);
+            uint far_flags = (pc.flags & 1u) != 0u ? 3u : 0u;
+            if (!clears_above(range.x, clearance)) far_flags &= ~1u;
+            if (!clears_below(range.y, clearance)) far_flags &= ~2u;
+            float lowest = min(kInfinity, range.x), highest = max(-kInfinity, range.y);
+            s_value[box] = v;
+            s_state[box] = 0u;
+            if ((far_flags & 3u) != 0u) {
+                float constant = (far_flags & 1u) != 0u ? lowest : highest;
+                if (valid) store(dest, false, v, constant, kFarField, 0u, Cell(0u, 0u, 0.0, 0.0));
+            } else if (valid) {
+                uint root_neg = tape_negated(root_word) ? 1u : 0u;
+                scratch[s0 + 3u] = (scratch[s0 + 3u] & 3u) | (1u << 2) | (root_neg << 4);
+                s_state[box] = 1u;
+            }
+        }
+        sync_all();
+
+        // Stage 4: the top-down pass (compact_tape), from the highest operators down: an
+        // entry's flags are final when its round is reached. (Round 0: the primitives.)
+        for (uint r = rounds - 1u; r >= 1u; --r) {
+            uint first_place = scratch[rbase + 2u * r], count = scratch[rbase + 2u * r + 1u];
+            for (uint k = id; k < count * kTeam; k += kWide) {
+                if (s_state[box] != 1u) continue;
+                uint e = scratch[obase + first_place + k / kTeam];
+                uint fe = vbase + (e * kTeam + box) * kWideEntryWords + 3u;
+                uint fl = scratch[fe];
+                if (((fl >> 2) & 3u) != 1u) continue;
+                uint l = scratch[lbase + e], r = e - 1u;
+                uint d = fl & 3u;
+                if (d == kKeepBoth) {
+                    uint nl = tape_negated(tape_read(parent, 2u + l)) ? 1u : 0u;
+                    uint nr = tape_negated(tape_read(parent, 2u + r)) ? 1u : 0u;
+                    uint fl_l = vbase + (l * kTeam + box) * kWideEntryWords + 3u;
+                    uint fl_r = vbase + (r * kTeam + box) * kWideEntryWords + 3u;
+                    scratch[fl_l] = (scratch[fl_l] & 3u) | (1u << 2) | (nl << 4);
+                    scratch[fl_r] = (scratch[fl_r] & 3u) | (1u << 2) | (nr << 4);
+                    continue;
+                }
+                uint wn = d == kLeftWins ? l : r;
+                uint neg = ((fl >> 4) & 1u) ^ (tape_negated(tape_read(parent, 2u + wn)) ? 1u : 0u);
+                scratch[fe] = (fl & 3u) | (2u << 2) | (fl & 16u);
+                uint fl_w = vbase + (wn * kTeam + box) * kWideEntryWords + 3u;
+                scratch[fl_w] = (scratch[fl_w] & 3u) | (1u << 2) | (neg << 4);
+            }
+            sync_all();
+        }
+
+        // Stage 5: compaction. Box b's kept entries in kSlices slices of the tape, one a lane
+        // (lanes b · kSlices ...): counted (entries, primitives, the stack's change and its
+        // highest point in the slice), placed by a prefix sum, then written.
+        uint cbox = id / kSlices, slice = id % kSlices;
+        uint per = (len + kSlices - 1u) / kSlices;
+        uint e0 = min(slice * per, len), e1 = min(e0 + per, len);
+        bool mine = s_state[cbox] == 1u;
+        uint kept = 0u, kept_prims = 0u;
+        int depth = 0, depth_peak = 0;  // the stack's change from the slice's start, its peak
+        for (uint e = e0; mine && e < e1; ++e) {
+            uint fl = scratch[vbase + (e * kTeam + cbox) * kWideEntryWords + 3u];
+            if (((fl >> 2) & 3u) != 1u) continue;
+            bool prim = is_primitive(tape_node(tape_read(parent, 2u + e)));
+            if (prim) ++kept_prims;
+            depth += prim ? 1 : -1;
+            depth_peak = kept == 0u ? depth : max(depth_peak, depth);
+            ++kept;
+        }
+        // (The stack's changes sum as uints: two's complement.)
+        uvec4 before = wg_exclusive_scan(uvec4(kept, kept_prims, uint(depth), 0u));
+        uvec4 box_first = cbox == 0u ? uvec4(0u) : s_scan[cbox * kSlices - 1u];
+        uvec4 box_total = s_scan[cbox * kSlices + kSlices - 1u] - box_first;
+        before -= box_first;
+        // The stack depth at the slice's start plus its highest point within it.
+        uint peak = kept == 0u ? 0u : uint(int(before.z) + depth_peak);
+        if (slice == 0u) {
+            s_len[cbox] = box_total.x;
+            s_prims[cbox] = box_total.y;
+            s_depth[cbox] = 0u;
+        }
+        sync_all();
+        if (mine) atomicMax(s_depth[cbox], peak);
+        sync_all();
+        if (id < kTeam && s_state[box] == 1u) {
+            uint out_len = s_len[box];
+            atomicMax(max_len, out_len);
+            if (out_len == len && ((parent & kInOctantPool) == 0u || transient)) {
+                // Nothing pruned: share the parent's tape (its stack is as deep).
+                atomicMax(max_depth, s_depth[box]);
+                s_state[box] = 0u;
+                store(dest, true, s_value[box], 0.0, parent, out_len, Cell(0u, 0u, 0.0, 0.0));
+            } else {
+#ifdef PRUNE_WIDE_SUBGROUPS
+                // One append per subgroup: the boxes' places by a prefix sum.
+                uint need = out_len + 2u;
+                uint offset = subgroupExclusiveAdd(need), sum = subgroupAdd(need);
+                uint first = 0u;
+                if (subgroupElect())
+                    first = transient ? atomicAdd(octant_used, sum) : atomicAdd(pool_used, sum);
+                uint at = subgroupBroadcastFirst(first) + offset;
+#else
+                uint at = transient ? atomicAdd(octant_used, out_len + 2u)
+                                    : atomicAdd(pool_used, out_len + 2u);
+#endif
+                uint start = transient ? pc.octant_start : pc.pool_start;
+                uint capacity = transient ? octant_capacity : pool_capacity;
+                if (at < start || at + out_len + 2u > capacity || at + out_len + 2u < at ||
+                    at >= kInOctantPool) {
+                    // The host grows the pool and redoes the level (see prune.comp).
+                    overflow = 1u;
+                    s_state[box] = 0u;
+                    store(dest, false, s_value[box], 0.0, kFarField, 0u, Cell(0u, 0u, 0.0, 0.0));
+                } else {
+                    if (transient) at |= kInOctantPool;
+                    tape_write(at, out_len);
+                    tape_write(at + 1u, s_prims[box]);
+                    s_at[box] = at;
+                    s_state[box] = 2u;
+                }
+            }
+        }
+        sync_all();
+        if (s_state[cbox] == 2u) {
+            uint to = s_at[cbox] + 2u + before.x;
+            for (uint e = e0; e < e1; ++e) {
+                uint fl = scratch[vbase + (e * kTeam + cbox) * kWideEntryWords + 3u];
+                if (((fl >> 2) & 3u) != 1u) continue;
+                uint node = tape_node(tape_read(parent, 2u + e));
+                tape_write(to++, tape_word(node, ((fl >> 4) & 1u) != 0u));
+            }
+        }
+        sync_all();
+        if (id < kTeam && s_state[box] == 2u) {
+            atomicMax(max_depth, s_depth[box]);
+            store(dest, true, s_value[box], 0.0, s_at[box], s_len[box], Cell(0u, 0u, 0.0, 0.0));
+        }
+        sync_all();
+    }
+}
