@@ -173,8 +173,8 @@ TEST(MeshSphere, SameMeshForAnyThreadCount) {
 
 TEST(MeshShapes, BoxIsClosedWithItsVolume) {
     SceneBuilder b;
-    const Scene sc = b.build(b.box({1.2f, 0.8f, 1.0f}).rotated({1, 2, 3}, 0.4f),
-                             {vec3(-1.5f), vec3(1.5f)});
+    const Scene sc =
+        b.build(b.box({1.2f, 0.8f, 1.0f}).rotated({1, 2, 3}, 0.4f), {vec3(-1.5f), vec3(1.5f)});
     const Mesh m = pruned_mesh(sc, 64);
     EXPECT_EQ(check_closed_manifold(m), 2);
     EXPECT_NEAR(signed_volume(m), 1.2 * 0.8 * 1.0, 0.02 * 0.96);
@@ -183,8 +183,8 @@ TEST(MeshShapes, BoxIsClosedWithItsVolume) {
 
 TEST(MeshShapes, TorusHasGenusOne) {
     SceneBuilder b;
-    const Scene sc = b.build(b.torus(1.0f, 0.35f).rotated({1, 0, 0}, 0.3f),
-                             {vec3(-1.6f), vec3(1.6f)});
+    const Scene sc =
+        b.build(b.torus(1.0f, 0.35f).rotated({1, 0, 0}, 0.3f), {vec3(-1.6f), vec3(1.6f)});
     const Mesh m = pruned_mesh(sc, 64);
     EXPECT_EQ(check_closed_manifold(m), 0);
     const double exact = 2 * std::numbers::pi * std::numbers::pi * 1.0 * 0.35 * 0.35;
@@ -341,7 +341,9 @@ uint32_t get_u32(const std::string& s, size_t at) {
     for (int k = 3; k >= 0; --k) v = v << 8 | uint8_t(s[at + k]);
     return v;
 }
-float get_f32(const std::string& s, size_t at) { return std::bit_cast<float>(get_u32(s, at)); }
+float get_f32(const std::string& s, size_t at) {
+    return std::bit_cast<float>(get_u32(s, at));
+}
 
 TEST(MeshWriters, RoundTrip) {
     const Mesh m = pruned_mesh(builtin_scene("sphere"), 16);
@@ -401,7 +403,7 @@ TEST(MeshWriters, RoundTrip) {
         expect_identical(r, m);
         std::filesystem::remove(path);
     }
-    {  // OBJ: text, 1-based
+    {                                                 // OBJ: text, 1-based
         const std::string path = temp_path("x.OBJ");  // extensions in any case
         write_mesh(m, path);
         std::istringstream in(read_file(path));
@@ -445,13 +447,20 @@ rapidjson::Document last_json_line(const std::string& out) {
     return d;
 }
 
+// Runs `sdfprune mesh ARGS --json` and reads its summary into d: the command must exit 0 and end
+// with a JSON object (call through ASSERT_NO_FATAL_FAILURE).
+void mesh_json(const std::string& args, rapidjson::Document& d) {
+    const test::CliResult r = test::run_cli("mesh " + args + " --json");
+    ASSERT_EQ(r.status, 0) << r.err;
+    d = last_json_line(r.out);
+    ASSERT_TRUE(d.IsObject()) << r.out;
+}
+
 TEST(MeshCli, WritesPlyAndReportsJson) {
     const std::string path = temp_path("cli.ply");
     std::filesystem::remove(path);
-    const test::CliResult r = test::run_cli("mesh builtin:sphere -o " + path + " --res 32 --json");
-    ASSERT_EQ(r.status, 0) << r.err;
-    const rapidjson::Document d = last_json_line(r.out);
-    ASSERT_TRUE(d.IsObject()) << r.out;
+    rapidjson::Document d;
+    ASSERT_NO_FATAL_FAILURE(mesh_json("builtin:sphere -o " + path + " --res 32", d));
     for (const char* key : {"triangles", "vertices", "ms", "prune_ms", "method", "res", "path"})
         EXPECT_TRUE(d.HasMember(key)) << key;
     EXPECT_EQ(std::string(d["method"].GetString()), "pruned");
@@ -465,34 +474,23 @@ TEST(MeshCli, WritesPlyAndReportsJson) {
               std::string::npos);
 
     // The naive method gives the same mesh; an explicit --grid is kept.
-    const test::CliResult n =
-        test::run_cli("mesh builtin:sphere -o " + path + " --res 32 --method naive --json");
-    ASSERT_EQ(n.status, 0) << n.err;
-    const rapidjson::Document dn = last_json_line(n.out);
-    ASSERT_TRUE(dn.IsObject()) << n.out;
+    rapidjson::Document dn;
+    ASSERT_NO_FATAL_FAILURE(
+        mesh_json("builtin:sphere -o " + path + " --res 32 --method naive", dn));
     EXPECT_EQ(dn["triangles"].GetDouble(), d["triangles"].GetDouble());
     EXPECT_EQ(dn["vertices"].GetDouble(), d["vertices"].GetDouble());
     EXPECT_EQ(read_file(path), s);
-    const test::CliResult g =
-        test::run_cli("mesh builtin:sphere -o " + path + " --res 32 --grid 16 --json");
-    ASSERT_EQ(g.status, 0) << g.err;
-    const rapidjson::Document dg = last_json_line(g.out);
-    ASSERT_TRUE(dg.IsObject()) << g.out;
+    rapidjson::Document dg;
+    ASSERT_NO_FATAL_FAILURE(mesh_json("builtin:sphere -o " + path + " --res 32 --grid 16", dg));
     EXPECT_EQ(dg["grid"].GetDouble(), 16);
     EXPECT_EQ(dg["triangles"].GetDouble(), d["triangles"].GetDouble());
-    const test::CliResult g32 =
-        test::run_cli("mesh builtin:sphere -o " + path + " --res 32 --grid 32 --json");
-    ASSERT_EQ(g32.status, 0) << g32.err;
-    const rapidjson::Document d32 = last_json_line(g32.out);
-    ASSERT_TRUE(d32.IsObject()) << g32.out;
+    rapidjson::Document d32;
+    ASSERT_NO_FATAL_FAILURE(mesh_json("builtin:sphere -o " + path + " --res 32 --grid 32", d32));
     EXPECT_EQ(d32["grid"].GetDouble(), 32);
     EXPECT_EQ(read_file(path), s) << "the same mesh from any pruning grid";
     // An odd resolution prunes at itself.
-    const test::CliResult odd =
-        test::run_cli("mesh builtin:sphere -o " + path + " --res 33 --json");
-    ASSERT_EQ(odd.status, 0) << odd.err;
-    const rapidjson::Document dodd = last_json_line(odd.out);
-    ASSERT_TRUE(dodd.IsObject()) << odd.out;
+    rapidjson::Document dodd;
+    ASSERT_NO_FATAL_FAILURE(mesh_json("builtin:sphere -o " + path + " --res 33", dodd));
     EXPECT_EQ(dodd["grid"].GetDouble(), 33);
     std::filesystem::remove(path);
 }
