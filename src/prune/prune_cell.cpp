@@ -529,10 +529,10 @@ void compact_lanes(const Scene& sc, std::span<const uint32_t> tape, const uint32
         negate[l] = uint8_t((keep & nl) | (left_wins & (negate[i] ^ nl)));
         negate[r] = uint8_t((keep & nr) | (right_wins & (negate[i] ^ nr)));
         alive[i] = uint8_t(keep);  // from here on: the lanes that emit entry i
-        if (values) {
+        if (values && (keep & ~may_decide) != 0) {  // lanes already known need no more
             const float k = sc.blend[math::tape_node(tape[i])];
             for (uint32_t c = 0; c < kL; ++c)
-                if ((keep >> c & 1) != 0 &&
+                if (((keep & ~may_decide) >> c & 1) != 0 &&
                     blend_may_decide(values[size_t(l) * kL + c], values[size_t(r) * kL + c], k))
                     may_decide |= 1u << c;
         }
