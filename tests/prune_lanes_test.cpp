@@ -1,6 +1,6 @@
-// prune_lanes_test.cpp — the pruning stages' loops over boxes run on two instruction sets (the
-// baseline and, on x86-64 processors that have it, AVX2; src/prune/prune_cell.cpp). Both must
-// make the same grids bit for bit: same tapes, same constants, same centre values.
+// prune_lanes_test.cpp — the pruning stages' loops over boxes run on several instruction sets (the
+// baseline and, on x86-64 processors that have them, AVX2 and AVX-512; src/prune/prune_cell.cpp).
+// All must make the same grids bit for bit: same tapes, same constants, same centre values.
 #include <gtest/gtest.h>
 
 #include <bit>
@@ -24,25 +24,45 @@ class LaneIsaScope {
     LaneIsa saved_;
 };
 
-// The same scene pruned on both instruction sets gives the same cells.
+const char* isa_name(LaneIsa isa) {
+    return isa == LaneIsa::kAvx512 ? "AVX-512" : isa == LaneIsa::kAvx2 ? "AVX2" : "baseline";
+}
+
+// The instruction sets this processor has besides the baseline.
+std::vector<LaneIsa> wide_isas() {
+    std::vector<LaneIsa> isas;
+    for (const LaneIsa isa : {LaneIsa::kAvx2, LaneIsa::kAvx512})
+        if (lane_isa_supported(isa)) isas.push_back(isa);
+    return isas;
+}
+
+// The same scene pruned on every instruction set gives the same cells.
 void expect_isas_agree(const Scene& sc, const PruneOptions& o, const std::string& what) {
     LaneIsaScope scope;
     set_lane_isa(LaneIsa::kBaseline);
     const PrunedGrid baseline = prune(sc, o);
-    set_lane_isa(LaneIsa::kAvx2);
-    const PrunedGrid avx2 = prune(sc, o);
-    EXPECT_TRUE(same_cells(baseline, avx2)) << what;
-    EXPECT_EQ(baseline.stats().near_field_cells, avx2.stats().near_field_cells) << what;
-    EXPECT_EQ(baseline.stats().tape_words_visited, avx2.stats().tape_words_visited) << what;
+    for (const LaneIsa isa : wide_isas()) {
+        set_lane_isa(isa);
+        const PrunedGrid wide = prune(sc, o);
+        EXPECT_TRUE(same_cells(baseline, wide)) << what << ", " << isa_name(isa);
+        EXPECT_EQ(baseline.stats().near_field_cells, wide.stats().near_field_cells) << what;
+        EXPECT_EQ(baseline.stats().tape_words_visited, wide.stats().tape_words_visited) << what;
+    }
 }
 
-bool has_avx2() {
+// set_lane_isa takes exactly the instruction sets lane_isa_supported names, and the default is
+// the widest of them.
+TEST(PruneLanes, SupportedIsasAreSettable) {
     LaneIsaScope scope;
-    try {
-        set_lane_isa(LaneIsa::kAvx2);
-        return true;
-    } catch (const std::invalid_argument&) {
-        return false;
+    const std::vector<LaneIsa> wide = wide_isas();
+    EXPECT_EQ(lane_isa(), wide.empty() ? LaneIsa::kBaseline : wide.back());
+    for (const LaneIsa isa : {LaneIsa::kBaseline, LaneIsa::kAvx2, LaneIsa::kAvx512}) {
+        if (lane_isa_supported(isa)) {
+            EXPECT_NO_THROW(set_lane_isa(isa)) << isa_name(isa);
+            EXPECT_EQ(lane_isa(), isa);
+        } else {
+            EXPECT_THROW(set_lane_isa(isa), std::invalid_argument) << isa_name(isa);
+        }
     }
 }
 
@@ -55,8 +75,8 @@ TEST(PruneLanes, BaselineIsAlwaysAvailable) {
 // Random scenes with every primitive kind, operator and placement (similarity maps, non-uniform
 // scales, shears), both cell bounds, refinement 1-3, no hierarchy: each cell of the two grids
 // equal.
-TEST(PruneLanes, Avx2EqualsBaselineOnRandomScenes) {
-    if (!has_avx2()) GTEST_SKIP() << "this processor has no AVX2: only the baseline runs";
+TEST(PruneLanes, WideIsasEqualBaselineOnRandomScenes) {
+    if (wide_isas().empty()) GTEST_SKIP() << "this processor has no AVX2: only the baseline runs";
     for (uint32_t i = 0; i < 24; ++i) {
         const test::RandomSceneSpec spec = test::varied_spec(i, 3 + i * 2);
         const Scene sc = test::random_scene(4200 + i, spec);
@@ -69,13 +89,13 @@ TEST(PruneLanes, Avx2EqualsBaselineOnRandomScenes) {
     }
 }
 
-// eval_tape_lanes (eval.hpp) gives eval_tape's values bit for bit, on both instruction sets, for
+// eval_tape_lanes (eval.hpp) gives eval_tape's values bit for bit, on every instruction set, for
 // every batch size, on random scenes (every kind, operator and placement), with the full tree
 // and with pruned tapes.
 TEST(PruneLanes, PointLanesEqualEvalTape) {
     LaneIsaScope scope;
-    std::vector<LaneIsa> isas = {LaneIsa::kBaseline};
-    if (has_avx2()) isas.push_back(LaneIsa::kAvx2);
+    std::vector<LaneIsa> isas = wide_isas();
+    isas.push_back(LaneIsa::kBaseline);
     for (uint32_t i = 0; i < 12; ++i) {
         const test::RandomSceneSpec spec = test::varied_spec(i, 2 + i * 3);
         const Scene sc = test::random_scene(5100 + i, spec);
@@ -109,7 +129,7 @@ TEST(PruneLanes, PointLanesEqualEvalTape) {
                         const float want = eval_tape(sc, tape, pts[k], stack.data());
                         ASSERT_EQ(std::bit_cast<uint32_t>(out[k]), std::bit_cast<uint32_t>(want))
                             << "scene " << i << ", " << count << " points, point " << k
-                            << (isa == LaneIsa::kAvx2 ? ", AVX2" : ", baseline");
+                            << ", " << isa_name(isa);
                     }
                 }
             }
@@ -155,8 +175,8 @@ TEST(PruneLanes, OneWordTapesEqualTheLoop) {
     }
 }
 
-TEST(PruneLanes, Avx2EqualsBaselineOnReferenceScenes) {
-    if (!has_avx2()) GTEST_SKIP() << "this processor has no AVX2: only the baseline runs";
+TEST(PruneLanes, WideIsasEqualBaselineOnReferenceScenes) {
+    if (wide_isas().empty()) GTEST_SKIP() << "this processor has no AVX2: only the baseline runs";
     for (const char* file : {"molecule.json", "trees.json"}) {
         SDFPRUNE_REQUIRE_SCENE(path, file);
         PruneOptions o;
@@ -173,6 +193,8 @@ TEST(PruneLanes, Avx2EqualsBaselineOnReferenceScenes) {
 // S = 2-4, both bounds, with and without the far field.
 TEST(PruneLanes, RefineCellEqualsEverySubBoxAlone) {
     LaneIsaScope scope;
+    std::vector<LaneIsa> isas = wide_isas();
+    isas.insert(isas.begin(), LaneIsa::kBaseline);
     uint32_t far = 0, decided = 0, undecided = 0;
     for (uint32_t i = 0; i < 24; ++i) {
         const test::RandomSceneSpec spec = test::varied_spec(i, 3 + i * 2);
@@ -193,7 +215,7 @@ TEST(PruneLanes, RefineCellEqualsEverySubBoxAlone) {
             const CellBounds bounds = k % 4 == 1 ? CellBounds::kLipschitz : CellBounds::kInterval;
             const bool far_field = k % 5 != 4;
             const float C = k % 7 == 3 ? 4.0f : 2.0f;
-            set_lane_isa(k % 2 == 0 || !has_avx2() ? LaneIsa::kBaseline : LaneIsa::kAvx2);
+            set_lane_isa(isas[k / 3 % isas.size()]);
 
             // Every sub-box alone: its decisions, and its root's far-field range.
             const vec3 sub_half = box.half / float(S);

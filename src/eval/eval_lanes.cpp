@@ -1,7 +1,7 @@
 // eval_lanes.cpp — eval_tape for a batch of points sharing a tape (eval.hpp): the tape is walked
 // once, and each entry is computed across the points' lanes (lanes.hpp), on a stack of rows of
-// kEvalLanes floats. Compiled for the baseline instruction set and for AVX2, chosen at run time;
-// both give eval_tape's values bit for bit.
+// kEvalLanes floats. Compiled for the baseline instruction set and for AVX2 and AVX-512
+// (lanes.hpp), chosen at run time; all give eval_tape's values bit for bit.
 #include <algorithm>
 
 #include "../core/lanes.hpp"
@@ -43,16 +43,18 @@ inline void eval_any_rows(const Scene& sc, std::span<const uint32_t> tape, const
         eval_rows<lanes::kBlock>(sc, tape, p, lanes, stack);
 }
 
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-#define SDFPRUNE_AVX2_EVAL 1
-[[gnu::target("avx2"), gnu::flatten]] void eval_rows_avx2(const Scene& sc,
-                                                          std::span<const uint32_t> tape,
-                                                          const PointLanes& p, uint32_t lanes,
-                                                          float* stack) {
+#if SDFPRUNE_X86_LANES
+[[SDFPRUNE_AVX2_LANES_TARGET, gnu::flatten]] void eval_rows_avx2(const Scene& sc,
+                                                                std::span<const uint32_t> tape,
+                                                                const PointLanes& p,
+                                                                uint32_t lanes, float* stack) {
     eval_any_rows(sc, tape, p, lanes, stack);
 }
-#else
-#define SDFPRUNE_AVX2_EVAL 0
+[[SDFPRUNE_AVX512_LANES_TARGET, gnu::flatten]] void eval_rows_avx512(
+    const Scene& sc, std::span<const uint32_t> tape, const PointLanes& p, uint32_t lanes,
+    float* stack) {
+    eval_any_rows(sc, tape, p, lanes, stack);
+}
 #endif
 
 [[gnu::flatten]] void eval_rows_baseline(const Scene& sc, std::span<const uint32_t> tape,
@@ -70,8 +72,10 @@ void eval_tape_lanes(const Scene& sc, std::span<const uint32_t> tape, PointLanes
         p.y[i] = p.y[count - 1];
         p.z[i] = p.z[count - 1];
     }
-#if SDFPRUNE_AVX2_EVAL
-    if (lane_isa() == LaneIsa::kAvx2)
+#if SDFPRUNE_X86_LANES
+    if (const LaneIsa isa = lane_isa(); isa == LaneIsa::kAvx512)
+        eval_rows_avx512(sc, tape, p, lanes, stack);
+    else if (isa == LaneIsa::kAvx2)
         eval_rows_avx2(sc, tape, p, lanes, stack);
     else
 #endif

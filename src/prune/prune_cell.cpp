@@ -219,19 +219,21 @@ inline void evaluate_any_lanes(const Scene& sc, std::span<const uint32_t> tape, 
         evaluate_lanes<kBlock>(sc, tape, c, half, radius, bounds, out, s, only);
 }
 
-// evaluate_lanes compiled twice, each with everything it calls inlined (flatten): for the
-// baseline instruction set, and on x86-64 for AVX2 (8 lanes per instruction), chosen at run
-// time. AVX2 without FMA: the same operations, rounded the same way, so both give the same
-// results bit for bit (PruneLanes tests compare them).
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-#define SDFPRUNE_AVX2_LANES 1
-[[gnu::target("avx2"), gnu::flatten]] void evaluate_lanes_avx2(
+// evaluate_lanes compiled once per instruction set, each with everything it calls inlined
+// (flatten): for the baseline, and on x86-64 for AVX2 and AVX-512 (lanes.hpp), chosen at run
+// time. No FMA: the same operations, rounded the same way, so all give the same results bit for
+// bit (PruneLanes tests compare them).
+#if SDFPRUNE_X86_LANES
+[[SDFPRUNE_AVX2_LANES_TARGET, gnu::flatten]] void evaluate_lanes_avx2(
     const Scene& sc, std::span<const uint32_t> tape, const BoxLanes& c, vec3 half, float radius,
     CellBounds bounds, LaneArrays out, CellScratch& s, std::span<const uint32_t> only) {
     evaluate_any_lanes(sc, tape, c, half, radius, bounds, out, s, only);
 }
-#else
-#define SDFPRUNE_AVX2_LANES 0
+[[SDFPRUNE_AVX512_LANES_TARGET, gnu::flatten]] void evaluate_lanes_avx512(
+    const Scene& sc, std::span<const uint32_t> tape, const BoxLanes& c, vec3 half, float radius,
+    CellBounds bounds, LaneArrays out, CellScratch& s, std::span<const uint32_t> only) {
+    evaluate_any_lanes(sc, tape, c, half, radius, bounds, out, s, only);
+}
 #endif
 
 [[gnu::flatten]] void evaluate_lanes_baseline(const Scene& sc, std::span<const uint32_t> tape,
@@ -241,11 +243,20 @@ inline void evaluate_any_lanes(const Scene& sc, std::span<const uint32_t> tape, 
     evaluate_any_lanes(sc, tape, c, half, radius, bounds, out, s, only);
 }
 
-LaneIsa best_lane_isa() {
-#if SDFPRUNE_AVX2_LANES
+bool isa_supported(LaneIsa isa) {
+#if SDFPRUNE_X86_LANES
     __builtin_cpu_init();
-    if (__builtin_cpu_supports("avx2")) return LaneIsa::kAvx2;
+    if (isa == LaneIsa::kAvx2) return __builtin_cpu_supports("avx2");
+    if (isa == LaneIsa::kAvx512)
+        return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+               __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512bw");
 #endif
+    return isa == LaneIsa::kBaseline;
+}
+
+LaneIsa best_lane_isa() {
+    for (const LaneIsa isa : {LaneIsa::kAvx512, LaneIsa::kAvx2})
+        if (isa_supported(isa)) return isa;
     return LaneIsa::kBaseline;
 }
 
@@ -255,9 +266,15 @@ std::atomic<int> g_lane_isa{-1};
 void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const BoxLanes& c, vec3 half,
                     float radius, CellBounds bounds, LaneArrays out, CellScratch& s,
                     std::span<const uint32_t> only = {}) {
-#if SDFPRUNE_AVX2_LANES
-    if (lane_isa() == LaneIsa::kAvx2)
-        return evaluate_lanes_avx2(sc, tape, c, half, radius, bounds, out, s, only);
+#if SDFPRUNE_X86_LANES
+    switch (lane_isa()) {
+        case LaneIsa::kAvx512:
+            return evaluate_lanes_avx512(sc, tape, c, half, radius, bounds, out, s, only);
+        case LaneIsa::kAvx2:
+            return evaluate_lanes_avx2(sc, tape, c, half, radius, bounds, out, s, only);
+        case LaneIsa::kBaseline:
+            break;
+    }
 #endif
     evaluate_lanes_baseline(sc, tape, c, half, radius, bounds, out, s, only);
 }
@@ -273,8 +290,12 @@ LaneIsa lane_isa() {
     return LaneIsa(isa);
 }
 
+bool lane_isa_supported(LaneIsa isa) {
+    return isa_supported(isa);
+}
+
 void set_lane_isa(LaneIsa isa) {
-    if (isa != LaneIsa::kBaseline && isa != best_lane_isa())
+    if (!isa_supported(isa))
         throw std::invalid_argument("set_lane_isa: this processor lacks the instruction set");
     g_lane_isa.store(int(isa), std::memory_order_relaxed);
 }
