@@ -225,16 +225,21 @@ class PrunedGrid {
     // Size of a cell of level `level`.
     vec3 level_cell_size(uint32_t level) const { return level_size_[level]; }
 
-    // locate_cell's walk in stages of one memory read each, for a tracer that interleaves the
-    // lookups of several rays and prefetches what each names next (most of the structure is
-    // out of cache): walk_begin names the first word to read, each walk_step reads the word
-    // named and names the next, until the deciding cell (then read, so in cache) is reached.
-    // walk_located gives locate_cell's answer.
+    // locate_cell's walk in stages, for a tracer that interleaves the lookups of several rays
+    // and prefetches what each names next (most of the structure is out of cache): walk_begin
+    // names the first word to read, each walk_step reads the word named and names the next,
+    // until the deciding cell (then read, so in cache) is reached. walk_located gives
+    // locate_cell's answer. On a grid with a lookup shortcut (built when every level is a power
+    // of two and the level above the finest is small enough) the walk is two steps at most: the
+    // shortcut's entry with the coarse cell it names (few, often in cache), then the finest
+    // cell when that one is near-field. This is the one implementation of the lookup:
+    // locate_cell runs it to the end.
     struct Walk {
         uint32_t ix = 0, iy = 0, iz = 0;   // the finest cell looked up
         uint32_t level = 0;                // of `cell`
         const uint32_t* entry = nullptr;   // the shortcut's entry to read next, if any
         const PrunedCell* cell = nullptr;  // else the cell to read next, or the deciding one
+        bool decided = false;              // `cell` is the deciding one (perhaps not read yet)
         const void* next() const { return entry ? static_cast<const void*>(entry) : cell; }
     };
     Walk walk_begin(uint32_t ix, uint32_t iy, uint32_t iz) const;
@@ -314,14 +319,6 @@ class PrunedGrid {
     uint32_t level_count() const { return uint32_t(levels_.size()); }
     uint32_t level_resolution(uint32_t level) const { return levels_[level].res; }
     std::span<const uint32_t> tape_pool() const { return {pool_.data, pool_.size}; }
-    // The lookup shortcut walk_begin reads first, for a tracer that inlines its own walk:
-    // for every cell of level shortcut_level() (the one above the finest; z-major) the deciding
-    // cell at or above it, as level << kShortcutLevelShift | index in level_cells(level). Empty
-    // when the grid has none; when it has one, every level's resolution and block factor are
-    // powers of two.
-    static constexpr uint32_t kShortcutLevelShift = 27;
-    std::span<const uint32_t> shortcut() const { return shortcut_; }
-    uint32_t shortcut_level() const { return shortcut_level_; }
     std::span<const uint32_t> tape_at(uint32_t offset) const {
         return {pool_.data + offset + 2, pool_.data[offset]};
     }
@@ -361,9 +358,12 @@ class PrunedGrid {
         }
         // The same, for a pow2 level (shifts and masks only).
         uint32_t local_index_pow2(uint32_t ix, uint32_t iy, uint32_t iz) const {
+            return block_local_pow2(ix >> shift, iy >> shift, iz >> shift);
+        }
+        // Index within its block of cell (x, y, z) of this pow2 level.
+        uint32_t block_local_pow2(uint32_t x, uint32_t y, uint32_t z) const {
             const uint32_t m = factor - 1;
-            return ((((iz >> shift) & m) << factor_bits | ((iy >> shift) & m)) << factor_bits) |
-                   ((ix >> shift) & m);
+            return ((z & m) << factor_bits | (y & m)) << factor_bits | (x & m);
         }
     };
     const Scene* scene_ = nullptr;
@@ -388,11 +388,14 @@ class PrunedGrid {
     vec3 cell_size_;
     vec3 inv_cell_size_;
     std::vector<vec3> level_size_;  // cell size of each level
-    // Lookup shortcut: for every cell of level shortcut_level_ (the one above the finest), the
-    // deciding cell at or above it, as level << kShortcutLevelShift | index; empty when not
-    // worth it.
+    // Lookup shortcut, which walk_begin reads first: for every cell of level shortcut_level_
+    // (the one above the finest; z-major), the deciding cell at or above it, as
+    // level << kShortcutLevelShift | index in its level's cells; empty when not worth it. When
+    // there is one, every level's resolution and block factor are powers of two: finest index
+    // >> shortcut_shift_ is the shortcut level's cell, shortcut_res_ that level's resolution.
+    static constexpr uint32_t kShortcutLevelShift = 27;
     std::vector<uint32_t> shortcut_;
-    uint32_t shortcut_level_ = 0;
+    uint32_t shortcut_level_ = 0, shortcut_shift_ = 0, shortcut_res_ = 0;
     void build_shortcut();
     void build_clearance(const CellRange* changed = nullptr);  // set_clearance on levels_
     // The Located of finest cell (ix, iy, iz), decided by `cell` of level `level`.
@@ -438,24 +441,10 @@ class PrunedGrid {
 
 [[gnu::always_inline]] inline void PrunedGrid::locate_cell(uint32_t ix, uint32_t iy, uint32_t iz,
                                                            Located& out) const {
-    if (!shortcut_.empty()) {
-        // The shortcut holds descend's result down to the level above the finest: at most one
-        // step of it is left. Every level is pow2 here.
-        const Level& s = levels_[shortcut_level_];
-        const uint32_t entry =
-            shortcut_[(size_t(iz >> s.shift) * s.res + (iy >> s.shift)) * s.res + (ix >> s.shift)];
-        uint32_t level = entry >> kShortcutLevelShift;
-        const PrunedCell* c = &levels_[level].cells[entry & ((1u << kShortcutLevelShift) - 1)];
-        if (c->tape != PrunedCell::kFarField) {
-            const Level& f = levels_[++level];
-            c = &f.cells[c->children + f.local_index_pow2(ix, iy, iz)];
-        }
-        const uint32_t shift = levels_[level].shift;
-        out = {level, ix >> shift, iy >> shift, iz >> shift, c};
-        return;
+    Walk w = walk_begin(ix, iy, iz);
+    while (!walk_step(w)) {
     }
-    const CellRef at = descend(ix, iy, iz, level_count() - 1);
-    out = located_at(at.level, &levels_[at.level].cells[at.index], ix, iy, iz);
+    out = walk_located(w);
 }
 
 [[gnu::always_inline]] inline PrunedGrid::Located PrunedGrid::located_at(uint32_t level,
@@ -470,29 +459,31 @@ class PrunedGrid {
 
 [[gnu::always_inline]] inline PrunedGrid::Walk PrunedGrid::walk_begin(uint32_t ix, uint32_t iy,
                                                                       uint32_t iz) const {
-    Walk w;
-    w.ix = ix;
-    w.iy = iy;
-    w.iz = iz;
     if (!shortcut_.empty()) {
-        const Level& s = levels_[shortcut_level_];
-        w.entry =
-            &shortcut_[(size_t(iz >> s.shift) * s.res + (iy >> s.shift)) * s.res + (ix >> s.shift)];
-    } else {
-        w.cell = &levels_[0].cells[levels_[0].local_index(ix, iy, iz, resolution())];
+        const uint32_t s = shortcut_shift_, r = shortcut_res_;
+        return {ix, iy, iz, 0, shortcut_.data() + ((iz >> s) * r + (iy >> s)) * r + (ix >> s)};
     }
-    return w;
+    const PrunedCell* root_cell =
+        &levels_[0].cells[levels_[0].local_index(ix, iy, iz, resolution())];
+    return {ix, iy, iz, 0, nullptr, root_cell};
 }
 
 [[gnu::always_inline]] inline bool PrunedGrid::walk_step(Walk& w) const {
     if (w.entry) {
-        // descend's result down to the shortcut's level (see locate_cell)
+        // descend's result down to the shortcut's level, and that cell at once: coarse cells
+        // are few and often in cache. A near-field one is of the level above the finest.
         const uint32_t entry = *w.entry;
         w.entry = nullptr;
         w.level = entry >> kShortcutLevelShift;
         w.cell = &levels_[w.level].cells[entry & ((1u << kShortcutLevelShift) - 1)];
+        if (w.cell->tape == PrunedCell::kFarField) return true;
+        // (the finest level: its cells are the finest cells)
+        const Level& f = levels_[++w.level];
+        w.cell = &f.cells[w.cell->children + f.block_local_pow2(w.ix, w.iy, w.iz)];
+        w.decided = true;
         return false;
     }
+    if (w.decided) return true;
     // (the address of the finest level rather than the level count: a size() divides)
     if (w.cell->tape == PrunedCell::kFarField || &levels_[w.level] == &levels_.back()) return true;
     const Level& f = levels_[++w.level];

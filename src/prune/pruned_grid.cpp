@@ -60,6 +60,8 @@ void PrunedGrid::build_shortcut() {
     for (const Level& l : levels_)
         if (l.cells.size() >= (1u << kShortcutLevelShift) || !l.pow2) return;
     shortcut_level_ = S;
+    shortcut_shift_ = levels_[S].shift;
+    shortcut_res_ = r;
     shortcut_.resize(size_t(r) * r * r);
     const uint32_t scale = resolution() / r;
     for (uint32_t z = 0; z < r; ++z)

@@ -92,21 +92,25 @@ struct Counters {
 // The full tree at every query.
 struct NaiveField {
     const Scene& sc;
-    // The exact value at p; `hint` (a tape valid near p) is unused.
-    float value(vec3 p, std::span<const uint32_t>, float* stack, Counters& c) const {
+    // A hit's tape, for its normal's stencil (see PrunedField::Hint).
+    struct Hint {
+        std::span<const uint32_t> tape;
+    };
+    Hint hint_at(vec3) const { return {sc.full_tape}; }
+    // The exact value at p; `hint` is unused.
+    float value(vec3 p, const Hint&, float* stack, Counters& c) const {
         c.evals += sc.size();
         return eval_tape(sc, sc.full_tape, p, stack);
     }
-    std::span<const uint32_t> tape_at(vec3) const { return sc.full_tape; }
 };
 
 // What a far-field step needs of a level of the grid, worked out once per image with the
 // expressions a step would use (so the steps stay bit for bit the same).
 struct LevelGeometry {
-    float4 size;         // cell size
-    float4 half;         // size · 0.5: from a cell's corner to its centre
-    float tiny;          // how far past a cell's exit a far-field step lands: 1e-4 · smallest side
-    uint32_t shift = 0;  // grids with a shortcut: log2 of the finest cells per cell and axis
+    float4 size;  // cell size
+    float4 half;  // size · 0.5: from a cell's corner to its centre
+    float tiny;   // how far past a cell's exit a far-field step lands: 1e-4 · smallest side
+    int shift;    // log2 of the finest cells per cell and axis (when PrunedField::pow2)
 };
 
 // The pruned grid.
@@ -115,34 +119,21 @@ struct PrunedField {
     std::vector<LevelGeometry> levels;
     // PrunedGrid::cell_index's terms: the grid's corner, 1 / cell size, the last index
     float4 grid_lo, inv_cell, last_index;
-    // The walk of a grid with a lookup shortcut (PrunedGrid::shortcut(): every level a power of
-    // two), inlined here: the shortcut's entry, then at most one finest cell, found with shifts
-    // and the levels' cell arrays held here. PrunedGrid::walk_step finds the same cells
-    // through its general case; it took 1/5 of the tracer's instructions on small scenes.
-    const uint32_t* shortcut = nullptr;    // null: no shortcut, walk with PrunedGrid::walk_step
-    uint32_t shortcut_shift = 0;           // finest index >> shortcut_shift: shortcut's cell
-    uint32_t shortcut_bits = 0;            // log2 of the shortcut level's resolution
-    uint32_t finest_bits = 0;              // log2 of the finest level's block factor
-    std::vector<const PrunedCell*> cells;  // level_cells(level).data()
+    // Every level's cells hold a power of two finest cells per axis: a cell's coordinates at
+    // its level are the finest index >> LevelGeometry::shift.
+    bool pow2 = true;
     explicit PrunedField(const PrunedGrid& grid)
         : g(grid),
           grid_lo(load4(grid.aabb().min)),
           inv_cell(load4(grid.inv_cell_size())),
           last_index(splat(float(grid.resolution() - 1))) {
-        const uint32_t n = g.resolution(), last = g.level_count() - 1;
-        for (uint32_t l = 0; l <= last; ++l) {
+        const uint32_t n = g.resolution();
+        for (uint32_t l = 0; l < g.level_count(); ++l) {
             const vec3 size = g.level_cell_size(l);
+            const uint32_t scale = n / g.level_resolution(l);
+            pow2 = pow2 && std::has_single_bit(scale) && scale * g.level_resolution(l) == n;
             levels.push_back({load4(size), load4(size * 0.5f),
-                              1e-4f * std::min({size.x, size.y, size.z}),
-                              uint32_t(std::countr_zero(n / g.level_resolution(l)))});
-            cells.push_back(g.level_cells(l).data());
-        }
-        const uint32_t s = g.shortcut_level();
-        if (!g.shortcut().empty() && s + 1 == last) {
-            shortcut = g.shortcut().data();
-            shortcut_shift = levels[s].shift;
-            shortcut_bits = uint32_t(std::countr_zero(g.level_resolution(s)));
-            finest_bits = uint32_t(std::countr_zero(g.level_factor(last)));
+                              1e-4f * std::min({size.x, size.y, size.z}), std::countr_zero(scale)});
         }
     }
     // The finest cell holding p in the grid's closed box: PrunedGrid::cell_index's,
@@ -151,33 +142,35 @@ struct PrunedField {
     int4 finest_index(float4 p) const {
         return __builtin_convertvector(min4((p - grid_lo) * inv_cell, last_index), int4);
     }
-    // The walk to the cell deciding finest cell i.
-    PrunedGrid::Walk walk_begin(int4 i) const {
-        if (!shortcut) return g.walk_begin(uint32_t(i[0]), uint32_t(i[1]), uint32_t(i[2]));
-        const int4 c = i >> int(shortcut_shift);
-        PrunedGrid::Walk w;
-        w.entry = shortcut + ((uint32_t(c[2]) << shortcut_bits | uint32_t(c[1])) << shortcut_bits |
-                              uint32_t(c[0]));
-        return w;
-    }
-    // With the shortcut: the finest cell i among the children of near-field cell `parent` of
-    // the level above (PrunedGrid::Level::local_index_pow2 at the finest level).
-    const PrunedCell* finest_child(const PrunedCell& parent, int4 i) const {
-        const uint32_t m = (1u << finest_bits) - 1;
-        const uint32_t local = ((uint32_t(i[2]) & m) << finest_bits | (uint32_t(i[1]) & m))
-                                   << finest_bits |
-                               (uint32_t(i[0]) & m);
-        return cells.back() + parent.children + local;
-    }
-    std::span<const uint32_t> tape_at(vec3 p) const {
+    // A hit's tape (its cell's, or the full tree's), for its normal's stencil, with the finest
+    // cell the hit lies in: a stencil point in that cell has that tape, which value() then
+    // takes with no lookup. Most stencil points are: at 256³ the stencil's offsets are about a
+    // tenth of a cell.
+    struct Hint {
+        std::span<const uint32_t> tape;
+        bool in_grid = false;
+        uint32_t ix = 0, iy = 0, iz = 0;
+    };
+    Hint hint_at(vec3 p) const {
+        Hint h{g.scene().full_tape};
+        if (!g.cell_index(p, h.ix, h.iy, h.iz)) return h;
+        h.in_grid = true;
         PrunedGrid::Located at;
-        if (!g.locate(p, at) || at.far_field()) return g.scene().full_tape;
-        return g.tape_at(at.cell->tape);
+        g.locate_cell(h.ix, h.iy, h.iz, at);
+        if (!at.far_field()) h.tape = g.tape_at(at.cell->tape);
+        return h;
     }
-    float value(vec3 p, std::span<const uint32_t> hint, float* stack, Counters& c) const {
-        PrunedGrid::Located at;
-        std::span<const uint32_t> tape = hint;
-        if (g.locate(p, at) && !at.far_field()) tape = g.tape_at(at.cell->tape);
+    // The pruned field at p: its cell's tape, or the hint's where p's cell is far-field (that
+    // cell holds a bound, not a value) or is the hit's.
+    float value(vec3 p, const Hint& hint, float* stack, Counters& c) const {
+        std::span<const uint32_t> tape = hint.tape;
+        uint32_t ix, iy, iz;
+        if (g.cell_index(p, ix, iy, iz) &&
+            !(hint.in_grid && ix == hint.ix && iy == hint.iy && iz == hint.iz)) {
+            PrunedGrid::Located at;
+            g.locate_cell(ix, iy, iz, at);
+            if (!at.far_field()) tape = g.tape_at(at.cell->tape);
+        }
         c.evals += tape.size();
         return eval_tape(g.scene(), tape, p, stack);
     }
@@ -291,8 +284,8 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
                 return true;
             }
             // p lies in the grid's box: every lookup finds a cell.
-            l.index = field.finest_index(l.p);
-            l.walk = field.walk_begin(l.index);
+            const int4 i = l.index = field.finest_index(l.p);
+            l.walk = field.g.walk_begin(uint32_t(i[0]), uint32_t(i[1]), uint32_t(i[2]));
             __builtin_prefetch(l.walk.next());
             l.next = Lane::Next::kWalk;
         } else {
@@ -323,52 +316,26 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
     const auto advance = [&](Lane& l) -> bool {
         if constexpr (kPruned) {
             if (l.next == Lane::Next::kWalk) {
-                // The deciding cell, its level and its coordinates at that level.
-                const PrunedCell* cell;
-                uint32_t level;
-                int4 at;
-                if (field.shortcut) {
-                    if (l.walk.entry) {
-                        const uint32_t e = *l.walk.entry;
-                        l.walk.entry = nullptr;
-                        level = e >> PrunedGrid::kShortcutLevelShift;
-                        cell = field.cells[level] +
-                               (e & ((1u << PrunedGrid::kShortcutLevelShift) - 1));
-                        // The shortcut names a cell of the coarse levels, often in cache: read
-                        // it now. A near-field one is of the level above the finest.
-                        if (cell->tape != PrunedCell::kFarField) {
-                            l.walk.level = level + 1;
-                            l.walk.cell = field.finest_child(*cell, l.index);
-                            __builtin_prefetch(l.walk.cell);
-                            return true;
-                        }
-                    } else {
-                        level = l.walk.level;
-                        cell = l.walk.cell;
-                    }
-                    at = l.index >> int(field.levels[level].shift);
-                } else {
-                    const bool at_entry = l.walk.entry != nullptr;
-                    bool found = field.g.walk_step(l.walk);
-                    // (as above: the shortcut's coarse cell now)
-                    if (!found && at_entry) found = field.g.walk_step(l.walk);
-                    if (!found) {
-                        __builtin_prefetch(l.walk.next());
-                        return true;
-                    }
-                    const PrunedGrid::Located located = field.g.walk_located(l.walk);
-                    level = located.level;
-                    cell = located.cell;
-                    at = int4{int32_t(located.x), int32_t(located.y), int32_t(located.z), 0};
+                if (!field.g.walk_step(l.walk)) {
+                    __builtin_prefetch(l.walk.next());
+                    return true;
                 }
-                const LevelGeometry& geo = field.levels[level];
+                // The deciding cell, its level and its coordinates at that level (walk_located's,
+                // by one vector shift where the levels allow it).
+                const PrunedCell& cell = *l.walk.cell;
+                const LevelGeometry& geo = field.levels[l.walk.level];
+                int4 coords = l.index >> geo.shift;
+                if (!field.pow2) {
+                    const PrunedGrid::Located at = field.g.walk_located(l.walk);
+                    coords = int4{int32_t(at.x), int32_t(at.y), int32_t(at.z), 0};
+                }
                 // (one conversion of the three coordinates, each exact: below 2^24)
-                const float4 lo = aabb_lo + __builtin_convertvector(at, float4) * geo.size;
-                if (cell->tape == PrunedCell::kFarField) {
-                    l.t = far_field_advance(l, l.p, lo, geo, *cell, ctx.inv_lipschitz);
+                const float4 lo = aabb_lo + __builtin_convertvector(coords, float4) * geo.size;
+                if (cell.tape == PrunedCell::kFarField) {
+                    l.t = far_field_advance(l, l.p, lo, geo, cell, ctx.inv_lipschitz);
                     return begin_step(l);
                 }
-                l.tape = field.g.tape_at(cell->tape);
+                l.tape = field.g.tape_at(cell.tape);
                 l.near_tape = l.tape;
                 l.near_lo = lo;
                 l.near_hi = lo + geo.size;
@@ -554,12 +521,13 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
             const uint32_t j = ray_pixel[r];
             Counters& c = counters[j];
             const vec3 dir = rays[r].dir, p = cam.eye + dir * rays[r].t;
-            const std::span<const uint32_t> tape = field.tape_at(p);
+            const auto hint = field.hint_at(p);
+            const std::span<const uint32_t> tape = hint.tape;
             // Tetrahedron-stencil gradient.
             const vec3 k[4] = {{1, -1, -1}, {-1, -1, 1}, {-1, 1, -1}, {1, 1, 1}};
             vec3 n(0.0f);
             for (const vec3& ki : k)
-                n = n + ki * field.value(p + ki * normal_h, tape, stack.data(), c);
+                n = n + ki * field.value(p + ki * normal_h, hint, stack.data(), c);
             const float len = math::length(n);
             n = len > 0 ? n / len : -dir;
             c.evals += tape.size();
@@ -694,7 +662,7 @@ PickResult pick(const PrunedGrid& grid, const RenderOptions& opt, uint32_t x, ui
     r.t = t;
     r.point = eye + dir * t;
     r.primitive =
-        eval_tape_winner(sc, field.tape_at(r.point), r.point, stack.data(), winners.data());
+        eval_tape_winner(sc, field.hint_at(r.point).tape, r.point, stack.data(), winners.data());
     return r;
 }
 
