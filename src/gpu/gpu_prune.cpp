@@ -476,6 +476,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     ctx.destroy(blocks);
     ctx.destroy(scratch);
     ctx.destroy(octant_pool);
+    g.finest_stack_depth = max_depth;  // the last level's: the finest cells'
 
     // All levels' cells in one buffer, for the lookups of the tracing and discretizing kernels.
     uint64_t cell_total = 0;
