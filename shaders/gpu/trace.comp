@@ -156,6 +156,11 @@ void main() {
         if (t >= 0.0) {
             precise vec3 p = eye + dir * t;
             uint tape = tape_at(p);
+            // The normal and color then use this tape wherever no near-field cell decides.
+            if (!stack_holds(tape)) {
+                defer_item(index);
+                return;
+            }
             vec3 n = vec3(0.0);
             n = n + vec3(1.0, -1.0, -1.0) * value_at(p + vec3(1.0, -1.0, -1.0) * h, tape);
             n = n + vec3(-1.0, -1.0, 1.0) * value_at(p + vec3(-1.0, -1.0, 1.0) * h, tape);
@@ -163,11 +168,6 @@ void main() {
             n = n + vec3(1.0, 1.0, 1.0) * value_at(p + vec3(1.0, 1.0, 1.0) * h, tape);
             float len = length(n);
             n = len > 0.0 ? n / len : -dir;
-            if (!stack_holds(tape)) g_deferred = true;
-            if (g_deferred) {
-                defer_item(index);
-                return;
-            }
             g_evals += pool[tape];
             vec3 albedo = eval_tape_color(tape, p, tid, pc.stack_threads);
             float lit = max(0.0, dot(n, light));
