@@ -2,19 +2,20 @@
 // full-tree pass (src/gpu/gpu_render.cpp, run_in_chunks).
 //
 // Each thread's evaluation stack is sized for the deepest of the finest cells' tapes, the only
-// pruned tapes these kernels evaluate: tens of slots where the full tree may need millions. A
-// point that no near-field cell decides (outside the grid, or a hit point in a far-field cell;
-// rare) needs the full tree, as on the CPU. In the first pass such an item is not evaluated but
-// appended to the deferred list; the host then runs the same kernel over the listed items only,
-// with stacks deep enough for the full tree and few threads (the full-tree pass). Every item's
-// output is what one pass with full-depth stacks would give, bit for bit.
+// pruned tapes these kernels evaluate: often tens of values where the full tree may need
+// thousands (a right-deep chain of unions is as deep as it is long). A point that no near-field
+// cell decides (outside the grid, or a hit point in a far-field cell; rare) needs the full tree,
+// as on the CPU. In the first pass such an item is not evaluated but appended to the deferred
+// list; the host then runs the same kernel over the listed items only, with stacks deep enough
+// for the full tree and few threads (the full-tree pass). Every item's output is what one pass
+// with full-depth stacks would give, bit for bit.
 // Uses binding 9 (the deferred list); SlicePush in src/gpu/device_layout.hpp mirrors Push.
 
 // Items [first, first + count) of a slice, output written from index `base` of the output
 // buffer. full_tree_pass 0: item first + tid, stacks of `stack_threads` threads sized for the
 // grid's tapes; the full tree's tape fits them only when full_tree_fits is 1, else an item that
 // needs it is deferred (the list holds deferred_capacity items; the count may pass it: the host
-// then makes the list longer and runs the slice again). full_tree_pass 1: item
+// then makes the list longer and runs the chunk again). full_tree_pass 1: item
 // deferred[1 + first + tid], stacks deep enough for the full tree.
 layout(push_constant) uniform Push {
     uint first, count, stack_threads, base;
