@@ -140,6 +140,16 @@ ChunkedRun run_in_chunks(Context& ctx, KernelId kernel, const DeviceGrid& g, con
     return run;
 }
 
+// On a device that ends an invocation's loops early (lavapipe), one evaluation of the longest
+// finest tape must fit the limit: past it an invocation stops partway and its output (and the
+// counts that render checks after) are meaningless.
+void check_tape_loops(const Context& ctx, const DeviceGrid& g) {
+    if (ctx.loop_limited() && uint64_t(g.stats.tape_max) + 64 >= Context::kLoopLimit)
+        throw GpuError("tapes of " + std::to_string(g.stats.tape_max) +
+                       " nodes exceed the loop limit of " + ctx.device_name() +
+                       "; use --backend cpu or a GPU");
+}
+
 }  // namespace
 
 Image render(Device& device, const Grid& grid, const RenderOptions& opt, RenderStats* stats) {
@@ -150,6 +160,7 @@ Image render(Device& device, const Grid& grid, const RenderOptions& opt, RenderS
     if (W == 0 || H == 0) throw std::invalid_argument("image size must be positive");
     const uint64_t pixels = uint64_t(W) * H;
     if (pixels > 0xffffffffull) throw std::invalid_argument("image too large");
+    check_tape_loops(ctx, g);
     const CameraFrame frame = camera_frame(sc, opt);
     TraceParams prm;
     prm.grid = g.grid_params();
@@ -211,11 +222,7 @@ void discretize(Device& device, const Grid& grid, uint32_t n, std::span<float> o
     if (out.size() != total) throw std::invalid_argument("discretize: output must hold n³ values");
     if (total > 0xffffffffull)  // the kernel indexes samples with 32 bits
         throw std::invalid_argument("discretize --backend vulkan: at most 1625³ samples");
-    if (ctx.loop_limited() && uint64_t(g.stats.tape_max) + 64 >= Context::kLoopLimit)
-        throw GpuError("tapes of " + std::to_string(g.stats.tape_max) +
-                       " nodes exceed the loop "
-                       "limit of " +
-                       ctx.device_name() + "; use --backend cpu or a GPU");
+    check_tape_loops(ctx, g);
     DiscretizeParams prm{};
     prm.grid = g.grid_params();
     const vec3 sample = (sc.aabb.max - sc.aabb.min) / float(n);
