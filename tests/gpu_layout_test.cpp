@@ -288,7 +288,9 @@ const std::vector<Mirror>& mirrors() {
         mirror<SlicePush>(
             "Push", {"trace", "discretize"},
             {SDFPRUNE_MEMBER(SlicePush, first), SDFPRUNE_MEMBER(SlicePush, count),
-             SDFPRUNE_MEMBER(SlicePush, stack_threads), SDFPRUNE_MEMBER(SlicePush, base)},
+             SDFPRUNE_MEMBER(SlicePush, stack_threads), SDFPRUNE_MEMBER(SlicePush, base),
+             SDFPRUNE_MEMBER(SlicePush, full_tree_pass), SDFPRUNE_MEMBER(SlicePush, full_tree_fits),
+             SDFPRUNE_MEMBER(SlicePush, deferred_capacity), SDFPRUNE_MEMBER(SlicePush, pad)},
             Scope::kPush),
     };
     return table;

@@ -358,6 +358,20 @@ void expect_similar(const Image& a, const Image& b, const std::string& what) {
     EXPECT_LE(double(differ), 0.002 * double(a.rgb.size() / 3)) << differ << " pixels differ";
 }
 
+// The deepest evaluation stack any finest cell's tape needs (a primitive pushes a value, an
+// operator pops two and pushes one), worked out on the host from the tapes read back.
+uint32_t deepest_finest_stack(const Scene& sc, const gpu::Grid& grid) {
+    uint32_t deepest = 0;
+    grid.for_each_finest_cell([&](uint64_t, const gpu::Grid::CellContents& c) {
+        uint32_t depth = 0;
+        for (uint32_t w : c.tape) {
+            depth = sc.is_primitive(math::tape_node(w)) ? depth + 1 : depth - 1;
+            deepest = std::max(deepest, depth);
+        }
+    });
+    return deepest;
+}
+
 TEST(Gpu, RenderMatchesCpu) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     RandomSceneSpec spec;
@@ -389,6 +403,8 @@ TEST(Gpu, RenderMatchesCpu) {
                 EXPECT_NEAR(cs.hit_fraction, gs.hit_fraction, 1e-3);
                 EXPECT_NEAR(cs.steps_avg, gs.steps_avg, 0.01 * cs.steps_avg);
                 EXPECT_GT(gs.hit_fraction, 0.0);
+                // Stacks for the deepest finest tape, 4 words a value.
+                EXPECT_EQ(gs.stack_words, 4u * deepest_finest_stack(sc, gpu));
             }
         }
 }
@@ -420,6 +436,72 @@ TEST(Gpu, DiscretizeMatchesCpu) {
         EXPECT_LE(discretize_mismatches(cpu, *dev, gpu, n),
                   exact_device(*dev) ? 0u : size_t(n) * n * n / 100)
             << "n = " << n;
+}
+
+// A right-deep chain of 3025 spheres on a slab needs a 3026-value stack on the full tree, but
+// only tens on the finest cells' tapes (the slab, innermost in the chain, decides every far
+// sphere away): the kernels' stacks are sized from those, and the images and samples still
+// equal the CPU's. The box's top face cuts through the spheres, so rays entering the box inside
+// one hit at once, and about half of those hit points round to just outside the box, where the
+// CPU (PrunedField::tape_at) uses the full tree: those pixels go through the full-tree pass.
+TEST(Gpu, StacksAreSizedFromThePrunedTapes) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    SceneBuilder b;
+    Shape chain = b.box(vec3(2.2f, 2.2f, 0.2f)).translated(vec3(0, 0, -0.1f));
+    constexpr uint32_t kSide = 55, kChain = kSide * kSide;
+    for (uint32_t i = 0; i < kChain; ++i) {
+        const vec3 at(-1 + 2 * float(i % kSide) / kSide, -1 + 2 * float(i / kSide) / kSide, 0);
+        chain = smooth_union(b.sphere(0.03f).translated(at), chain, 0.02f);
+    }
+    const Scene sc = b.build(chain, Aabb{vec3(-1.2f, -1.2f, -0.3f), vec3(1.2f, 1.2f, 0.02f)});
+    ASSERT_EQ(sc.max_stack, kChain + 1);
+    PruneOptions o;
+    o.resolution = 32;
+    const PrunedGrid cpu = prune(sc, o);
+    const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+    const bool exact = exact_device(*dev);
+    expect_matches_cpu(sc, cpu, gpu, *dev, "chain of 3025 in a cut box");
+    const uint32_t deepest = deepest_finest_stack(sc, gpu);
+    ASSERT_GT(deepest, 1u);
+
+    RenderOptions ro;
+    ro.width = 96;
+    ro.height = 64;
+    ro.camera = orbit_camera(sc.aabb, 0, 0, 0, 40);  // looking down -z, at the cut face
+    RenderStats cs, gs;
+    const Image a = render(cpu, ro, &cs);
+    const Image image = gpu::render(*dev, gpu, ro, &gs);
+    if (exact)
+        EXPECT_TRUE(a.rgb == image.rgb) << "the image differs from the CPU's";
+    else
+        expect_similar(a, image, "chain of 3025");
+    EXPECT_EQ(cs.steps_avg, gs.steps_avg);
+    EXPECT_GT(gs.hit_fraction, 0.05);
+    // 4 words a value, for the deepest finest tape: far below the full tree's 3026 values.
+    EXPECT_EQ(gs.stack_words, 4u * deepest);
+    EXPECT_LT(gs.stack_words * 20, 4u * sc.max_stack) << "stack of " << gs.stack_words << " words";
+    EXPECT_GT(gs.full_tree_pixels, 0u) << "no pixel went through the full-tree pass";
+
+    // A deferred list of 8 items overflows: each chunk runs again with a longer one.
+    setenv("SDFPRUNE_VULKAN_DEFERRED_LIST", "8", 1);
+    RenderStats short_list;
+    const Image again = gpu::render(*dev, gpu, ro, &short_list);
+    unsetenv("SDFPRUNE_VULKAN_DEFERRED_LIST");
+    EXPECT_TRUE(again.rgb == image.rgb);
+    EXPECT_EQ(short_list.full_tree_pixels, gs.full_tree_pixels);
+
+    const uint32_t n = 24;
+    std::vector<float> want(size_t(n) * n * n), got(want.size());
+    discretize_pruned(cpu, n, want);
+    gpu::DiscretizeStats ds;
+    gpu::discretize(*dev, gpu, n, got, &ds);
+    EXPECT_EQ(ds.stack_words, gs.stack_words);
+    EXPECT_EQ(ds.full_tree_samples, 0u);  // sample centres lie inside the box
+    size_t bad = 0;
+    for (size_t i = 0; i < want.size(); ++i)
+        bad += exact ? (want[i] == got[i] ? 0 : 1)
+                     : (std::fabs(want[i] - got[i]) <= 1e-6f * (1 + std::fabs(want[i])) ? 0 : 1);
+    EXPECT_LE(bad, exact ? 0u : want.size() / 100);
 }
 
 // A device whose shaders address at most 1 MiB of one buffer: images and grids come back in

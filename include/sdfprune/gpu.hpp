@@ -30,6 +30,7 @@ struct GpuError : std::runtime_error {
 
 class Context;
 class DeviceGrid;
+struct DiscretizeStats;
 
 // True when this build includes the Vulkan backend.
 bool built_with_vulkan();
@@ -119,7 +120,7 @@ class Grid {
   private:
     friend Grid prune(Device&, const Scene&, const PruneOptions&);
     friend Image render(Device&, const Grid&, const RenderOptions&, RenderStats*);
-    friend void discretize(Device&, const Grid&, uint32_t, std::span<float>, double*);
+    friend void discretize(Device&, const Grid&, uint32_t, std::span<float>, DiscretizeStats*);
     Grid();
     std::unique_ptr<DeviceGrid> impl_;
 };
@@ -129,12 +130,27 @@ class Grid {
 Grid prune(Device& device, const Scene& scene, const PruneOptions& options = {});
 
 // Sphere tracing (primary + shadow ray) on the device; stats->trace_ms is GPU time.
+// Each thread's evaluation stack is sized from the grid's finest tapes (stats->stack_words),
+// not from the full tree. The few pixels that need the full tree (a hit point outside the grid
+// or in a far-field cell, as PrunedField::tape_at on the CPU) are traced again in a second
+// pass with full-depth stacks and as few threads as need them (stats->full_tree_pixels); it
+// throws GpuError only when not even one thread's full-depth stack fits the device.
 Image render(Device& device, const Grid& grid, const RenderOptions& options,
              RenderStats* stats = nullptr);
 
-// The pruned field at the centres of an n³ grid over the scene's AABB, as discretize_pruned;
-// *gpu_ms (if given) receives the GPU time.
+// What discretize did.
+struct DiscretizeStats {
+    double gpu_ms = 0;
+    // 32-bit words of evaluation stack per thread, sized from the grid's finest tapes.
+    uint64_t stack_words = 0;
+    // Samples outside the grid (only by rounding), evaluated on the full tree in a second
+    // pass with full-depth stacks (see render).
+    uint64_t full_tree_samples = 0;
+};
+
+// The pruned field at the centres of an n³ grid over the scene's AABB, as discretize_pruned,
+// with per-thread stacks sized as render's; *stats (if given) receives what it did.
 void discretize(Device& device, const Grid& grid, uint32_t n, std::span<float> out,
-                double* gpu_ms = nullptr);
+                DiscretizeStats* stats = nullptr);
 
 }  // namespace sdfprune::gpu

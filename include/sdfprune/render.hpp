@@ -62,13 +62,18 @@ struct RenderStats {
     double evals_avg = 0;     // node evaluations per pixel (steps, normal and color)
     double hit_fraction = 0;  // pixels whose primary ray hit the surface
     double evals_max = 0;
+    // Vulkan only (0 on the CPU): the 32-bit words of evaluation stack each thread of the
+    // tracing kernel held (4 per value: the value and a color), sized from the finest cells'
+    // tapes; and the pixels traced again with stacks deep enough for the full tree because
+    // their hit point or its normal needed it (gpu.hpp, render).
+    uint64_t stack_words = 0;
+    uint64_t full_tree_pixels = 0;
 };
 
 // On the pruned grid (grid.scene() is the scene).
 Image render(const PrunedGrid& grid, const RenderOptions& options, RenderStats* stats = nullptr);
 // Naive: the full tree at every step.
-Image render_naive(const Scene& scene, const RenderOptions& options,
-                   RenderStats* stats = nullptr);
+Image render_naive(const Scene& scene, const RenderOptions& options, RenderStats* stats = nullptr);
 
 // The primary ray through the centre of pixel (x, y) of the image `options` describe (its size
 // and camera), traced on the pruned grid: whether it hits the surface, where, and the primitive

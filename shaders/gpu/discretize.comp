@@ -1,11 +1,13 @@
 #version 450
 // discretize.comp — the pruned field at the centres of an n³ grid over the AABB, one value per
 // thread: the finest cell's tape at the centre, or its far-field constant
-// (PrunedGrid::eval and discretize_pruned).
+// (PrunedGrid::eval and discretize_pruned); a centre outside the grid (only by rounding) gets
+// the full tree's value, in the full-tree pass (slice.glsl).
 #extension GL_GOOGLE_include_directive : require
 #define SCENE_STACK_BINDING 8
 #include "scene.glsl"
 #include "grid.glsl"
+#include "slice.glsl"
 
 layout(local_size_x = 64) in;
 
@@ -18,13 +20,10 @@ struct DiscretizeParams {
 layout(std430, binding = 6) readonly buffer DiscretizeParamBlock { DiscretizeParams prm; };
 layout(std430, binding = 7) writeonly buffer Values { float values[]; };  // from index base
 
-// One slice per dispatch: values [first, first + count), one per thread.
-layout(push_constant) uniform Push { uint first, count, stack_threads, base; } pc;
-
 void main() {
     uint tid = gl_GlobalInvocationID.x;
     if (tid >= pc.count) return;
-    uint index = pc.first + tid;  // (z·n + y)·n + x
+    uint index = slice_item(tid);  // (z·n + y)·n + x
     uint n = prm.n;
     uvec3 i = uvec3(index % n, (index / n) % n, index / (n * n));
     GridParams g = prm.grid;
@@ -33,7 +32,11 @@ void main() {
     Located at;
     float v;
     if (!locate(g, p, at)) {
-        v = eval_tape(0u, p, tid, pc.stack_threads);
+        if (!stack_holds(kFullTreeTape)) {
+            defer_item(index);
+            return;
+        }
+        v = eval_tape(kFullTreeTape, p, tid, pc.stack_threads);
     } else if (at.c.tape == kFarField) {
         v = far_field_constant_at(g, at);
     } else {

@@ -21,6 +21,7 @@ layout(std430, binding = 1) readonly buffer Params { PrimitiveParams params[]; }
 layout(std430, binding = 2) readonly buffer Extras { PrimitiveExtra extras[]; };
 // Tapes as [length, primitives, words...]; the full tree's tape is at offset 0.
 layout(std430, binding = 3) buffer Pool { uint pool[]; };
+const uint kFullTreeTape = 0u;
 
 #define kInfinity uintBitsToFloat(0x7f800000u)
 

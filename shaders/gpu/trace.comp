@@ -2,11 +2,14 @@
 // trace.comp — sphere tracing on the pruned grid, one pixel per thread: a primary ray, the
 // tetrahedron-stencil normal, the blended color, and a shadow ray. Mirrors march() and
 // trace_image() in src/render/trace.cpp; the host finishes the image (background, sRGB,
-// heatmap) exactly as the CPU tracer does.
+// heatmap) exactly as the CPU tracer does. A pixel whose hit point or normal needs the full
+// tree (as the CPU's PrunedField::tape_at gives it) is finished in the full-tree pass
+// (slice.glsl).
 #extension GL_GOOGLE_include_directive : require
 #define SCENE_STACK_BINDING 8
 #include "scene.glsl"
 #include "grid.glsl"
+#include "slice.glsl"
 
 layout(local_size_x = 64) in;
 
@@ -29,9 +32,6 @@ struct Pixel {
 layout(std430, binding = 6) readonly buffer TraceParamBlock { TraceParams prm; };
 layout(std430, binding = 7) writeonly buffer Pixels { Pixel pixels[]; };  // from index base
 
-// One slice of the image per dispatch: pixels [first, first + count), one per thread.
-layout(push_constant) uniform Push { uint first, count, stack_threads, base; } pc;
-
 
 bool ray_box(vec3 o, vec3 inv_dir, vec3 lo, vec3 hi, out float t0, out float t1) {
     t0 = 0.0;
@@ -50,10 +50,23 @@ bool ray_box(vec3 o, vec3 inv_dir, vec3 lo, vec3 hi, out float t0, out float t1)
 }
 
 uint g_evals = 0u, g_steps = 0u;
+// Set when the pixel needs a tape this pass's stack cannot hold (stack_holds): its values from
+// then on are meaningless, and the pixel is deferred to the full-tree pass.
+bool g_deferred = false;
+
+// The value of `tape` at p, counted in g_evals; 0 and g_deferred set if the stack cannot hold
+// the tape's evaluation.
+float value_of(uint tape, vec3 p) {
+    if (!stack_holds(tape)) {
+        g_deferred = true;
+        return 0.0;
+    }
+    g_evals += pool[tape];
+    return eval_tape(tape, p, gl_GlobalInvocationID.x, pc.stack_threads);
+}
 
 float march(vec3 o, vec3 dir, float t0, float t1, uint max_steps) {
     GridParams g = prm.grid;
-    uint tid = gl_GlobalInvocationID.x;
     vec3 inv_dir = vec3(1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z);
     // the octant the ray heads into: which 4 bits of a far-field cell's word are its clearance
     // (clearance_in, prune.hpp)
@@ -65,7 +78,7 @@ float march(vec3 o, vec3 dir, float t0, float t1, uint max_steps) {
     for (uint step = 0u; step < max_steps && t <= t1; ++step) {
         ++g_steps;
         precise vec3 p = min(max(o + dir * t, g.aabb_min.xyz), g.aabb_max.xyz);
-        uint tape = 0u;  // the full tree
+        uint tape = kFullTreeTape;  // (p is clamped into the grid: only NaN finds no cell)
         bool cached = p.x >= near_lo.x && p.y >= near_lo.y && p.z >= near_lo.z &&
                       p.x <= near_hi.x && p.y <= near_hi.y && p.z <= near_hi.z;
         Located at;
@@ -96,8 +109,8 @@ float march(vec3 o, vec3 dir, float t0, float t1, uint max_steps) {
             near_lo = lo;
             near_hi = lo + size;
         }
-        g_evals += pool[tape];
-        float d = eval_tape(tape, p, tid, pc.stack_threads);
+        float d = value_of(tape, p);
+        if (g_deferred) return -1.0;
         if (d < 5e-4 * min(1.0, t)) return t;
         t += d * g.aabb_max.w;
     }
@@ -107,7 +120,7 @@ float march(vec3 o, vec3 dir, float t0, float t1, uint max_steps) {
 // The tape valid at p: its near-field cell's, else the full tree's.
 uint tape_at(vec3 p) {
     Located at;
-    if (!locate(prm.grid, p, at) || at.c.tape == kFarField) return 0u;
+    if (!locate(prm.grid, p, at) || at.c.tape == kFarField) return kFullTreeTape;
     return at.c.tape;
 }
 
@@ -115,14 +128,13 @@ float value_at(vec3 p, uint hint) {
     Located at;
     uint tape = hint;
     if (locate(prm.grid, p, at) && at.c.tape != kFarField) tape = at.c.tape;
-    g_evals += pool[tape];
-    return eval_tape(tape, p, gl_GlobalInvocationID.x, pc.stack_threads);
+    return value_of(tape, p);
 }
 
 void main() {
     uint tid = gl_GlobalInvocationID.x;
     if (tid >= pc.count) return;
-    uint index = pc.first + tid;
+    uint index = slice_item(tid);
     uint x = index % prm.width, y = index / prm.width;
     GridParams g = prm.grid;
     float tan_half = prm.eye.w, aspect = prm.forward.w, h = prm.right.w;
@@ -137,9 +149,18 @@ void main() {
     vec4 out_color = vec4(0.0);
     if (ray_box(eye, inv, g.aabb_min.xyz, g.aabb_max.xyz, t0, t1)) {
         float t = march(eye, dir, t0, t1, 1024u);
+        if (g_deferred) {
+            defer_item(index);
+            return;
+        }
         if (t >= 0.0) {
             precise vec3 p = eye + dir * t;
             uint tape = tape_at(p);
+            // The normal and color then use this tape wherever no near-field cell decides.
+            if (!stack_holds(tape)) {
+                defer_item(index);
+                return;
+            }
             vec3 n = vec3(0.0);
             n = n + vec3(1.0, -1.0, -1.0) * value_at(p + vec3(1.0, -1.0, -1.0) * h, tape);
             n = n + vec3(-1.0, -1.0, 1.0) * value_at(p + vec3(-1.0, -1.0, 1.0) * h, tape);
@@ -157,6 +178,10 @@ void main() {
                 if (ray_box(so, sinv, g.aabb_min.xyz, g.aabb_max.xyz, s0, s1) &&
                     march(so, light, s0 + h, s1, 512u) >= 0.0)
                     lit = 0.0;
+                if (g_deferred) {
+                    defer_item(index);
+                    return;
+                }
             }
             vec3 c = prm.shading == 1u
                          ? n * 0.5 + 0.5

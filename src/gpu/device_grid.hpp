@@ -24,6 +24,11 @@ class DeviceGrid {
     Buffer levels;                       // GpuLevel per level
     std::vector<GpuLevel> level_info;
     uint32_t pool_words = 0;  // words in use in `pool`
+    // The deepest evaluation stack (values) of the finest cells' tapes, the only pruned tapes
+    // the tracing and discretizing kernels evaluate: it sizes their per-thread stacks. The
+    // pruning steps' own figure for the finest level after refinement (GpuCounters::max_depth:
+    // each tape written or shared adds its depth as the steps walk it).
+    uint32_t finest_stack_depth = 1;
     GpuGridParams grid_params() const;
 };
 

@@ -78,10 +78,12 @@ struct DiscretizeParams {
     vec4 sample_size;
     uint32_t n, pad0, pad1, pad2;
 };
-// trace.comp and discretize.comp: Push. Items [first, first + count) of a slice, written from
-// index `base` of the output buffer.
+// trace.comp and discretize.comp: Push (slice.glsl). Items [first, first + count) of a slice,
+// written from index `base` of the output buffer; full_tree_pass 1 takes them from the deferred
+// list instead (slice.glsl says how the two passes share the work).
 struct SlicePush {
     uint32_t first, count, stack_threads, base;
+    uint32_t full_tree_pass, full_tree_fits, deferred_capacity, pad;
 };
 
 static_assert(sizeof(GpuNode) == 16 && sizeof(GpuPrimitiveExtra) == 48);
@@ -91,6 +93,6 @@ static_assert(sizeof(GpuBlock) == 16 && sizeof(GpuLevel) == 16 && sizeof(GpuGrid
 static_assert(sizeof(GpuCounters) == 48);
 static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) <= 128);
 static_assert(sizeof(TraceParams) == 160 && sizeof(DiscretizeParams) == 96);
-static_assert(sizeof(GpuPixel) == 32 && sizeof(SlicePush) == 16);
+static_assert(sizeof(GpuPixel) == 32 && sizeof(SlicePush) == 32);
 
 }  // namespace sdfprune::gpu

@@ -394,11 +394,15 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                 ctx.begin();
                 for (Step& s : steps) {
                     // The longest tape and deepest stack read back: the cells' (the next
-                    // parents'), not the octants'.
+                    // parents'), not the octants'; and after refinement, the refined cells'
+                    // deepest stack (what the tracing kernels' stacks are sized by; every
+                    // near-field cell's refinement adds its tape's depth).
                     if (s.push.mode == 2) {
                         ctx.fill(counters, 0, offsetof(GpuCounters, max_len), 4);
                         ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
                     }
+                    if (s.push.mode == 3)
+                        ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
                     record_step(s);
                 }
                 if (expand) {
@@ -476,6 +480,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     ctx.destroy(blocks);
     ctx.destroy(scratch);
     ctx.destroy(octant_pool);
+    g.finest_stack_depth = max_depth;  // the last level's: the finest cells' (refined)
 
     // All levels' cells in one buffer, for the lookups of the tracing and discretizing kernels.
     uint64_t cell_total = 0;

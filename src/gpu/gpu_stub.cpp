@@ -49,7 +49,7 @@ Grid prune(Device&, const Scene&, const PruneOptions&) {
 Image render(Device&, const Grid&, const RenderOptions&, RenderStats*) {
     missing();
 }
-void discretize(Device&, const Grid&, uint32_t, std::span<float>, double*) {
+void discretize(Device&, const Grid&, uint32_t, std::span<float>, DiscretizeStats*) {
     missing();
 }
 

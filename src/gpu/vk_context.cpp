@@ -48,8 +48,8 @@ const KernelCode kKernels[] = {
     {kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 11, uint32_t(kPruneWide), true},
     {kExpandSpv, sizeof(kExpandSpv), 4},
     {kCellInfoSpv, sizeof(kCellInfoSpv), 3},
-    {kTraceSpv, sizeof(kTraceSpv), 9},
-    {kDiscretizeSpv, sizeof(kDiscretizeSpv), 9},
+    {kTraceSpv, sizeof(kTraceSpv), 10},
+    {kDiscretizeSpv, sizeof(kDiscretizeSpv), 10},
 };
 static_assert(std::size(kKernels) == size_t(KernelId::kCount));
 

@@ -47,8 +47,10 @@ void add_discretize(CLI::App& app, std::vector<Command>& commands) {
              const Prepared p = prepare(args->scene, po);
              const auto t0 = std::chrono::steady_clock::now();
              double eval_ms = 0;
+             gpu::DiscretizeStats gpu_stats;
              if (p.device_grid) {
-                 gpu::discretize(*p.device, *p.device_grid, n, values, &eval_ms);
+                 gpu::discretize(*p.device, *p.device_grid, n, values, &gpu_stats);
+                 eval_ms = gpu_stats.gpu_ms;
              } else {
                  Progress bar("discretizing", o.quiet);
                  const auto cb = [&bar](double f) { bar.update(f); };
@@ -102,7 +104,10 @@ void add_discretize(CLI::App& app, std::vector<Command>& commands) {
                          .add("refine", po.prune.refine)
                          .add("near_field_cells", s->near_field_cells);
                  }
-                 if (p.device) j.add("device", p.device->name());
+                 if (p.device)
+                     j.add("device", p.device->name())
+                         .add("stack_words", gpu_stats.stack_words)
+                         .add("full_tree_samples", gpu_stats.full_tree_samples);
                  std::printf("%s\n", j.str().c_str());
              }
              return 0;

@@ -105,7 +105,10 @@ void add_render(CLI::App& app, std::vector<Command>& commands) {
                      .add("evals_avg", st.evals_avg)
                      .add("hit_fraction", st.hit_fraction);
                  if (prep.stats()) j.add("grid", prep.stats()->grid);
-                 if (prep.device) j.add("device", prep.device->name());
+                 if (prep.device)
+                     j.add("device", prep.device->name())
+                         .add("stack_words", st.stack_words)
+                         .add("full_tree_pixels", st.full_tree_pixels);
                  std::printf("%s\n", j.str().c_str());
              } else if (!a->app.quiet) {
                  std::printf(
