@@ -3,14 +3,16 @@
 # stdout): the paper's Table 1 columns (T_p, T_s, T_d, M_p) for molecule, trees and the 14
 # generated kinds on the Vulkan device, beside the paper's RTX 4060 figures and the same
 # machine's CPU backend (all its cores). Writes one JSON object per scene and device to
-# RESULTS.json (default bench/gpu-results.json): device, scene, prune_ms, prune_lipschitz_ms,
+# RESULTS.json (default BUILD_DIR/gpu-results.json): device, scene, prune_ms, prune_lipschitz_ms,
 # wall_ms, trace_ms, prune_trace_ms, discretize_ms, prune_peak_bytes, cpu_prune_ms, cpu_threads,
-# stats_equal. A note instead when there is no Vulkan device. Called by bench/targets.sh.
-# SDFPRUNE_GPU_SCENES limits the scenes (names, space-separated).
+# stats_equal. bench/gpu-results.json holds a real GPU's, made with
+# `bash bench/gpu.sh build bench/gpu-results.json`. A note instead when there is no Vulkan
+# device. Called by bench/targets.sh. SDFPRUNE_GPU_SCENES names the scenes (space-separated);
+# on lavapipe, which runs on the CPU, the default is molecule, trees and fluid.
 set -euo pipefail
 build=${1:-build}
 here=$(cd "$(dirname "$0")" && pwd)
-results=${2:-$here/gpu-results.json}
+results=${2:-$build/gpu-results.json}
 bin="$build/sdfprune"
 scenes=${SDFPRUNE_SCENES:-$here/../../shared/scenes}
 tmp=$(mktemp -d)
@@ -25,8 +27,12 @@ if ! "$bin" stats builtin:sphere --grid 8 --backend vulkan >/dev/null 2>&1; then
   exit 0
 fi
 
-kinds=${SDFPRUNE_GPU_SCENES:-"molecule trees character raccoon console gameboy car train-station
-  camera car-chase city crowd monument fluid"}
+kinds="molecule trees character raccoon console gameboy car train-station camera car-chase city
+  crowd monument fluid"
+if "$bin" stats builtin:sphere --grid 8 --backend vulkan --json | tail -n 1 | grep -q llvmpipe; then
+  kinds="molecule trees fluid"
+fi
+kinds=${SDFPRUNE_GPU_SCENES:-$kinds}
 threads=$(nproc)
 : >"$tmp/runs.jsonl"
 # One scene: each command's JSON line (or its error) into runs.jsonl, tagged with what ran.
@@ -46,7 +52,7 @@ run() {  # run NAME WHAT COMMAND...
 for k in $kinds; do
   case $k in
     molecule | trees) f="$scenes/$k.json" ;;
-    *) f="$tmp/$k.json"; "$bin" generate "$k" -o "$f" >/dev/null ;;
+    *) f="$tmp/$k.json"; "$bin" generate "$k" -o "$f" >/dev/null || continue ;;
   esac
   [ -f "$f" ] || { log "$k: no scene file $f"; continue; }
   log "vulkan $k"
