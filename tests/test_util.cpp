@@ -1,13 +1,45 @@
-// test_util.cpp — running the CLI from tests.
+// test_util.cpp — running the CLI from tests, and each test process's own temporary directory.
 #include "test_util.hpp"
 
+#include <stdlib.h>
 #include <sys/wait.h>
 
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <system_error>
 
 namespace sdfprune::test {
+namespace {
+
+// The files tests write (under ::testing::TempDir(), which reads TEST_TMPDIR) go to a directory
+// of the test process's own, removed with everything in it when the process's tests end, so that
+// no run leaves files behind in the system's temporary directory.
+class OwnTempDir : public ::testing::Environment {
+  public:
+    void SetUp() override {
+        namespace fs = std::filesystem;
+        std::error_code ec;
+        std::string pattern = (fs::temp_directory_path(ec) / "sdfprune_tests_XXXXXX").string();
+        if (ec || ::mkdtemp(pattern.data()) == nullptr) return;  // TempDir() stays as it was
+        dir_ = pattern;
+        ::setenv("TEST_TMPDIR", dir_.c_str(), 1);
+    }
+    void TearDown() override {
+        if (dir_.empty()) return;
+        std::error_code ec;
+        std::filesystem::remove_all(dir_, ec);
+    }
+
+  private:
+    std::string dir_;
+};
+
+[[maybe_unused]] const ::testing::Environment* const own_temp_dir =
+    ::testing::AddGlobalTestEnvironment(new OwnTempDir);
+
+}  // namespace
 
 CliResult run_cli(const std::string& args, const std::string& env) {
     const std::string base = ::testing::TempDir() + "sdfprune_cli_" + std::to_string(::getpid());
