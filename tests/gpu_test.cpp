@@ -305,6 +305,25 @@ TEST(Gpu, TopLevelsRunWide) {
     expect_matches_cpu(sc, prune(sc, o), gpu, *dev, "demo 64³");
 }
 
+// The host's share of a pruning call is accounted: every level's submission among the host's
+// (which also counts uploads and readbacks), buffers made, and their times within wall_ms.
+TEST(Gpu, HostShareIsAccounted) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Scene sc = builtin_scene("demo");
+    PruneOptions o;
+    o.resolution = 32;
+    const gpu::Grid g = gpu::prune(*dev, sc, o);
+    const gpu::DevicePruneStats& st = g.stats();
+    EXPECT_GE(st.host_submissions, uint64_t(st.submissions));
+    EXPECT_GT(st.host_buffers, 0u);
+    EXPECT_GT(st.host_submit_ms, 0.0);
+    EXPECT_LE(st.host_buffer_ms + st.host_submit_ms, st.wall_ms);
+    // A second call counts its own share, not the first's too.
+    const gpu::Grid again = gpu::prune(*dev, sc, o);
+    EXPECT_EQ(again.stats().host_submissions, st.host_submissions);
+    EXPECT_EQ(again.stats().host_buffers, st.host_buffers);
+}
+
 TEST(Gpu, DeepChainPrunes) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     // Right-deep chains: the evaluation stack is as deep as the chain, the tapes are long.
@@ -463,8 +482,9 @@ TEST(Gpu, DiscretizeMatchesCpu) {
     const PrunedGrid cpu = prune(sc, o);
     const gpu::Grid gpu = gpu::prune(*dev, sc, o);
     for (uint32_t n : {32u, 20u, 48u}) {
-        if (exact_device(*dev))
+        if (exact_device(*dev)) {
             EXPECT_EQ(discretize_mismatches(cpu, *dev, gpu, n), 0u) << "n = " << n;
+        }
         EXPECT_EQ(discretize_violations(sc, o, *dev, gpu, n), 0u) << "n = " << n;
     }
 }

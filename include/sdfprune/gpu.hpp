@@ -91,6 +91,12 @@ struct DevicePruneStats : PruneStats {
     double wall_ms = 0;
     uint32_t pool_grows = 0;
     uint32_t submissions = 0;
+    // The host's share of wall_ms: buffers created (device memory allocated; staging buffers
+    // of uploads and readbacks too) and their time, and every submission's (uploads and
+    // readbacks included) from the end of its recording to its results being back, which
+    // holds the GPU's time.
+    uint64_t host_buffers = 0, host_submissions = 0;
+    double host_buffer_ms = 0, host_submit_ms = 0;
     // Whether the wide steps used subgroup operations (the device has them and
     // SDFPRUNE_VULKAN_SUBGROUPS is not 0), else shared memory.
     bool subgroups = false;

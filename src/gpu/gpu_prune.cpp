@@ -40,6 +40,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     Context& ctx = device.context();
     ctx.reset_peak();
     const uint64_t live_before = ctx.bytes_live();
+    const Context::HostTime host_before = ctx.host_time();
     Grid grid;
     grid.impl_ = std::make_unique<DeviceGrid>(ctx, sc);
     DeviceGrid& g = *grid.impl_;
@@ -523,6 +524,11 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     st.wall_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start)
             .count();
+    const Context::HostTime& host = ctx.host_time();
+    st.host_buffers = host.buffers - host_before.buffers;
+    st.host_submissions = host.submissions - host_before.submissions;
+    st.host_buffer_ms = host.buffer_ms - host_before.buffer_ms;
+    st.host_submit_ms = host.submit_ms - host_before.submit_ms;
 
     // Statistics (not timed): per cell (length, primitives) or far-field, level by level.
     const uint32_t N = res.back();

@@ -2,6 +2,7 @@
 #include "vk_context.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cstdlib>
 #include <cstring>
 
@@ -314,7 +315,22 @@ uint32_t Context::memory_type(uint32_t bits, bool host_visible) const {
     throw GpuError("Vulkan: no suitable memory type");
 }
 
+namespace {
+// Adds one call and its host time to a tally (Context::HostTime) when it ends, however it ends.
+struct HostTally {
+    uint64_t& calls;
+    double& ms;
+    std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
+    ~HostTally() {
+        ++calls;
+        ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                  .count();
+    }
+};
+}  // namespace
+
 Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
+    const HostTally tally{host_.buffers, host_.buffer_ms};
     Buffer b;
     b.size = std::max<uint64_t>(bytes, 16);
     b.size = (b.size + 15) & ~uint64_t(15);
@@ -484,6 +500,7 @@ double Context::submit() {
 }
 
 double Context::submit_part() {
+    const HostTally tally{host_.submissions, host_.submit_ms};
     if (timestamps_)
         vkCmdWriteTimestamp(cmd_, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps_, 1);
     check(vkEndCommandBuffer(cmd_), "vkEndCommandBuffer");

@@ -81,6 +81,15 @@ class Context {
     uint64_t bytes_peak() const { return peak_; }
     void reset_peak() { peak_ = live_; }
 
+    // Where the host's time goes, summed since the context was made: buffers created (device
+    // memory allocated, mapped), and submissions (uploads and readbacks too) with the host's
+    // wall time from ending the recording to the results being back.
+    struct HostTime {
+        uint64_t buffers = 0, submissions = 0;
+        double buffer_ms = 0, submit_ms = 0;
+    };
+    const HostTime& host_time() const { return host_; }
+
     // Recording: begin(), any number of dispatch()/copy()/fill(), then submit() runs them in
     // order (each waits for the previous one's writes) and returns the GPU milliseconds they took.
     // Long recordings are submitted in parts on the way (kMaxDispatches at a time).
@@ -136,6 +145,7 @@ class Context {
     uint64_t live_ = 0, peak_ = 0;
     uint32_t sets_used_ = 0;
     double carried_ms_ = 0;  // GPU time of the parts already submitted
+    HostTime host_;
     bool recording_ = false;
 };
 

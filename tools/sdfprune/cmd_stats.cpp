@@ -218,6 +218,10 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          .add("submissions", device_grid->stats().submissions)
                          .add("subgroups", device_grid->stats().subgroups)
                          .add("pool_grows", device_grid->stats().pool_grows)
+                         .add("host_buffers", device_grid->stats().host_buffers)
+                         .add("host_buffer_ms", device_grid->stats().host_buffer_ms)
+                         .add("host_submissions", device_grid->stats().host_submissions)
+                         .add("host_submit_ms", device_grid->stats().host_submit_ms)
                          .add("gpu_steps", steps);
                  }
                  if (args->edit_bench > 0)
@@ -246,12 +250,16 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
              std::printf("  tape length (near-field)  %.2f nodes avg, %u max (full tree: %u)\n",
                          s.tape_avg, s.tape_max, sc.size());
              if (device) {
+                 const gpu::DevicePruneStats& ds = device_grid->stats();
                  std::printf(
                      "  pruning on %s: %.1f ms GPU (%.1f ms wall, %u submissions, %u pool "
-                     "grows), peak %.1f MB device memory\n",
-                     device->name().c_str(), s.prune_ms, device_grid->stats().wall_ms,
-                     device_grid->stats().submissions, device_grid->stats().pool_grows,
-                     double(s.prune_peak_bytes) / 1e6);
+                     "grows), peak %.1f MB device memory\n"
+                     "    host: %llu buffers made in %.1f ms, %llu submissions waited for in "
+                     "%.1f ms\n",
+                     device->name().c_str(), s.prune_ms, ds.wall_ms, ds.submissions,
+                     ds.pool_grows, double(s.prune_peak_bytes) / 1e6,
+                     (unsigned long long)ds.host_buffers, ds.host_buffer_ms,
+                     (unsigned long long)ds.host_submissions, ds.host_submit_ms);
                  static const char* const kModes[] = {"cells", "octants", "cells from octants",
                                                       "refinement"};
                  for (const gpu::GpuStepShape& st : device_grid->stats().steps)
