@@ -19,7 +19,9 @@ tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 log() { echo "bench: $*" >&2; }
 
-if ! "$bin" stats builtin:sphere --grid 8 --backend vulkan >/dev/null 2>&1; then
+# The device, probed once: its stats line, or nothing where there is none.
+probe=$("$bin" stats builtin:sphere --grid 8 --backend vulkan --json 2>/dev/null | tail -n 1) || probe=""
+if [ -z "$probe" ]; then
   echo
   echo "## Vulkan backend"
   echo
@@ -29,7 +31,7 @@ fi
 
 kinds="molecule trees character raccoon console gameboy car train-station camera car-chase city
   crowd monument fluid"
-if "$bin" stats builtin:sphere --grid 8 --backend vulkan --json | tail -n 1 | grep -q llvmpipe; then
+if grep -q llvmpipe <<<"$probe"; then
   kinds="molecule trees fluid"
 fi
 kinds=${SDFPRUNE_GPU_SCENES:-$kinds}

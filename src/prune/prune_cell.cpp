@@ -243,7 +243,9 @@ inline void evaluate_any_lanes(const Scene& sc, std::span<const uint32_t> tape, 
     evaluate_any_lanes(sc, tape, c, half, radius, bounds, out, s, only);
 }
 
-bool isa_supported(LaneIsa isa) {
+}  // namespace
+
+bool lane_isa_supported(LaneIsa isa) {
 #if SDFPRUNE_X86_LANES
     __builtin_cpu_init();
     if (isa == LaneIsa::kAvx2) return __builtin_cpu_supports("avx2");
@@ -254,9 +256,11 @@ bool isa_supported(LaneIsa isa) {
     return isa == LaneIsa::kBaseline;
 }
 
+namespace {
+
 LaneIsa best_lane_isa() {
     for (const LaneIsa isa : {LaneIsa::kAvx512, LaneIsa::kAvx2})
-        if (isa_supported(isa)) return isa;
+        if (lane_isa_supported(isa)) return isa;
     return LaneIsa::kBaseline;
 }
 
@@ -290,12 +294,8 @@ LaneIsa lane_isa() {
     return LaneIsa(isa);
 }
 
-bool lane_isa_supported(LaneIsa isa) {
-    return isa_supported(isa);
-}
-
 void set_lane_isa(LaneIsa isa) {
-    if (!isa_supported(isa))
+    if (!lane_isa_supported(isa))
         throw std::invalid_argument("set_lane_isa: this processor lacks the instruction set");
     g_lane_isa.store(int(isa), std::memory_order_relaxed);
 }
@@ -550,10 +550,11 @@ void compact_lanes(const Scene& sc, std::span<const uint32_t> tape, const uint32
         negate[l] = uint8_t((keep & nl) | (left_wins & (negate[i] ^ nl)));
         negate[r] = uint8_t((keep & nr) | (right_wins & (negate[i] ^ nr)));
         alive[i] = uint8_t(keep);  // from here on: the lanes that emit entry i
-        if (values && (keep & ~may_decide) != 0) {  // lanes already known need no more
+        // (lanes already known to have a decidable operator need no more tests)
+        if (const uint32_t open = keep & ~may_decide; values && open != 0) {
             const float k = sc.blend[math::tape_node(tape[i])];
             for (uint32_t c = 0; c < kL; ++c)
-                if (((keep & ~may_decide) >> c & 1) != 0 &&
+                if ((open >> c & 1) != 0 &&
                     blend_may_decide(values[size_t(l) * kL + c], values[size_t(r) * kL + c], k))
                     may_decide |= 1u << c;
         }
