@@ -43,6 +43,17 @@ ParallelOptions parallel_options(const Options& o, double lo = 0, double hi = 1)
 bool parallel_chunks(uint64_t count, const ParallelOptions& o,
                      const std::function<void(uint64_t)>& fn);
 
+// parallel_chunks with chunks handed out in increasing order and an in-order epilogue:
+// commit(c) runs once for every chunk c that ran, in increasing order of c and never two at
+// once, on whichever thread finishes the chunk that completes the prefix [0, c] (so results can
+// be placed in chunk order while later chunks still run, with no barrier). A chunk not
+// committed yet waits for those before it: with chunks handed out in order, about one per
+// thread. Cancellation as parallel_chunks (the chunks before the first skipped one are
+// committed); an exception from fn or commit stops the handing out and propagates.
+bool parallel_chunks_ordered(uint64_t count, const ParallelOptions& o,
+                             const std::function<void(uint64_t)>& fn,
+                             const std::function<void(uint64_t)>& commit);
+
 // The exception type of loops with no cancel flag (ParallelOptions::cancel null): never thrown.
 struct NotCancellable {};
 
@@ -50,6 +61,14 @@ struct NotCancellable {};
 template <class Cancelled, class F>
 void parallel_for(uint64_t count, const ParallelOptions& o, const F& fn) {
     if (!parallel_chunks(count, o, std::function<void(uint64_t)>(std::cref(fn)))) throw Cancelled();
+}
+
+// parallel_chunks_ordered, throwing Cancelled() when cancelled.
+template <class Cancelled, class F, class G>
+void parallel_for_ordered(uint64_t count, const ParallelOptions& o, const F& fn, const G& commit) {
+    if (!parallel_chunks_ordered(count, o, std::function<void(uint64_t)>(std::cref(fn)),
+                                 std::function<void(uint64_t)>(std::cref(commit))))
+        throw Cancelled();
 }
 
 // Batch point queries: fn(begin, end) over chunks of 256 of [0, count), no progress or cancel.

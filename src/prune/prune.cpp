@@ -4,12 +4,12 @@
 // thread count. Children of far-field cells are not stored. Also the tape pool and the
 // statistics' totals; the grid's queries are in pruned_grid.cpp.
 //
-// Memory: a level's tapes stay in their chunks' buffers, which are the next level's parents; the
-// chunks are pruned in waves, and after each wave the parents' buffers no block left refers to
-// are freed. Finest tapes go to the pool wave by wave; coarse tapes are dropped once they have
-// served as parents (PruneOptions::coarse_tapes keeps them).
+// Memory: a level's tapes stay in their chunks' buffers, which are the next level's parents. The
+// chunks are committed in order as they finish (parallel_for_ordered): a parent buffer is freed
+// as soon as no chunk still to run refers to it, and finest tapes go to the pool chunk by chunk;
+// coarse tapes are dropped once they have served as parents (PruneOptions::coarse_tapes keeps
+// them).
 #include <tbb/enumerable_thread_specific.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <bit>
@@ -17,6 +17,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <memory>
 #include <new>
 #include <utility>
 
@@ -145,43 +146,35 @@ struct LevelBuffers {
     }
 };
 
-// The blocks of the next level: one per near-field cell of `cells` (the level just pruned, whose
-// blocks are `blocks`, f wide), in cell order, their children nf wide (nf = 0: `cells` is the
-// finest level, no blocks), each with its tape in its chunk's buffer in `outs`. Sets the cells'
-// `children`; adds to far_finest the finest cells (`below`³ each) the far-field cells cover;
-// first_block[c] = the first block whose parent is in chunk c.
-std::vector<ParentBlock> link_children(std::span<PrunedCell> cells,
-                                       std::span<const ParentBlock> blocks, uint32_t f, uint32_t nf,
-                                       const std::vector<LevelChunk>& outs, uint64_t below,
-                                       uint64_t& far_finest, std::vector<uint32_t>& first_block) {
+// The next level's blocks under the near-field cells [begin, end) of one chunk of `cells` (the
+// level just pruned, whose blocks are `blocks`, f wide), appended to `next` in cell order, their
+// children nf wide, each with its tape in the chunk's buffer `words`. Sets those cells'
+// `children`; returns the number of far-field cells among them.
+uint64_t link_chunk(std::span<PrunedCell> cells, std::span<const ParentBlock> blocks, uint32_t f,
+                    uint32_t nf, uint64_t begin, uint64_t end, const std::vector<uint32_t>& words,
+                    std::vector<ParentBlock>& next) {
     const uint64_t per_block = uint64_t(f) * f * f;
-    std::vector<ParentBlock> next;
-    first_block.assign(outs.size() + 1, 0);
-    for (uint64_t i = 0; i < cells.size(); ++i) {
+    uint64_t far = 0;
+    for (uint64_t i = begin; i < end; ++i) {
         PrunedCell& cell = cells[i];
         if (cell.tape == PrunedCell::kFarField) {
-            far_finest += below * below * below;
+            ++far;
             continue;
         }
-        if (nf == 0) continue;
         const CellCoord at = block_cell(blocks[i / per_block].origin, f, uint32_t(i % per_block));
-        const uint32_t c = uint32_t(i / kChunkCells);
         cell.children = uint32_t(next.size() * nf * nf * nf);
-        const uint32_t* header = outs[c].words.data() + cell.tape;
-        ++first_block[c + 1];
+        const uint32_t* header = words.data() + cell.tape;
         next.push_back({{at.x * nf, at.y * nf, at.z * nf}, header[0], header + 2});
     }
-    for (size_t c = 0; c + 1 < first_block.size(); ++c) first_block[c + 1] += first_block[c];
-    first_block.pop_back();
-    return next;
+    return far;
 }
 
 }  // namespace
 
 // The driver of the hierarchy: for each level, the level step (prune_level.hpp) over fixed
-// chunks of its blocks' cells in parallel waves; then the chunks' tapes are placed (finest: in
-// the pool; coarse: kept as the next level's parents) and the near-field cells become the next
-// level's blocks.
+// chunks of its blocks' cells in parallel, committed in chunk order: the chunks' tapes are placed
+// (finest: in the pool; coarse: kept as the next level's parents) and the near-field cells become
+// the next level's blocks.
 PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     const auto t0 = std::chrono::steady_clock::now();
     if (!(opt.far_field_c >= 1.0f)) throw std::invalid_argument("far-field C must be >= 1");
@@ -216,7 +209,6 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     buf.first_block = {0};
     std::vector<ParentBlock> blocks{{{0, 0, 0}, sc.size(), buf.parents[0].data() + 2}};
     buf.parent_bytes = bytes_of(buf.parents[0]);
-    const int workers = opt.threads > 0 ? opt.threads : tbb::this_task_arena::max_concurrency();
 
     const auto scratch_bytes = [&] {
         uint64_t b = 0;
@@ -245,7 +237,7 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
         std::vector<LevelChunk> outs(chunks);
 
         // Moves chunk c's tapes into the pool (or, for coarse tapes not kept, points its
-        // near-field cells to the full tree's tape).
+        // near-field cells to the full tree's tape); returns its far-field cells.
         const auto place_chunk = [&](uint32_t c, bool into_pool) {
             const uint64_t base = g.pool_.size;
             if (into_pool) {
@@ -254,65 +246,89 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                 g.pool_.append(outs[c].words);
             }
             const uint64_t end = std::min(total, uint64_t(c + 1) * kChunkCells);
+            uint64_t far = 0;
             for (uint64_t i = uint64_t(c) * kChunkCells; i < end; ++i) {
                 uint32_t& t = level.cells[i].tape;
-                if (t != PrunedCell::kFarField) t = into_pool ? uint32_t(base + t) : 0;
+                if (t != PrunedCell::kFarField)
+                    t = into_pool ? uint32_t(base + t) : 0;
+                else
+                    ++far;
             }
+            return far;
         };
         uint64_t level_bytes = bytes_of(level.cells);  // this level's cells and kept buffers
-        // Waves of chunks: enough for load balance, few enough that parents are freed early
-        // and finest buffers are few. Output does not depend on the wave size.
-        const uint32_t wave = 16 * uint32_t(std::max(1, workers));
-        for (uint32_t w0 = 0; w0 < chunks; w0 += wave) {
-            const uint32_t w1 = std::min(chunks, w0 + wave);
-            ParallelOptions po = parallel_options(opt);
-            po.progress_lo = (double(li) + double(w0) / chunks) / double(res.size());
-            po.progress_hi = (double(li) + double(w1) / chunks) / double(res.size());
-            parallel_for<PruneCancelled>(w1 - w0, po, [&](uint64_t k) {
-                const uint32_t c = uint32_t(w0 + k);
-                const uint64_t begin = uint64_t(c) * kChunkCells;
-                const uint64_t end = std::min(total, begin + kChunkCells);
-                LevelChunk& out = outs[c];
-                prune_level_step(sc, opt, geo, blocks, begin, end,
-                                 std::span(level.cells).subspan(begin, end - begin),
-                                 scratch.local(), out);
-                // Coarse buffers live on as the next level's parents: no slack.
-                if (!finest) out.words.shrink_to_fit();
-            });
-            uint64_t wave_bytes = 0;
-            for (uint32_t c = w0; c < w1; ++c) {
-                wave_bytes += bytes_of(outs[c].words);
-                add_chunk_stats(outs[c], st);
+        // Above the finest level: the next level's blocks, and per chunk the first of them
+        // whose parent is in the chunk.
+        const uint32_t nf = finest ? 0 : res[li + 1] / res[li];
+        const uint64_t below = N / level.res;
+        std::vector<ParentBlock> next;
+        std::vector<uint32_t> first_block(finest ? 0 : chunks, 0);
+        // Bytes of each chunk's buffer plus one, once done (0: not done yet).
+        const auto chunk_bytes = std::make_unique<std::atomic<uint64_t>[]>(chunks);
+        uint64_t level_peak = 0;  // the level's peak but scratch
+        // One loop over the level's chunks. Each chunk is committed in chunk order as soon as
+        // it and all before it are done, while later chunks run: its counts are added, its
+        // finest tapes go to the pool (or, above the finest level, the blocks under its cells
+        // are linked), and the parents no later chunk refers to are freed. Output does not
+        // depend on the order in which chunks finish.
+        const auto prune_chunk = [&](uint64_t k) {
+            const uint64_t begin = k * kChunkCells;
+            const uint64_t end = std::min(total, begin + kChunkCells);
+            LevelChunk& out = outs[k];
+            prune_level_step(sc, opt, geo, blocks, begin, end,
+                             std::span(level.cells).subspan(begin, end - begin), scratch.local(),
+                             out);
+            // Coarse buffers live on as the next level's parents: no slack.
+            if (!finest) out.words.shrink_to_fit();
+            chunk_bytes[k].store(bytes_of(out.words) + 1, std::memory_order_relaxed);
+        };
+        // Runs in chunk order, one at a time (parallel_for_ordered).
+        const auto commit_chunk = [&](uint64_t k) {
+            const uint64_t bytes = chunk_bytes[k].load(std::memory_order_relaxed) - 1;
+            // The chunks done after this one, waiting for their turn.
+            uint64_t waiting = 0;
+            for (uint64_t d = k + 1; d < chunks; ++d) {
+                const uint64_t b = chunk_bytes[d].load(std::memory_order_relaxed);
+                if (b == 0) break;
+                waiting += b - 1;
             }
+            level_peak =
+                std::max(level_peak, pool_bytes() + buf.parent_bytes + level_bytes + bytes +
+                                         waiting + buf.done_cells_bytes + bytes_of(blocks));
+            add_chunk_stats(outs[k], st);
             if (finest) {
-                for (uint32_t c = w0; c < w1; ++c) place_chunk(c, true);
+                far_finest += place_chunk(uint32_t(k), true);
+                std::vector<uint32_t>().swap(outs[k].words);
             } else {
-                level_bytes += wave_bytes;
-                wave_bytes = 0;
+                // The next level's blocks under this chunk (before its tapes' offsets go).
+                first_block[k] = uint32_t(next.size());
+                const uint64_t begin = k * kChunkCells, end = std::min(total, begin + kChunkCells);
+                far_finest +=
+                    below * below * below *
+                    link_chunk(level.cells, blocks, f, nf, begin, end, outs[k].words, next);
+                place_chunk(uint32_t(k), opt.coarse_tapes);
+                level_bytes += bytes;
             }
-            buf.peak =
-                std::max(buf.peak, pool_bytes() + buf.parent_bytes + level_bytes + wave_bytes +
-                                       buf.done_cells_bytes + bytes_of(blocks) + scratch_bytes());
-            if (finest)
-                for (uint32_t c = w0; c < w1; ++c) std::vector<uint32_t>().swap(outs[c].words);
-            // Free the parents that no block from the next wave on refers to.
-            buf.release_before(uint64_t(w1) * kChunkCells / per_block, blocks.size());
-        }
+            // Free the parents that no chunk after this one refers to.
+            buf.release_before((k + 1) * kChunkCells / per_block, blocks.size());
+        };
+        ParallelOptions po = parallel_options(opt);
+        po.progress_lo = double(li) / double(res.size());
+        po.progress_hi = double(li + 1) / double(res.size());
+        parallel_for_ordered<PruneCancelled>(chunks, po, prune_chunk, commit_chunk);
+        // Scratch only grows within a level: its size now bounds its size at every commit.
+        buf.peak = std::max(buf.peak, level_peak + scratch_bytes());
 
-        // Far-field cells of this level, and the next level's blocks: one per near-field cell.
-        std::vector<uint32_t> first_block;
-        std::vector<ParentBlock> next =
-            link_children(level.cells, blocks, f, finest ? 0 : res[li + 1] / res[li], outs,
-                          N / level.res, far_finest, first_block);
-        blocks.swap(next);
+        // Above the finest level, the next level's blocks (one per near-field cell, linked as
+        // the chunks were committed) become the blocks.
         if (!finest) {
-            // This level's buffers become the parents; the cells' offsets into them go.
+            blocks.swap(next);
+            // This level's buffers become the parents.
             buf.parents.clear();
             buf.parent_bytes = 0;
             buf.released = 0;
             buf.first_block.swap(first_block);
             for (uint32_t c = 0; c < chunks; ++c) {
-                place_chunk(c, opt.coarse_tapes);
                 buf.parent_bytes += bytes_of(outs[c].words);
                 buf.parents.push_back(std::move(outs[c].words));
             }

@@ -64,12 +64,16 @@ void PrunedGrid::build_shortcut() {
     shortcut_res_ = r;
     shortcut_.resize(size_t(r) * r * r);
     const uint32_t scale = resolution() / r;
-    for (uint32_t z = 0; z < r; ++z)
+    // A slice of the shortcut per chunk (disjoint writes).
+    ParallelOptions po;
+    po.threads = options_.threads;
+    parallel_for<NotCancellable>(r, po, [&](uint64_t z) {
         for (uint32_t y = 0; y < r; ++y)
             for (uint32_t x = 0; x < r; ++x) {
-                const CellRef at = descend(x * scale, y * scale, z * scale, S);
+                const CellRef at = descend(x * scale, y * scale, uint32_t(z) * scale, S);
                 shortcut_[(size_t(z) * r + y) * r + x] = at.level << kShortcutLevelShift | at.index;
             }
+    });
 }
 
 void PrunedGrid::build_clearance(const CellRange* changed) {
