@@ -361,9 +361,12 @@ bool sibling_is_near_field(const Scene& sc, std::span<const uint32_t> tape, uint
 namespace {
 
 // The S³ sub-boxes of refine_cell in visiting order, each as i | j << 10 | k << 20 (S <= 1024):
-// the middle and the corners first, where decisions and the far field fail soonest, then the
-// rest. The order changes nothing but when refine_cell may stop. Its first batch is one block
-// (for odd S the middle and 7 corners), where most cells stop (molecule and trees: about 70 %).
+// the 8 corners first, then the middle, then the rest. The order changes nothing but when
+// refine_cell may stop. Its first batch is one block, the corners, where most cells stop: where
+// an operator stays undecided is a band around a surface, near a plane across a small cell, and
+// a band that misses every corner misses their convex hull, the cell; the middle adds less (its
+// operands' values at the centre were tested before, blend_may_decide). Corners before the
+// middle: 1 % fewer instructions in trees' and molecule's pruning (callgrind).
 void sub_box_order(uint32_t S, std::vector<uint32_t>& order) {
     const uint32_t mid = S / 2, last = S - 1;
     const auto is_corner = [&](uint32_t i, uint32_t j, uint32_t k) {
@@ -371,9 +374,9 @@ void sub_box_order(uint32_t S, std::vector<uint32_t>& order) {
     };
     const auto pack = [](uint32_t i, uint32_t j, uint32_t k) { return i | j << 10 | k << 20; };
     order.clear();
-    if (!is_corner(mid, mid, mid)) order.push_back(pack(mid, mid, mid));
     for (uint32_t c = 0; c < 8; ++c)
         order.push_back(pack(c & 1 ? last : 0, c & 2 ? last : 0, c & 4 ? last : 0));
+    if (!is_corner(mid, mid, mid)) order.push_back(pack(mid, mid, mid));
     for (uint32_t b = 0; b < S * S * S; ++b) {
         const uint32_t i = b % S, j = b / S % S, k = b / (S * S);
         if (!is_corner(i, j, k) && !(i == mid && j == mid && k == mid))
