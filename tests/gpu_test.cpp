@@ -236,7 +236,8 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
 // The steps' work shapes (GpuStepShape) follow the hierarchy: per level the octants then the
 // cells from them, then the refinement; jobs are the CPU's cells and octants, lanes come in
 // teams that share a parent tape (one lane per cell or octant, in refinement per sub-box), and
-// the busiest lane walks at least one parent tape. (Teams only: SDFPRUNE_VULKAN_WIDE=0.)
+// the busiest lane walks at least one parent tape; their GPU times add up to at most the
+// pruning's. (Teams only: SDFPRUNE_VULKAN_WIDE=0.)
 TEST(Gpu, StepShapesFollowTheLevels) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = builtin_scene("demo");
@@ -273,6 +274,17 @@ TEST(Gpu, StepShapesFollowTheLevels) {
     EXPECT_EQ(steps[6].jobs, steps[5].jobs);  // every finest cell is refined
     // The root's octants walk the full tape: evaluation and compaction, and one more pass.
     EXPECT_GE(steps[0].longest_walk_words, 3ull * sc.size());
+    // The steps' GPU times are parts of the pruning's GPU time; with timestamps (every device
+    // prune_ms comes from), each step takes some.
+    double sum = 0;
+    for (const gpu::GpuStepShape& st : steps) {
+        EXPECT_GE(st.gpu_ms, 0.0);
+        if (gpu.stats().prune_ms > 0) {
+            EXPECT_GT(st.gpu_ms, 0.0);
+        }
+        sum += st.gpu_ms;
+    }
+    EXPECT_LE(sum, gpu.stats().prune_ms * 1.0001 + 1e-6);
 }
 
 // By default the top levels' steps, few jobs over long parent tapes, run wide: a workgroup

@@ -85,6 +85,9 @@ struct GpuStepShape {
     // tape in each stage plus one step per height of the scene (the operators of one height
     // after another). A bound, not a count.
     uint64_t longest_walk_words = 0;
+    // The step's GPU time (timestamps around its dispatches; 0 where the device has none), in
+    // its level's last run.
+    double gpu_ms = 0;
 };
 
 struct DevicePruneStats : PruneStats {

@@ -172,6 +172,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         uint32_t threads, groups;  // lanes that take jobs, and their workgroups
         bool wide;
         GpuStepShape shape;
+        uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
     };
     const auto plan_step = [&](uint32_t mode, uint32_t factor, uint64_t jobs, vec3 csize,
                                const Buffer& octants, const Buffer& cells, bool transient) {
@@ -320,6 +321,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     };
     // Records a step's dispatches; the pools' words in use before the level start them.
     const auto record_step = [&](Step& s) {
+        s.first_stamp = ctx.stamp();
         PrunePush push = s.push;
         push.pool_start = g.pool_words;
         for (uint64_t first = 0; first < std::max<uint64_t>(s.team_jobs, 1);
@@ -343,6 +345,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                 ++s.shape.dispatches;
                 s.shape.workgroups += s.groups;
             }
+        s.last_stamp = ctx.stamp();
     };
 
     // Each level in one submission: its steps (the octants, the cells, the refinement) and the
@@ -426,7 +429,10 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                     grow(octant_pool, octant_capacity, counter->octant_used, octant_keep);
             }
             g.pool_words = counter->pool_used;
-            for (const Step& s : steps) st.steps.push_back(s.shape);
+            for (Step& s : steps) {
+                s.shape.gpu_ms = ctx.stamp_ms(s.last_stamp) - ctx.stamp_ms(s.first_stamp);
+                st.steps.push_back(s.shape);
+            }
             return *counter;
         };
 

@@ -234,7 +234,7 @@ Context::Context() {
     if (valid_bits > 0) {
         auto qpi = vk_struct<VkQueryPoolCreateInfo>(VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO);
         qpi.queryType = VK_QUERY_TYPE_TIMESTAMP;
-        qpi.queryCount = 2;
+        qpi.queryCount = 2 + kMaxStamps;  // a part's start and end, then its stamps
         check(vkCreateQueryPool(device_, &qpi, nullptr, &timestamps_), "vkCreateQueryPool");
     }
 
@@ -394,6 +394,7 @@ uint32_t Context::threads_for(uint64_t work, uint64_t bytes_per_thread) const {
 void Context::begin() {
     if (recording_) throw std::logic_error("Context::begin while recording");
     carried_ms_ = 0;
+    stamps_ms_.clear();
     begin_part();
 }
 
@@ -403,10 +404,23 @@ void Context::begin_part() {
     bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
     check(vkBeginCommandBuffer(cmd_, &bi), "vkBeginCommandBuffer");
     recording_ = true;
+    part_stamps_.clear();
     if (timestamps_) {
-        vkCmdResetQueryPool(cmd_, timestamps_, 0, 2);
+        vkCmdResetQueryPool(cmd_, timestamps_, 0, 2 + kMaxStamps);
         vkCmdWriteTimestamp(cmd_, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps_, 0);
     }
+}
+
+uint32_t Context::stamp() {
+    if (!recording_) throw std::logic_error("Context::stamp without begin");
+    const uint32_t id = uint32_t(stamps_ms_.size());
+    stamps_ms_.push_back(0);
+    if (timestamps_ && part_stamps_.size() < kMaxStamps) {
+        vkCmdWriteTimestamp(cmd_, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps_,
+                            2 + uint32_t(part_stamps_.size()));
+        part_stamps_.push_back(id);
+    }
+    return id;
 }
 
 void Context::barrier() {
@@ -515,11 +529,20 @@ double Context::submit_part() {
     vkResetDescriptorPool(device_, descriptor_pool_, 0);
     sets_used_ = 0;
     if (!timestamps_) return 0;
-    uint64_t ticks[2] = {0, 0};
-    if (vkGetQueryPoolResults(device_, timestamps_, 0, 2, sizeof(ticks), ticks, sizeof(uint64_t),
+    // The part's start and end, then its stamps (ms since the part's start, plus the parts
+    // before it: carried_ms_).
+    const uint32_t queries = 2 + uint32_t(part_stamps_.size());
+    uint64_t ticks[2 + kMaxStamps] = {};
+    if (vkGetQueryPoolResults(device_, timestamps_, 0, queries, queries * sizeof(uint64_t), ticks,
+                              sizeof(uint64_t),
                               VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT) != VK_SUCCESS)
         return 0;
-    return double((ticks[1] - ticks[0]) & timestamp_mask_) * timestamp_ns_ * 1e-6;
+    const auto ms = [&](uint64_t t) {
+        return double((t - ticks[0]) & timestamp_mask_) * timestamp_ns_ * 1e-6;
+    };
+    for (size_t j = 0; j < part_stamps_.size(); ++j)
+        stamps_ms_[part_stamps_[j]] = carried_ms_ + ms(ticks[2 + j]);
+    return ms(ticks[1]);
 }
 
 void Context::upload(const Buffer& dst, const void* data, uint64_t bytes, uint64_t dst_offset) {

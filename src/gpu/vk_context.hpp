@@ -103,6 +103,13 @@ class Context {
     // Fills `bytes` of dst from `offset` (both multiples of 4).
     void fill(const Buffer& dst, uint32_t value, uint64_t offset, uint64_t bytes);
     double submit();
+    // A timestamp after everything recorded so far (each dispatch waits for the one before):
+    // after submit(), stamp_ms(id) is the GPU milliseconds from begin() to it, summed over the
+    // parts a long recording was submitted in. Up to kMaxStamps per part are taken; further
+    // stamps of a part, and all on a device without timestamps, read 0.
+    static constexpr uint32_t kMaxStamps = 256;
+    uint32_t stamp();
+    double stamp_ms(uint32_t id) const { return id < stamps_ms_.size() ? stamps_ms_[id] : 0; }
 
     // Blocking transfers through a staging buffer.
     void upload(const Buffer& dst, const void* data, uint64_t bytes, uint64_t dst_offset = 0);
@@ -144,7 +151,9 @@ class Context {
     bool subgroups_ = false;
     uint64_t live_ = 0, peak_ = 0;
     uint32_t sets_used_ = 0;
-    double carried_ms_ = 0;  // GPU time of the parts already submitted
+    double carried_ms_ = 0;              // GPU time of the parts already submitted
+    std::vector<double> stamps_ms_;      // the recording's stamps (stamp())
+    std::vector<uint32_t> part_stamps_;  // the current part's stamps, in query order
     HostTime host_;
     bool recording_ = false;
 };

@@ -212,7 +212,8 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                                              .add("jobs", st.jobs)
                                              .add("lanes", st.lanes)
                                              .add("lanes_per_tape", st.lanes_per_tape)
-                                             .add("longest_walk_words", st.longest_walk_words));
+                                             .add("longest_walk_words", st.longest_walk_words)
+                                             .add("gpu_ms", st.gpu_ms));
                      j.add("device", device->name())
                          .add("wall_ms", device_grid->stats().wall_ms)
                          .add("submissions", device_grid->stats().submissions)
@@ -256,20 +257,19 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                      "grows), peak %.1f MB device memory\n"
                      "    host: %llu buffers made in %.1f ms, %llu submissions waited for in "
                      "%.1f ms\n",
-                     device->name().c_str(), s.prune_ms, ds.wall_ms, ds.submissions,
-                     ds.pool_grows, double(s.prune_peak_bytes) / 1e6,
-                     (unsigned long long)ds.host_buffers, ds.host_buffer_ms,
-                     (unsigned long long)ds.host_submissions, ds.host_submit_ms);
+                     device->name().c_str(), s.prune_ms, ds.wall_ms, ds.submissions, ds.pool_grows,
+                     double(s.prune_peak_bytes) / 1e6, (unsigned long long)ds.host_buffers,
+                     ds.host_buffer_ms, (unsigned long long)ds.host_submissions, ds.host_submit_ms);
                  static const char* const kModes[] = {"cells", "octants", "cells from octants",
                                                       "refinement"};
                  for (const gpu::GpuStepShape& st : device_grid->stats().steps)
                      std::printf(
                          "    level %u %-18s %s%u dispatches, %llu workgroups, %llu jobs "
-                         "on %llu lanes (%u to a tape), longest walk <= %llu words\n",
+                         "on %llu lanes (%u to a tape), longest walk <= %llu words, %.2f ms\n",
                          st.level, kModes[std::min(st.mode, 3u)], st.wide ? "wide: " : "",
                          st.dispatches, (unsigned long long)st.workgroups,
                          (unsigned long long)st.jobs, (unsigned long long)st.lanes,
-                         st.lanes_per_tape, (unsigned long long)st.longest_walk_words);
+                         st.lanes_per_tape, (unsigned long long)st.longest_walk_words, st.gpu_ms);
              } else
                  std::printf(
                      "  pruning                   %.1f ms, peak %.1f MB in pruning buffers\n",
