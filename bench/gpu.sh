@@ -9,6 +9,10 @@
 # `bash bench/gpu.sh build bench/gpu-results.json`. A note instead when there is no Vulkan
 # device. Called by bench/targets.sh. SDFPRUNE_GPU_SCENES names the scenes (space-separated);
 # on lavapipe, which runs on the CPU, the default is molecule, trees and fluid.
+# SDFPRUNE_GPU_FLUID_COUNTS (e.g. "100000 1000000") adds generated fluids of that many spheres
+# (scenes fluid-N: pruning only, GPU and CPU, each within SDFPRUNE_GPU_TIMEOUT seconds, default
+# 300). Each object also holds prune_steps: the GPU pruning's steps (level, mode, wide, jobs,
+# lanes, longest_walk_words, gpu_ms), where its time goes.
 set -euo pipefail
 build=${1:-build}
 here=$(cd "$(dirname "$0")" && pwd)
@@ -67,6 +71,15 @@ for k in $kinds; do
     --json --quiet
 done
 
+for n in ${SDFPRUNE_GPU_FLUID_COUNTS:-}; do
+  f="$tmp/fluid-$n.json"
+  "$bin" generate fluid --count "$n" -o "$f" >/dev/null || { log "fluid-$n: generate failed"; continue; }
+  log "vulkan fluid-$n"
+  run "fluid-$n" gpu timeout "${SDFPRUNE_GPU_TIMEOUT:-300}" "$bin" stats "$f" --backend vulkan --json
+  run "fluid-$n" cpu timeout "${SDFPRUNE_GPU_TIMEOUT:-300}" "$bin" stats "$f" --threads "$threads" --json
+  rm -f "$f"
+done
+
 python3 - "$tmp/runs.jsonl" "$results" "$here/paper/table1.csv" "$threads" <<'EOF'
 import csv, json, sys
 runs_path, results_path, paper_path, threads = sys.argv[1:5]
@@ -91,7 +104,10 @@ for name, r in runs.items():
         "wall_ms": g and g.get("wall_ms"),
         "trace_ms": t and t["trace_ms"], "prune_trace_ms": t and t["prune_ms"] + t["trace_ms"],
         "discretize_ms": d and d["eval_ms"], "prune_peak_bytes": g and g["prune_peak_bytes"],
-        "cpu_prune_ms": c and c["prune_ms"], "cpu_threads": int(threads), "stats_equal": same})
+        "cpu_prune_ms": c and c["prune_ms"], "cpu_threads": int(threads), "stats_equal": same,
+        "prune_steps": g and [{k: st.get(k) for k in ("level", "mode", "wide", "jobs", "lanes",
+                                                      "longest_walk_words", "gpu_ms")}
+                              for st in g.get("gpu_steps", [])]})
 with open(results_path, "w") as f:
     json.dump(objects, f, indent=1)
     f.write("\n")
