@@ -41,8 +41,10 @@ vec3 heat_color(double value, double top);
 inline constexpr int kRgb8CurveSteps = 4096;
 const uint8_t* rgb8_curve();
 inline void store_rgb8(const uint8_t* curve, vec3 color, uint8_t* out) {
+    // The index lies in [0.5, kRgb8CurveSteps + 0.5]: a conversion to int32 truncates it as one
+    // to size_t would, in one instruction where size_t's takes a test for 2^63 and a branch.
     for (int c = 0; c < 3; ++c)
-        out[c] = curve[size_t(std::clamp(color[c], 0.0f, 1.0f) * kRgb8CurveSteps + 0.5f)];
+        out[c] = curve[int32_t(std::clamp(color[c], 0.0f, 1.0f) * kRgb8CurveSteps + 0.5f)];
 }
 void to_rgb8(const std::vector<vec3>& color, Image& img);
 // RenderStats from a traced image's totals and its largest per-pixel evaluation count.
