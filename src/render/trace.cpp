@@ -87,7 +87,10 @@ bool ray_box(vec3 o, vec3 inv_dir, vec3 lo, vec3 hi, float& t0, float& t1) {
 // eval_tape's value of `tape` at p. A one-word tape (one primitive: most near-field cells'
 // tapes) is eval_tape's own one-word case, taken here without the call, whose saving of
 // registers cost as much as the case itself (callgrind, character: 8 instructions a call).
-float tape_value(const Scene& sc, std::span<const uint32_t> tape, vec3 p, float* stack) {
+// Flattened: eval_primitive inline, so its 96 bytes of parameters are read in place rather
+// than copied for a call.
+[[gnu::flatten]] float tape_value(const Scene& sc, std::span<const uint32_t> tape, vec3 p,
+                                  float* stack) {
     if (tape.size() != 1) return eval_tape(sc, tape, p, stack);
     const uint32_t n = math::tape_node(tape[0]);
     const float v = math::eval_primitive(sc.kind[n], sc.params[sc.primitive[n]], p);
