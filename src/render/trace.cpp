@@ -370,7 +370,10 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
             }
         }
         l.evals += l.tape.size();
-        const float d = tape_value(ctx.sc, l.tape, vec3(l.p[0], l.p[1], l.p[2]), stack);
+        // (the naive tracer's tape is the full tree: eval_tape, as before tape_value)
+        const vec3 p(l.p[0], l.p[1], l.p[2]);
+        const float d =
+            kPruned ? tape_value(ctx.sc, l.tape, p, stack) : eval_tape(ctx.sc, l.tape, p, stack);
         if (d < 5e-4f * std::min(1.0f, l.t)) {
             l.ray->t = l.t;
             return finish(l);
