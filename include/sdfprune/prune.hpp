@@ -231,9 +231,9 @@ class PrunedGrid {
     // until the deciding cell (then read, so in cache) is reached. walk_located gives
     // locate_cell's answer. On a grid with a lookup shortcut (built when every level is a power
     // of two and the level above the finest is small enough) the walk is two steps at most: the
-    // shortcut's entry with the coarse cell it names (few, often in cache), then the finest
-    // cell when that one is near-field. This is the one implementation of the lookup:
-    // locate_cell runs it to the end.
+    // shortcut's entry, which names either the deciding far-field cell or, where the cell of the
+    // level above the finest is near-field, its block of finest cells, then that block's finest
+    // cell. This is the one implementation of the lookup: locate_cell runs it to the end.
     struct Walk {
         uint32_t ix = 0, iy = 0, iz = 0;   // the finest cell looked up
         uint32_t level = 0;                // of `cell`
@@ -389,14 +389,21 @@ class PrunedGrid {
     vec3 inv_cell_size_;
     std::vector<vec3> level_size_;  // cell size of each level
     // Lookup shortcut, which walk_begin reads first: for every cell of level shortcut_level_
-    // (the one above the finest; z-major), the deciding cell at or above it, as
-    // level << kShortcutLevelShift | index in its level's cells; empty when not worth it. When
-    // there is one, every level's resolution and block factor are powers of two: finest index
-    // >> shortcut_shift_ is the shortcut level's cell, shortcut_res_ that level's resolution.
+    // (the one above the finest; z-major), the far-field cell at or above it that decides it,
+    // as level << kShortcutLevelShift | index in its level's cells, or, where that cell is
+    // near-field, kShortcutChildren | the first finest cell of its children (so a lookup there
+    // reads no coarse cell: that read, at once and not prefetched, missed D1 in one of eight
+    // lookups on character at 256³); empty when not worth it. When there is one, every level's
+    // resolution and block factor are powers of two: finest index >> shortcut_shift_ is the
+    // shortcut level's cell, shortcut_res_ that level's resolution.
     static constexpr uint32_t kShortcutLevelShift = 27;
+    static constexpr uint32_t kShortcutChildren = 1u << 31;
     std::vector<uint32_t> shortcut_;
     uint32_t shortcut_level_ = 0, shortcut_shift_ = 0, shortcut_res_ = 0;
     void build_shortcut();
+    // The shortcut's entry of shortcut-level cell (x, y, z) (build_shortcut, and update()
+    // where cells above it or the cell itself changed between near-field and far-field).
+    uint32_t shortcut_entry(uint32_t x, uint32_t y, uint32_t z) const;
     void build_clearance(const CellRange* changed = nullptr);  // set_clearance on levels_
     // The Located of finest cell (ix, iy, iz), decided by `cell` of level `level`.
     Located located_at(uint32_t level, const PrunedCell* cell, uint32_t ix, uint32_t iy,
@@ -470,18 +477,21 @@ class PrunedGrid {
 
 [[gnu::always_inline]] inline bool PrunedGrid::walk_step(Walk& w) const {
     if (w.entry) {
-        // descend's result down to the shortcut's level, and that cell at once: coarse cells
-        // are few and often in cache. A near-field one is of the level above the finest.
+        // descend's result down to the shortcut's level: the deciding far-field cell, or the
+        // block of finest cells under a near-field cell of the level above the finest.
         const uint32_t entry = *w.entry;
         w.entry = nullptr;
+        if (entry & kShortcutChildren) {
+            // (the finest level: its cells are the finest cells)
+            w.level = shortcut_level_ + 1;
+            const Level& f = levels_[w.level];
+            w.cell = &f.cells[(entry & ~kShortcutChildren) + f.block_local_pow2(w.ix, w.iy, w.iz)];
+            w.decided = true;
+            return false;
+        }
         w.level = entry >> kShortcutLevelShift;
         w.cell = &levels_[w.level].cells[entry & ((1u << kShortcutLevelShift) - 1)];
-        if (w.cell->tape == PrunedCell::kFarField) return true;
-        // (the finest level: its cells are the finest cells)
-        const Level& f = levels_[++w.level];
-        w.cell = &f.cells[w.cell->children + f.block_local_pow2(w.ix, w.iy, w.iz)];
-        w.decided = true;
-        return false;
+        return true;
     }
     if (w.decided) return true;
     // (the address of the finest level rather than the level count: a size() divides)

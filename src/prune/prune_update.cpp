@@ -171,19 +171,16 @@ void GridUpdate::compact(PrunedGrid& g) {
     for (const PrunedGrid::Level& l : g.levels_) g.compact_cells_ += l.cells.size();
 }
 
-// The lookup shortcut's entries under cell `at` of level `level` (whose far-field state or
-// children changed).
+// The lookup shortcut's entries under cell `at` of level `level` (whose far-field state
+// changed: at the shortcut's level too, since a near-field cell's entry names its children).
 void GridUpdate::refresh_shortcut(PrunedGrid& g, uint32_t level, CellCoord at) {
-    if (g.shortcut_.empty() || level >= g.shortcut_level_) return;
+    if (g.shortcut_.empty() || level > g.shortcut_level_) return;
     const uint32_t S = g.shortcut_level_, r = g.levels_[S].res;
-    const uint32_t span = r / g.levels_[level].res, scale = g.resolution() / r;
+    const uint32_t span = r / g.levels_[level].res;
     for (uint32_t z = at.z * span; z < (at.z + 1) * span; ++z)
         for (uint32_t y = at.y * span; y < (at.y + 1) * span; ++y)
-            for (uint32_t x = at.x * span; x < (at.x + 1) * span; ++x) {
-                const PrunedGrid::CellRef c = g.descend(x * scale, y * scale, z * scale, S);
-                g.shortcut_[(size_t(z) * r + y) * r + x] =
-                    c.level << PrunedGrid::kShortcutLevelShift | c.index;
-            }
+            for (uint32_t x = at.x * span; x < (at.x + 1) * span; ++x)
+                g.shortcut_[(size_t(z) * r + y) * r + x] = g.shortcut_entry(x, y, z);
 }
 
 void GridUpdate::run(PrunedGrid& g, const Scene& sc, const SceneEdit& edit,
@@ -234,7 +231,7 @@ void GridUpdate::run(PrunedGrid& g, const Scene& sc, const SceneEdit& edit,
     tbb::enumerable_thread_specific<CellScratch> scratch;
     // Level 0 is one block under the full tree's tape (pool offset 0), which names every node.
     std::vector<Job> jobs{{{0, 0, 0}, 0, 0, false}};
-    // Cells of levels above the shortcut's whose far-field state changed.
+    // Cells whose far-field state changed (those below the shortcut's level are ignored).
     std::vector<std::pair<uint32_t, CellCoord>> flipped;
     for (uint32_t li = 0; li < g.level_count() && !jobs.empty(); ++li) {
         PrunedGrid::Level& level = g.levels_[li];

@@ -63,17 +63,22 @@ void PrunedGrid::build_shortcut() {
     shortcut_shift_ = levels_[S].shift;
     shortcut_res_ = r;
     shortcut_.resize(size_t(r) * r * r);
-    const uint32_t scale = resolution() / r;
     // A slice of the shortcut per chunk (disjoint writes).
     ParallelOptions po;
     po.threads = options_.threads;
     parallel_for<NotCancellable>(r, po, [&](uint64_t z) {
         for (uint32_t y = 0; y < r; ++y)
-            for (uint32_t x = 0; x < r; ++x) {
-                const CellRef at = descend(x * scale, y * scale, uint32_t(z) * scale, S);
-                shortcut_[(size_t(z) * r + y) * r + x] = at.level << kShortcutLevelShift | at.index;
-            }
+            for (uint32_t x = 0; x < r; ++x)
+                shortcut_[(size_t(z) * r + y) * r + x] = shortcut_entry(x, y, uint32_t(z));
     });
+}
+
+uint32_t PrunedGrid::shortcut_entry(uint32_t x, uint32_t y, uint32_t z) const {
+    const uint32_t scale = resolution() / shortcut_res_;
+    const CellRef at = descend(x * scale, y * scale, z * scale, shortcut_level_);
+    const PrunedCell& c = levels_[at.level].cells[at.index];
+    if (c.tape != PrunedCell::kFarField) return kShortcutChildren | c.children;
+    return at.level << kShortcutLevelShift | at.index;
 }
 
 void PrunedGrid::build_clearance(const CellRange* changed) {

@@ -41,8 +41,19 @@ vec3 heat_color(double value, double top);
 inline constexpr int kRgb8CurveSteps = 4096;
 const uint8_t* rgb8_curve();
 inline void store_rgb8(const uint8_t* curve, vec3 color, uint8_t* out) {
-    for (int c = 0; c < 3; ++c)
-        out[c] = curve[size_t(std::clamp(color[c], 0.0f, 1.0f) * kRgb8CurveSteps + 0.5f)];
+    // curve[size_t(std::clamp(c, 0, 1) · kRgb8CurveSteps + 0.5)] for the three channels at once
+    // (GCC/Clang vector extension, any target): the same comparisons and IEEE operations lane
+    // by lane, and a conversion to int32, which truncates the index (in [0.5, steps + 0.5]) as
+    // one to size_t would. A third of the instructions of the scalar loop.
+    using float4 = float __attribute__((vector_size(16)));
+    using int4 = int32_t __attribute__((vector_size(16)));
+    const float4 zero = {0, 0, 0, 0}, one = {1, 1, 1, 1};
+    float4 c = {color.x, color.y, color.z, 0};
+    c = c < zero ? zero : c;  // std::clamp(c, 0, 1): c < 0 ? 0 : (1 < c ? 1 : c)
+    c = one < c ? one : c;
+    const int4 index =
+        __builtin_convertvector(c * float(kRgb8CurveSteps) + float4{0.5f, 0.5f, 0.5f, 0.5f}, int4);
+    for (int k = 0; k < 3; ++k) out[k] = curve[index[k]];
 }
 void to_rgb8(const std::vector<vec3>& color, Image& img);
 // RenderStats from a traced image's totals and its largest per-pixel evaluation count.
