@@ -112,9 +112,10 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     double gpu_ms = 0;
 
     // Replaces `pool` by one of `words` words (at most the device's limit), keeping its first
-    // `keep` words.
+    // `keep` words (with none to keep, the old one goes first: the two are never held at once).
     const auto resize = [&](Buffer& pool, uint64_t& cap, uint64_t words, uint64_t keep) {
         const uint64_t grown = std::min(words, max_pool_words);
+        if (keep == 0) ctx.destroy(pool);
         Buffer& bigger = local.create(grown * 4);
         if (keep > 0) {
             ctx.begin();
@@ -191,9 +192,11 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             (kPruneStateWords * kPruneTeam + uint64_t(max_len) * (1 + kPruneTeam) +
              4ull * max_depth * kPruneTeam) *
             4;
-        // Teams in flight: as many as have jobs and their scratch fits the budget. Only teams
-        // with jobs hold scratch, so one parent tape as long as the budget allows can be pruned
-        // (the root's, the full tree, at level 0) even where a workgroup's 8 teams could not.
+        // Teams in flight: as many as have jobs, their scratch fits the budget and the device
+        // runs at once (more would only queue, their scratch held for nothing; the teams take
+        // the jobs in a grid-stride loop). Only teams with jobs hold scratch, so one parent
+        // tape as long as the budget allows can be pruned (the root's, the full tree, at level
+        // 0) even where a workgroup's 8 teams could not.
         const uint64_t fit = ctx.scratch_budget_bytes() / team_bytes;
         if (fit == 0)
             throw GpuError("Vulkan: pruning a tape of " + std::to_string(max_len) +
@@ -201,7 +204,8 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                            " bytes of scratch, more than the device's buffers allow; use "
                            "--backend cpu");
         s.teams = std::min({std::max<uint64_t>(s.team_jobs, 1), fit,
-                            uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kPruneTeam)});
+                            uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kPruneTeam),
+                            std::max<uint64_t>(ctx.resident_threads() / kPruneTeam, 1)});
         s.threads = uint32_t(s.teams * kPruneTeam);
         s.groups = uint32_t((s.threads + kWorkgroupSize - 1) / kWorkgroupSize);
         // Steps of a job: per batch of sub-boxes an evaluation window by window, the far-field
@@ -284,8 +288,9 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             const uint64_t fit_groups = ctx.scratch_budget_bytes() / group_bytes;
             const bool limited = ctx.loop_limited();
             if (fit_groups > 0 && (!limited || 2 * per_job + 1024 <= Context::kLoopLimit)) {
-                const uint64_t groups = std::min({std::max<uint64_t>(s.team_jobs, 1), fit_groups,
-                                                  uint64_t(ctx.max_workgroups())});
+                const uint64_t groups = std::min(
+                    {std::max<uint64_t>(s.team_jobs, 1), fit_groups, uint64_t(ctx.max_workgroups()),
+                     std::max<uint64_t>(ctx.resident_threads() / kPruneWide, 1)});
                 const uint64_t walk =
                     s.team_jobs == 0 ? 0 : ceil_div(s.team_jobs, groups) * walk_job;
                 const bool pick =
@@ -359,12 +364,8 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         const uint64_t total = per_block * block_count;
         if (total > 0xfffffffeull) throw std::length_error("too many cells in one level");
         const vec3 csize = extent / float(res[li]);
-        Buffer& cells = local.create(total * sizeof(PrunedCell));
         // The same split as the CPU backend (prune.cpp): octants first where it applies.
         const bool split = opt.hierarchy && f >= 4 && f % 2 == 0 && 1024 % per_block == 0;
-        Buffer& octants = local.create(split ? block_count * 8 * sizeof(PrunedCell) : 16);
-        Buffer& refined = local.create(refine ? total * sizeof(PrunedCell) : 16);
-        Buffer& next = local.create(finest ? 16 : total * sizeof(GpuBlock));
         const uint32_t nf = finest ? 0 : res[li + 1] / res[li];
         // Every cell's tape (with its header) is at most its parent's: the octants' go to the
         // octant pool, the cells' to the main pool (or first to the octant pool, refined into
@@ -380,6 +381,12 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         presize(g.pool, capacity, g.pool_words, share(main_bound, main_ratio));
         presize(octant_pool, octant_capacity, 0,
                 share(octant_bound, octant_ratio) + (refine ? share(main_bound, main_ratio) : 0));
+        // The level's cells, made after the pools grew (a pool's old and new buffers, held at
+        // once while its words are copied, are not held beside them).
+        Buffer& cells = local.create(total * sizeof(PrunedCell));
+        Buffer& octants = local.create(split ? block_count * 8 * sizeof(PrunedCell) : 16);
+        Buffer& refined = local.create(refine ? total * sizeof(PrunedCell) : 16);
+        Buffer& next = local.create(finest ? 16 : total * sizeof(GpuBlock));
 
         // Runs `steps` (and expand.comp when `expand`) in one submission, the octant pool
         // holding `octant_keep` words from before; grows a pool and runs them again while one
@@ -526,6 +533,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             .count();
     const Context::HostTime& host = ctx.host_time();
     st.host_buffers = host.buffers - host_before.buffers;
+    st.host_buffers_reused = host.buffers_reused - host_before.buffers_reused;
     st.host_submissions = host.submissions - host_before.submissions;
     st.host_buffer_ms = host.buffer_ms - host_before.buffer_ms;
     st.host_submit_ms = host.submit_ms - host_before.submit_ms;
