@@ -172,6 +172,8 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         uint64_t team_jobs, teams, rounds, per_dispatch;
         uint32_t threads, groups;  // lanes that take jobs, and their workgroups
         bool wide;
+        // Fewer teams than jobs for want of scratch (not because the device runs no more).
+        bool scratch_limited;
         GpuStepShape shape;
     };
     const auto plan_step = [&](uint32_t mode, uint32_t factor, uint64_t jobs, vec3 csize,
@@ -203,9 +205,12 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                            " words needs " + std::to_string(team_bytes) +
                            " bytes of scratch, more than the device's buffers allow; use "
                            "--backend cpu");
-        s.teams = std::min({std::max<uint64_t>(s.team_jobs, 1), fit,
-                            uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kPruneTeam),
-                            std::max<uint64_t>(ctx.resident_threads() / kPruneTeam, 1)});
+        const uint64_t unlimited =
+            std::min({std::max<uint64_t>(s.team_jobs, 1),
+                      uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kPruneTeam),
+                      std::max<uint64_t>(ctx.resident_threads() / kPruneTeam, 1)});
+        s.teams = std::min(unlimited, fit);
+        s.scratch_limited = fit < unlimited;
         s.threads = uint32_t(s.teams * kPruneTeam);
         s.groups = uint32_t((s.threads + kWorkgroupSize - 1) / kWorkgroupSize);
         // Steps of a job: per batch of sub-boxes an evaluation window by window, the far-field
@@ -288,9 +293,10 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             const uint64_t fit_groups = ctx.scratch_budget_bytes() / group_bytes;
             const bool limited = ctx.loop_limited();
             if (fit_groups > 0 && (!limited || 2 * per_job + 1024 <= Context::kLoopLimit)) {
-                const uint64_t groups = std::min(
-                    {std::max<uint64_t>(s.team_jobs, 1), fit_groups, uint64_t(ctx.max_workgroups()),
-                     std::max<uint64_t>(ctx.resident_threads() / kPruneWide, 1)});
+                const uint64_t unlimited_groups =
+                    std::min({std::max<uint64_t>(s.team_jobs, 1), uint64_t(ctx.max_workgroups()),
+                              std::max<uint64_t>(ctx.resident_threads() / kPruneWide, 1)});
+                const uint64_t groups = std::min(unlimited_groups, fit_groups);
                 const uint64_t walk =
                     s.team_jobs == 0 ? 0 : ceil_div(s.team_jobs, groups) * walk_job;
                 const bool pick =
@@ -298,6 +304,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                                            walk < s.shape.longest_walk_words);
                 if (pick) {
                     s.wide = true;
+                    s.scratch_limited = fit_groups < unlimited_groups;
                     s.teams = groups;
                     s.groups = uint32_t(groups);
                     s.threads = uint32_t(groups * kPruneWide);
@@ -438,14 +445,15 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         };
 
         // One submission for the level where the parents' longest tape sizes the cells' steps
-        // with a team for every job; where scratch would hold the cells' teams back (long
-        // tapes), the octants first, so that their own longest tape sizes the rest.
+        // with a team for every job (or as many as the device runs at once); where scratch
+        // would hold the cells' teams back (long tapes), the octants first, so that their own
+        // longest tape sizes the rest.
         std::vector<Step> steps;
         uint64_t octant_keep = 0;
         if (split) {
             steps.push_back(plan_step(1, f, block_count * 8, csize, octants, cells, false));
             Step cells_step = plan_step(2, f, total, csize, octants, cells, refine);
-            if (cells_step.teams < cells_step.team_jobs) {
+            if (cells_step.scratch_limited) {
                 const GpuCounters oc = run_steps(steps, false, 0);
                 octant_keep = oc.octant_used;
                 max_len = std::max(std::min(oc.max_len, max_len), 1u);
