@@ -330,18 +330,22 @@ TEST(Gpu, HostShareIsAccounted) {
 // Every finest cell of two device grids, compared: the same kind, constant and tape.
 void expect_same_device_cells(const gpu::Grid& a, const gpu::Grid& b, const std::string& what) {
     SCOPED_TRACE(what);
-    std::vector<gpu::Grid::CellContents> cells;
-    std::vector<std::vector<uint32_t>> tapes;
+    struct Cell {  // a copy (CellContents' tape lives only within the visit)
+        bool far_field;
+        float constant;
+        std::vector<uint32_t> tape;
+    };
+    std::vector<Cell> cells;
     a.for_each_finest_cell([&](uint64_t, const gpu::Grid::CellContents& c) {
-        cells.push_back(c);
-        tapes.emplace_back(c.tape.begin(), c.tape.end());
+        cells.push_back({c.far_field, c.constant, {c.tape.begin(), c.tape.end()}});
     });
     uint64_t mismatches = 0, i = 0;
     b.for_each_finest_cell([&](uint64_t, const gpu::Grid::CellContents& c) {
         ASSERT_LT(i, cells.size());
-        const bool same = cells[i].far_field == c.far_field &&
-                          (c.far_field ? cells[i].constant == c.constant
-                                       : std::equal(tapes[i].begin(), tapes[i].end(),
+        const Cell& want = cells[i];
+        const bool same = want.far_field == c.far_field &&
+                          (c.far_field ? want.constant == c.constant
+                                       : std::equal(want.tape.begin(), want.tape.end(),
                                                     c.tape.begin(), c.tape.end()));
         if (!same && ++mismatches <= 3) ADD_FAILURE() << "finest cell " << i << " differs";
         ++i;

@@ -106,8 +106,8 @@ class Context {
     uint64_t bytes_peak() const { return peak_; }
     void reset_peak() { peak_ = live_; }
     // The idle cache: bytes it holds (device-local and host-visible), and its budget, past
-    // which the buffers cached longest are freed first. By default an eighth of the largest
-    // device-local heap, at most 1 GiB; SDFPRUNE_VULKAN_CACHE_BYTES=N sets it (0: no cache).
+    // which the buffers cached longest are freed first. By default a quarter of the largest
+    // device-local heap, at most 4 GiB; SDFPRUNE_VULKAN_CACHE_BYTES=N sets it (0: no cache).
     uint64_t bytes_cached() const { return cached_; }
     uint64_t cache_budget() const { return cache_budget_; }
     void set_cache_budget(uint64_t bytes);

@@ -238,6 +238,8 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          .add("host_buffer_ms", device_grid->stats().host_buffer_ms)
                          .add("host_submissions", device_grid->stats().host_submissions)
                          .add("host_submit_ms", device_grid->stats().host_submit_ms);
+                     // The device's idle buffers, kept for the next call (the grid held).
+                     j.add("idle_cache_bytes", device->memory_cached());
                      if (args->repeat > 1)
                          j.add("repeat", args->repeat)
                              .add("first_prune_ms", first.prune_ms)
