@@ -82,7 +82,8 @@ class Context {
     // × wavefront size) where the device has them; on CPU devices (lavapipe: a workgroup per
     // core at a time) kCpuGroupsPerCore workgroups a core; elsewhere kAssumedResidentThreads.
     // SDFPRUNE_VULKAN_RESIDENT_THREADS=N sets it (for tests).
-    static constexpr uint64_t kAssumedResidentThreads = uint64_t(1) << 18;  // an H100's 270,336
+    // (2^18: about an H100's or H200's 132 SMs × 2,048 invocations, 270,336.)
+    static constexpr uint64_t kAssumedResidentThreads = uint64_t(1) << 18;
     static constexpr uint64_t kCpuGroupsPerCore = 16;
     uint64_t resident_threads() const { return resident_threads_; }
 
