@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <memory>
+#include <optional>
 
 #include "prune_check.hpp"
 #include "sdfprune/builtin.hpp"
@@ -327,13 +328,153 @@ TEST(Gpu, HostShareIsAccounted) {
     const gpu::Grid g = gpu::prune(*dev, sc, o);
     const gpu::DevicePruneStats& st = g.stats();
     EXPECT_GE(st.host_submissions, uint64_t(st.submissions));
-    EXPECT_GT(st.host_buffers, 0u);
+    // (Buffers made or taken from the idle cache, which earlier tests may have filled.)
+    EXPECT_GT(st.host_buffers + st.host_buffers_reused, 0u);
     EXPECT_GT(st.host_submit_ms, 0.0);
     EXPECT_LE(st.host_buffer_ms + st.host_submit_ms, st.wall_ms);
     // A second call counts its own share, not the first's too.
     const gpu::Grid again = gpu::prune(*dev, sc, o);
     EXPECT_EQ(again.stats().host_submissions, st.host_submissions);
-    EXPECT_EQ(again.stats().host_buffers, st.host_buffers);
+    EXPECT_EQ(again.stats().host_buffers + again.stats().host_buffers_reused,
+              st.host_buffers + st.host_buffers_reused);
+}
+
+// Every finest cell of two device grids, compared: the same kind, constant and tape.
+void expect_same_device_cells(const gpu::Grid& a, const gpu::Grid& b, const std::string& what) {
+    SCOPED_TRACE(what);
+    struct Cell {  // a copy (CellContents' tape lives only within the visit)
+        bool far_field;
+        float constant;
+        std::vector<uint32_t> tape;
+    };
+    std::vector<Cell> cells;
+    a.for_each_finest_cell([&](uint64_t, const gpu::Grid::CellContents& c) {
+        cells.push_back({c.far_field, c.constant, {c.tape.begin(), c.tape.end()}});
+    });
+    uint64_t mismatches = 0, i = 0;
+    b.for_each_finest_cell([&](uint64_t, const gpu::Grid::CellContents& c) {
+        ASSERT_LT(i, cells.size());
+        const Cell& want = cells[i];
+        const bool same = want.far_field == c.far_field &&
+                          (c.far_field ? want.constant == c.constant
+                                       : std::equal(want.tape.begin(), want.tape.end(),
+                                                    c.tape.begin(), c.tape.end()));
+        if (!same && ++mismatches <= 3) ADD_FAILURE() << "finest cell " << i << " differs";
+        ++i;
+    });
+    EXPECT_EQ(i, cells.size());
+    EXPECT_EQ(mismatches, 0u);
+}
+
+// A device made with an environment variable set (for the figures it reads once).
+std::unique_ptr<gpu::Device> device_with_env(const char* name, const char* value) {
+    setenv(name, value, 1);
+    std::unique_ptr<gpu::Device> d;
+    try {
+        d = std::make_unique<gpu::Device>();
+    } catch (const gpu::GpuError& e) {
+        ADD_FAILURE() << "no Vulkan device (install mesa-vulkan-drivers): " << e.what();
+    }
+    unsetenv(name);
+    return d;
+}
+
+// Buffers are recycled across levels and calls (Context's idle cache): a pruning that repeats
+// another's on the same device allocates nothing new once the other's grid is gone, and no
+// more than its own grid's buffers (6) while that grid is alive; the grids are the same.
+TEST(Gpu, RepeatedPruneReusesBuffers) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Scene sc = builtin_scene("demo");
+    PruneOptions o;
+    o.resolution = 32;
+    std::optional<gpu::Grid> first(gpu::prune(*dev, sc, o));
+    const uint64_t requests = first->stats().host_buffers + first->stats().host_buffers_reused;
+    EXPECT_GT(first->stats().host_buffers_reused, 0u);  // the levels' temporaries at least
+    {
+        const gpu::Grid alive = gpu::prune(*dev, sc, o);  // the first grid still held
+        EXPECT_LE(alive.stats().host_buffers, 6u);
+        EXPECT_EQ(alive.stats().host_buffers + alive.stats().host_buffers_reused, requests);
+        expect_same_device_cells(*first, alive, "with the first grid alive");
+    }
+    const uint64_t in_use = dev->memory_in_use();
+    const gpu::Grid second = gpu::prune(*dev, sc, o);
+    EXPECT_EQ(second.stats().host_buffers, 0u);
+    EXPECT_EQ(second.stats().host_buffers_reused, requests);
+    EXPECT_EQ(second.stats().prune_peak_bytes, first->stats().prune_peak_bytes);
+    expect_same_stats(first->stats(), second.stats(), "second prune");
+    expect_same_device_cells(*first, second, "second prune");
+    // The memory in use counts the new grid, not the idle buffers.
+    EXPECT_GT(dev->memory_in_use(), in_use);
+    EXPECT_GT(dev->memory_cached(), 0u);
+    first.reset();
+}
+
+// The idle cache keeps to its budget (SDFPRUNE_VULKAN_CACHE_BYTES), buffers cached longest
+// going first; with no budget nothing is kept or reused; release_cached_memory empties it.
+// Grids are the same whatever the cache holds.
+TEST(Gpu, IdleCacheKeepsToItsBudget) {
+    if (!gpu::built_with_vulkan()) GTEST_SKIP() << "built without the Vulkan backend";
+    const Scene sc = builtin_scene("demo");
+    PruneOptions o;
+    o.resolution = 32;
+    const std::unique_ptr<gpu::Device> none = device_with_env("SDFPRUNE_VULKAN_CACHE_BYTES", "0");
+    ASSERT_TRUE(none);
+    const gpu::Grid a = gpu::prune(*none, sc, o);
+    const gpu::Grid b = gpu::prune(*none, sc, o);
+    EXPECT_EQ(none->memory_cached(), 0u);
+    EXPECT_EQ(a.stats().host_buffers_reused, 0u);
+    EXPECT_EQ(b.stats().host_buffers_reused, 0u);
+    EXPECT_EQ(b.stats().host_buffers, a.stats().host_buffers);
+
+    constexpr uint64_t kBudget = 256 << 10;
+    const std::unique_ptr<gpu::Device> small =
+        device_with_env("SDFPRUNE_VULKAN_CACHE_BYTES", "262144");
+    ASSERT_TRUE(small);
+    for (int i = 0; i < 2; ++i) {
+        const gpu::Grid g = gpu::prune(*small, sc, o);
+        EXPECT_LE(small->memory_cached(), kBudget);
+        EXPECT_GT(small->memory_cached(), 0u);  // the small buffers stay
+        if (i == 1) {
+            EXPECT_GT(g.stats().host_buffers_reused, 0u);
+        }
+        expect_same_device_cells(a, g, "a 256 KiB cache");
+    }
+    EXPECT_LE(small->memory_cached(), kBudget);
+    small->release_cached_memory();
+    EXPECT_EQ(small->memory_cached(), 0u);
+    EXPECT_EQ(small->memory_in_use(), 0u);
+}
+
+// The pruning's peak device memory stays near what it makes. Scratch is held only for the
+// teams a device runs at once (here 2,048 invocations: 256 teams, whatever the device), not
+// for every team the scratch budget would allow (up to 128 MiB on lavapipe, 256 MiB on GPUs,
+// for a small scene's many short-tape jobs). Beyond scratch, the peak is the result
+// (tape_bytes) and the finest level's working set: the main pool presized for twice the share
+// of its bound the previous level used, the refinement's transient tapes (about as many again,
+// in the octant pool), the old pool held while its words are copied, the cells before and
+// after refinement, capacities up to 1.25 times what was asked: about 6 times the pool and 3
+// times the cells; 16 times tape_bytes leaves room for a device that prunes a few cells the
+// other way, and catches a return of the scratch budget held in full (over 20 times here).
+TEST(Gpu, PrunePeakStaysNearTheResult) {
+    if (!gpu::built_with_vulkan()) GTEST_SKIP() << "built without the Vulkan backend";
+    const Scene sc = builtin_scene("demo");
+    PruneOptions o;
+    o.resolution = 64;
+    const std::unique_ptr<gpu::Device> capped =
+        device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "2048");
+    const std::unique_ptr<gpu::Device> uncapped =
+        device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "1073741824");
+    ASSERT_TRUE(capped && uncapped);
+    const gpu::Grid small = gpu::prune(*capped, sc, o);
+    const gpu::Grid large = gpu::prune(*uncapped, sc, o);
+    const gpu::DevicePruneStats& st = small.stats();
+    EXPECT_LE(st.prune_peak_bytes, 16 * st.tape_bytes + (8u << 20))
+        << "tape_bytes " << st.tape_bytes;
+    EXPECT_LT(st.prune_peak_bytes, large.stats().prune_peak_bytes);
+    for (const gpu::GpuStepShape& step : st.steps)
+        EXPECT_LE(step.lanes, 2048u) << "level " << step.level << " mode " << step.mode;
+    expect_same_stats(large.stats(), st, "resident teams capped");
+    expect_same_device_cells(large, small, "resident teams capped");
 }
 
 TEST(Gpu, DeepChainPrunes) {
@@ -466,17 +607,17 @@ size_t discretize_violations(const Scene& sc, const PruneOptions& o, gpu::Device
     std::vector<float> stack(sc.max_stack + 1);
     size_t bad = 0;
     for (size_t i = 0; i < got.size(); ++i) {
-        const vec3 p = sc.aabb.min + vec3(float(i % n) + 0.5f, float(i / n % n) + 0.5f,
-                                          float(i / n / n) + 0.5f) *
-                                         (extent / float(n));
+        const vec3 p = sc.aabb.min +
+                       vec3(float(i % n) + 0.5f, float(i / n % n) + 0.5f, float(i / n / n) + 0.5f) *
+                           (extent / float(n));
         const float f = eval_tape(sc, sc.full_tape, p, stack.data()), g = got[i];
         const float tol = 1e-5f * (1 + std::fabs(f));
         const bool sign_flipped = (f > tol && g < -tol) || (f < -tol && g > tol);
         const bool overstated = std::fabs(g) > std::fabs(f) + tol;
         const bool inexact = std::fabs(f) < near_band - tol && std::fabs(g - f) > tol;
         if ((sign_flipped || overstated || inexact) && ++bad <= 3)
-            ADD_FAILURE() << "n = " << n << ", sample " << i << ": full tree " << f
-                          << ", device " << g;
+            ADD_FAILURE() << "n = " << n << ", sample " << i << ": full tree " << f << ", device "
+                          << g;
     }
     return bad;
 }

@@ -45,8 +45,13 @@ class Device {
     Device(Device&&) noexcept;
     Device& operator=(Device&&) noexcept;
     std::string name() const;
-    // Device memory held now by sdfprune's buffers on this device (grids included).
+    // Device memory held now by sdfprune's buffers on this device (grids included), not
+    // counting the idle buffers kept for reuse (memory_cached: at most a quarter of the
+    // device's memory, 4 GiB; SDFPRUNE_VULKAN_CACHE_BYTES=N sets the budget).
     uint64_t memory_in_use() const;
+    uint64_t memory_cached() const;
+    // Frees the idle buffers (the next pruning allocates its buffers again).
+    void release_cached_memory();
     Context& context() { return *context_; }
 
   private:
@@ -94,11 +99,12 @@ struct DevicePruneStats : PruneStats {
     double wall_ms = 0;
     uint32_t pool_grows = 0;
     uint32_t submissions = 0;
-    // The host's share of wall_ms: buffers created (device memory allocated; staging buffers
-    // of uploads and readbacks too) and their time, and every submission's (uploads and
-    // readbacks included) from the end of its recording to its results being back, which
-    // holds the GPU's time.
-    uint64_t host_buffers = 0, host_submissions = 0;
+    // The host's share of wall_ms: buffers newly allocated (device memory allocated; staging
+    // buffers of uploads and readbacks too), buffers taken instead from the device's idle
+    // cache (those a previous level or call gave back), the time of both; and every
+    // submission's (uploads and readbacks included) from the end of its recording to its
+    // results being back, which holds the GPU's time.
+    uint64_t host_buffers = 0, host_buffers_reused = 0, host_submissions = 0;
     double host_buffer_ms = 0, host_submit_ms = 0;
     // Whether the wide steps used subgroup operations (the device has them and
     // SDFPRUNE_VULKAN_SUBGROUPS is not 0), else shared memory.

@@ -21,6 +21,14 @@ uint64_t Device::memory_in_use() const {
     return context_->bytes_live();
 }
 
+uint64_t Device::memory_cached() const {
+    return context_->bytes_cached();
+}
+
+void Device::release_cached_memory() {
+    context_->trim();
+}
+
 Grid::Grid() = default;
 Grid::~Grid() = default;
 Grid::Grid(Grid&&) noexcept = default;

@@ -112,9 +112,10 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     double gpu_ms = 0;
 
     // Replaces `pool` by one of `words` words (at most the device's limit), keeping its first
-    // `keep` words.
+    // `keep` words (with none to keep, the old one goes first: the two are never held at once).
     const auto resize = [&](Buffer& pool, uint64_t& cap, uint64_t words, uint64_t keep) {
         const uint64_t grown = std::min(words, max_pool_words);
+        if (keep == 0) ctx.destroy(pool);
         Buffer& bigger = local.create(grown * 4);
         if (keep > 0) {
             ctx.begin();
@@ -171,6 +172,8 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         uint64_t team_jobs, teams, rounds, per_dispatch;
         uint32_t threads, groups;  // lanes that take jobs, and their workgroups
         bool wide;
+        // Fewer teams than jobs for want of scratch (not because the device runs no more).
+        bool scratch_limited;
         GpuStepShape shape;
         uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
     };
@@ -192,17 +195,23 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             (kPruneStateWords * kPruneTeam + uint64_t(max_len) * (1 + kPruneTeam) +
              4ull * max_depth * kPruneTeam) *
             4;
-        // Teams in flight: as many as have jobs and their scratch fits the budget. Only teams
-        // with jobs hold scratch, so one parent tape as long as the budget allows can be pruned
-        // (the root's, the full tree, at level 0) even where a workgroup's 8 teams could not.
+        // Teams in flight: as many as have jobs, their scratch fits the budget and the device
+        // runs at once (more would only queue, their scratch held for nothing; the teams take
+        // the jobs in a grid-stride loop). Only teams with jobs hold scratch, so one parent
+        // tape as long as the budget allows can be pruned (the root's, the full tree, at level
+        // 0) even where a workgroup's 8 teams could not.
         const uint64_t fit = ctx.scratch_budget_bytes() / team_bytes;
         if (fit == 0)
             throw GpuError("Vulkan: pruning a tape of " + std::to_string(max_len) +
                            " words needs " + std::to_string(team_bytes) +
                            " bytes of scratch, more than the device's buffers allow; use "
                            "--backend cpu");
-        s.teams = std::min({std::max<uint64_t>(s.team_jobs, 1), fit,
-                            uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kPruneTeam)});
+        const uint64_t unlimited =
+            std::min({std::max<uint64_t>(s.team_jobs, 1),
+                      uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kPruneTeam),
+                      std::max<uint64_t>(ctx.resident_threads() / kPruneTeam, 1)});
+        s.teams = std::min(unlimited, fit);
+        s.scratch_limited = fit < unlimited;
         s.threads = uint32_t(s.teams * kPruneTeam);
         s.groups = uint32_t((s.threads + kWorkgroupSize - 1) / kWorkgroupSize);
         // Steps of a job: per batch of sub-boxes an evaluation window by window, the far-field
@@ -285,8 +294,10 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             const uint64_t fit_groups = ctx.scratch_budget_bytes() / group_bytes;
             const bool limited = ctx.loop_limited();
             if (fit_groups > 0 && (!limited || 2 * per_job + 1024 <= Context::kLoopLimit)) {
-                const uint64_t groups = std::min({std::max<uint64_t>(s.team_jobs, 1), fit_groups,
-                                                  uint64_t(ctx.max_workgroups())});
+                const uint64_t unlimited_groups =
+                    std::min({std::max<uint64_t>(s.team_jobs, 1), uint64_t(ctx.max_workgroups()),
+                              std::max<uint64_t>(ctx.resident_threads() / kPruneWide, 1)});
+                const uint64_t groups = std::min(unlimited_groups, fit_groups);
                 const uint64_t walk =
                     s.team_jobs == 0 ? 0 : ceil_div(s.team_jobs, groups) * walk_job;
                 const bool pick =
@@ -294,6 +305,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                                            walk < s.shape.longest_walk_words);
                 if (pick) {
                     s.wide = true;
+                    s.scratch_limited = fit_groups < unlimited_groups;
                     s.teams = groups;
                     s.groups = uint32_t(groups);
                     s.threads = uint32_t(groups * kPruneWide);
@@ -362,12 +374,8 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         const uint64_t total = per_block * block_count;
         if (total > 0xfffffffeull) throw std::length_error("too many cells in one level");
         const vec3 csize = extent / float(res[li]);
-        Buffer& cells = local.create(total * sizeof(PrunedCell));
         // The same split as the CPU backend (prune.cpp): octants first where it applies.
         const bool split = opt.hierarchy && f >= 4 && f % 2 == 0 && 1024 % per_block == 0;
-        Buffer& octants = local.create(split ? block_count * 8 * sizeof(PrunedCell) : 16);
-        Buffer& refined = local.create(refine ? total * sizeof(PrunedCell) : 16);
-        Buffer& next = local.create(finest ? 16 : total * sizeof(GpuBlock));
         const uint32_t nf = finest ? 0 : res[li + 1] / res[li];
         // Every cell's tape (with its header) is at most its parent's: the octants' go to the
         // octant pool, the cells' to the main pool (or first to the octant pool, refined into
@@ -383,6 +391,12 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         presize(g.pool, capacity, g.pool_words, share(main_bound, main_ratio));
         presize(octant_pool, octant_capacity, 0,
                 share(octant_bound, octant_ratio) + (refine ? share(main_bound, main_ratio) : 0));
+        // The level's cells, made after the pools grew (a pool's old and new buffers, held at
+        // once while its words are copied, are not held beside them).
+        Buffer& cells = local.create(total * sizeof(PrunedCell));
+        Buffer& octants = local.create(split ? block_count * 8 * sizeof(PrunedCell) : 16);
+        Buffer& refined = local.create(refine ? total * sizeof(PrunedCell) : 16);
+        Buffer& next = local.create(finest ? 16 : total * sizeof(GpuBlock));
 
         // Runs `steps` (and expand.comp when `expand`) in one submission, the octant pool
         // holding `octant_keep` words from before; grows a pool and runs them again while one
@@ -437,14 +451,15 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         };
 
         // One submission for the level where the parents' longest tape sizes the cells' steps
-        // with a team for every job; where scratch would hold the cells' teams back (long
-        // tapes), the octants first, so that their own longest tape sizes the rest.
+        // with a team for every job (or as many as the device runs at once); where scratch
+        // would hold the cells' teams back (long tapes), the octants first, so that their own
+        // longest tape sizes the rest.
         std::vector<Step> steps;
         uint64_t octant_keep = 0;
         if (split) {
             steps.push_back(plan_step(1, f, block_count * 8, csize, octants, cells, false));
             Step cells_step = plan_step(2, f, total, csize, octants, cells, refine);
-            if (cells_step.teams < cells_step.team_jobs) {
+            if (cells_step.scratch_limited) {
                 const GpuCounters oc = run_steps(steps, false, 0);
                 octant_keep = oc.octant_used;
                 max_len = std::max(std::min(oc.max_len, max_len), 1u);
@@ -532,6 +547,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             .count();
     const Context::HostTime& host = ctx.host_time();
     st.host_buffers = host.buffers - host_before.buffers;
+    st.host_buffers_reused = host.buffers_reused - host_before.buffers_reused;
     st.host_submissions = host.submissions - host_before.submissions;
     st.host_buffer_ms = host.buffer_ms - host_before.buffer_ms;
     st.host_submit_ms = host.submit_ms - host_before.submit_ms;

@@ -30,6 +30,12 @@ std::string Device::name() const {
 uint64_t Device::memory_in_use() const {
     missing();
 }
+uint64_t Device::memory_cached() const {
+    missing();
+}
+void Device::release_cached_memory() {
+    missing();
+}
 Grid::Grid() = default;
 Grid::~Grid() = default;
 Grid::Grid(Grid&&) noexcept = default;

@@ -2,9 +2,11 @@
 #include "vk_context.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cstdlib>
 #include <cstring>
+#include <thread>
 
 #include "device_layout.hpp"
 
@@ -189,7 +191,51 @@ Context::Context() {
         if (const char* env = std::getenv("SDFPRUNE_VULKAN_SUBGROUPS"); env && *env)
             subgroups_ = subgroups_ && std::atoi(env) != 0;
     }
+    {
+        // Invocations resident at once (resident_threads): the vendors' core counts where the
+        // device reports them (querying an extension's properties needs no enabling).
+        auto nv = vk_struct<VkPhysicalDeviceShaderSMBuiltinsPropertiesNV>(
+            VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SHADER_SM_BUILTINS_PROPERTIES_NV);
+        auto amd = vk_struct<VkPhysicalDeviceShaderCorePropertiesAMD>(
+            VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SHADER_CORE_PROPERTIES_AMD);
+        auto p2 =
+            vk_struct<VkPhysicalDeviceProperties2>(VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2);
+        const bool has_nv = has_extension(physical_, VK_NV_SHADER_SM_BUILTINS_EXTENSION_NAME);
+        const bool has_amd = has_extension(physical_, VK_AMD_SHADER_CORE_PROPERTIES_EXTENSION_NAME);
+        p2.pNext = has_nv ? static_cast<void*>(&nv) : has_amd ? static_cast<void*>(&amd) : nullptr;
+        vkGetPhysicalDeviceProperties2(physical_, &p2);
+        const uint64_t nv_threads = uint64_t(nv.shaderSMCount) * nv.shaderWarpsPerSM * 32;
+        const uint64_t amd_threads = uint64_t(amd.shaderEngineCount) *
+                                     amd.shaderArraysPerEngineCount *
+                                     amd.computeUnitsPerShaderArray * amd.simdPerComputeUnit *
+                                     amd.wavefrontsPerSimd * amd.wavefrontSize;
+        if (has_nv && nv_threads > 0)
+            resident_threads_ = nv_threads;
+        else if (has_amd && amd_threads > 0)
+            resident_threads_ = amd_threads;
+        else if (props.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU)
+            resident_threads_ = uint64_t(std::max(1u, std::thread::hardware_concurrency())) *
+                                kCpuGroupsPerCore * kWorkgroupSize;
+        if (const char* env = std::getenv("SDFPRUNE_VULKAN_RESIDENT_THREADS"); env && *env)
+            resident_threads_ = std::strtoull(env, nullptr, 10);
+        resident_threads_ = std::max<uint64_t>(resident_threads_, kWorkgroupSize);
+    }
     vkGetPhysicalDeviceMemoryProperties(physical_, &memory_);
+    // The idle cache's budget (create_buffer): a quarter of the largest device-local heap (or
+    // of any heap, on devices without one), at most 4 GiB. A call's buffers add up to more
+    // than its peak (a pool replaced level by level leaves each smaller one behind): the
+    // generated fluid's (27,977 nodes) passed 1 GiB and were trimmed before the next call.
+    {
+        uint64_t heap = 0, any_heap = 0;
+        for (uint32_t i = 0; i < memory_.memoryHeapCount; ++i) {
+            any_heap = std::max<uint64_t>(any_heap, memory_.memoryHeaps[i].size);
+            if (memory_.memoryHeaps[i].flags & VK_MEMORY_HEAP_DEVICE_LOCAL_BIT)
+                heap = std::max<uint64_t>(heap, memory_.memoryHeaps[i].size);
+        }
+        cache_budget_ = std::min<uint64_t>(uint64_t(4) << 30, (heap ? heap : any_heap) / 4);
+        if (const char* env = std::getenv("SDFPRUNE_VULKAN_CACHE_BYTES"); env && *env)
+            cache_budget_ = std::strtoull(env, nullptr, 10);
+    }
 
     const float priority = 1.0f;
     auto qci = vk_struct<VkDeviceQueueCreateInfo>(VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO);
@@ -289,6 +335,7 @@ Context::Context() {
 Context::~Context() {
     if (device_) {
         vkDeviceWaitIdle(device_);
+        trim(0);
         for (Kernel& k : kernels_) {
             vkDestroyPipeline(device_, k.pipeline, nullptr);
             vkDestroyPipelineLayout(device_, k.layout, nullptr);
@@ -327,15 +374,51 @@ struct HostTally {
                   .count();
     }
 };
+
+// The capacity class of a buffer of `bytes` (a multiple of 16): up to 64 bytes the size
+// itself; above, the next multiple of a quarter of the power of two below it (2^k times 1.25,
+// 1.5, 1.75 or 2), so at most 25 % more than asked.
+uint64_t capacity_class(uint64_t bytes) {
+    if (bytes <= 64) return bytes;
+    const uint64_t quarter = uint64_t(1) << (std::bit_width(bytes - 1) - 3);
+    return (bytes + quarter - 1) / quarter * quarter;
+}
 }  // namespace
 
 Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
-    const HostTally tally{host_.buffers, host_.buffer_ms};
+    const auto start = std::chrono::steady_clock::now();
+    const auto add_time = [&] {
+        host_.buffer_ms +=
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                .count();
+    };
+    const uint64_t size = (std::max<uint64_t>(bytes, 16) + 15) & ~uint64_t(15);
+    // (A buffer as large as the device's largest range is not rounded past it.)
+    const uint64_t capacity = std::max(size, std::min(capacity_class(size), max_range_));
+    const auto hand_out = [&](Buffer b) {
+        b.size = size;
+        if (!host_visible) {
+            live_ += b.capacity;
+            peak_ = std::max(peak_, live_);
+        }
+        add_time();
+        return b;
+    };
+    // The most recently cached buffer of this class and kind (still warm in the driver's and
+    // the device's caches).
+    for (size_t i = idle_.size(); i-- > 0;)
+        if (idle_[i].capacity == capacity && (idle_[i].mapped != nullptr) == host_visible) {
+            const Buffer b = idle_[i];
+            idle_.erase(idle_.begin() + ptrdiff_t(i));
+            cached_ -= b.capacity;
+            ++host_.buffers_reused;
+            return hand_out(b);
+        }
+
     Buffer b;
-    b.size = std::max<uint64_t>(bytes, 16);
-    b.size = (b.size + 15) & ~uint64_t(15);
+    b.capacity = capacity;
     auto bci = vk_struct<VkBufferCreateInfo>(VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO);
-    bci.size = b.size;
+    bci.size = capacity;
     bci.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
                 VK_BUFFER_USAGE_TRANSFER_DST_BIT;
     bci.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
@@ -345,31 +428,63 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
     auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
     mai.allocationSize = req.size;
     mai.memoryTypeIndex = memory_type(req.memoryTypeBits, host_visible);
-    const VkResult r = vkAllocateMemory(device_, &mai, nullptr, &b.memory);
+    VkResult r = vkAllocateMemory(device_, &mai, nullptr, &b.memory);
+    if (r != VK_SUCCESS && !idle_.empty()) {  // the idle buffers may be what is in the way
+        trim(0);
+        r = vkAllocateMemory(device_, &mai, nullptr, &b.memory);
+    }
     if (r != VK_SUCCESS) {
         vkDestroyBuffer(device_, b.buffer, nullptr);
+        add_time();
         throw GpuError("Vulkan device out of memory: a buffer of " + std::to_string(bytes) +
                        " bytes did not fit (" + std::to_string(live_) + " bytes in use)");
     }
     vkBindBufferMemory(device_, b.buffer, b.memory, 0);
-    if (host_visible) check(vkMapMemory(device_, b.memory, 0, b.size, 0, &b.mapped), "vkMapMemory");
-    if (!host_visible) {
-        live_ += b.size;
-        peak_ = std::max(peak_, live_);
+    if (host_visible) {
+        r = vkMapMemory(device_, b.memory, 0, capacity, 0, &b.mapped);
+        if (r != VK_SUCCESS) {
+            vkDestroyBuffer(device_, b.buffer, nullptr);
+            vkFreeMemory(device_, b.memory, nullptr);
+            add_time();
+            check(r, "vkMapMemory");
+        }
     }
-    return b;
+    ++host_.buffers;
+    return hand_out(b);
 }
 
 void Context::destroy(Buffer& b) {
     if (!b.buffer) return;
-    if (b.mapped) {
-        vkUnmapMemory(device_, b.memory);
+    if (!b.mapped) live_ -= b.capacity;
+    if (b.capacity > cache_budget_) {
+        free_buffer(b);
     } else {
-        live_ -= b.size;
+        trim(cache_budget_ - b.capacity);
+        idle_.push_back(b);
+        cached_ += b.capacity;
     }
+    b = Buffer{};
+}
+
+void Context::free_buffer(Buffer& b) {
+    if (b.mapped) vkUnmapMemory(device_, b.memory);
     vkDestroyBuffer(device_, b.buffer, nullptr);
     vkFreeMemory(device_, b.memory, nullptr);
     b = Buffer{};
+}
+
+void Context::trim(uint64_t keep_bytes) {
+    size_t n = 0;  // idle_'s first n, the oldest, are freed
+    while (n < idle_.size() && cached_ > keep_bytes) {
+        cached_ -= idle_[n].capacity;
+        free_buffer(idle_[n++]);
+    }
+    idle_.erase(idle_.begin(), idle_.begin() + ptrdiff_t(n));
+}
+
+void Context::set_cache_budget(uint64_t bytes) {
+    cache_budget_ = bytes;
+    trim(bytes);
 }
 
 uint32_t Context::groups_for(uint64_t n) const {
@@ -462,7 +577,7 @@ void Context::dispatch(KernelId id, std::initializer_list<const Buffer*> buffers
                            " bytes is more than " + device_name_ + " lets a shader address (" +
                            std::to_string(max_range_) + " bytes); use --backend cpu");
         }
-        info[i] = {b->buffer, 0, VK_WHOLE_SIZE};
+        info[i] = {b->buffer, 0, b->size};
         writes[i] = vk_struct<VkWriteDescriptorSet>(VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET);
         writes[i].dstSet = set;
         writes[i].dstBinding = i;
@@ -491,7 +606,7 @@ void Context::copy(const Buffer& src, const Buffer& dst, uint64_t bytes, uint64_
 }
 
 void Context::fill(const Buffer& dst, uint32_t value) {
-    vkCmdFillBuffer(cmd_, dst.buffer, 0, VK_WHOLE_SIZE, value);
+    vkCmdFillBuffer(cmd_, dst.buffer, 0, dst.size, value);
     barrier();
 }
 

@@ -1,6 +1,7 @@
 // vk_context.hpp — the little of Vulkan the GPU backend needs: one compute queue, storage
-// buffers, compute kernels built from the SPIR-V embedded at build time, and a recorder that
-// batches dispatches and copies into one submission timed with GPU timestamps.
+// buffers (recycled through an idle cache), compute kernels built from the SPIR-V embedded at
+// build time, and a recorder that batches dispatches and copies into one submission timed with
+// GPU timestamps.
 //
 // Not thread-safe: one Context is used by one thread at a time.
 #pragma once
@@ -34,7 +35,11 @@ enum class KernelId : uint32_t {
 struct Buffer {
     VkBuffer buffer = VK_NULL_HANDLE;
     VkDeviceMemory memory = VK_NULL_HANDLE;
+    // The bytes asked for (rounded up to 16): what the shaders see (the descriptor's range),
+    // what fill() clears and what callers take as the array's length.
     VkDeviceSize size = 0;
+    // The bytes allocated: size's capacity class (Context::create_buffer), at least size.
+    VkDeviceSize capacity = 0;
     void* mapped = nullptr;  // host-visible buffers only
 };
 
@@ -71,21 +76,51 @@ class Context {
     // the most workgroups one dispatch may have.
     uint64_t scratch_budget_bytes() const;
     uint32_t max_workgroups() const { return max_groups_; }
+    // About how many invocations the device runs at once: more threads in flight only queue
+    // behind these, so scratch for more is held for nothing. From VK_NV_shader_sm_builtins
+    // (SMs × warps per SM × 32) or VK_AMD_shader_core_properties (SIMDs × wavefronts per SIMD
+    // × wavefront size) where the device has them; on CPU devices (lavapipe: a workgroup per
+    // core at a time) kCpuGroupsPerCore workgroups a core; elsewhere kAssumedResidentThreads.
+    // SDFPRUNE_VULKAN_RESIDENT_THREADS=N sets it (for tests).
+    // (2^18: about an H100's or H200's 132 SMs × 2,048 invocations, 270,336.)
+    static constexpr uint64_t kAssumedResidentThreads = uint64_t(1) << 18;
+    static constexpr uint64_t kCpuGroupsPerCore = 16;
+    uint64_t resident_threads() const { return resident_threads_; }
 
-    // A storage buffer in device memory, or host-visible (mapped) for uploads and readbacks.
-    // Throws GpuError when the device has no memory left for it.
+    // A storage buffer in device memory, or host-visible (mapped) for uploads and readbacks,
+    // of `bytes` (Buffer::size) and contents undefined. Buffers are recycled, since allocating
+    // device memory costs the host 0.4-1 ms a buffer on an H200's driver: destroy() puts a
+    // buffer in an idle cache, and create_buffer() takes the most recently cached buffer of the
+    // same kind (device-local or host-visible) and capacity class before it allocates. Classes
+    // are 2^k times 1, 1.25, 1.5 or 1.75 (from 64 bytes; below, multiples of 16; never more
+    // than the device's largest storage buffer unless asked for), so a buffer holds at most
+    // 25 % more than asked and a call that repeats another's requests finds every buffer it
+    // needs in the cache. Throws GpuError when the device has no memory left for it (after
+    // freeing the idle cache and trying once more).
     Buffer create_buffer(uint64_t bytes, bool host_visible = false);
+    // Hands b back to the idle cache (freed at once if it alone is over the budget) and
+    // empties it; an empty buffer is ignored.
     void destroy(Buffer& b);
-    // Device memory held by live buffers, now and at most since reset_peak().
+    // Device-local memory held by buffers handed out (their capacities), now and at most since
+    // reset_peak(); the idle cache is not counted.
     uint64_t bytes_live() const { return live_; }
     uint64_t bytes_peak() const { return peak_; }
     void reset_peak() { peak_ = live_; }
+    // The idle cache: bytes it holds (device-local and host-visible), and its budget, past
+    // which the buffers cached longest are freed first. By default a quarter of the largest
+    // device-local heap, at most 4 GiB; SDFPRUNE_VULKAN_CACHE_BYTES=N sets it (0: no cache).
+    uint64_t bytes_cached() const { return cached_; }
+    uint64_t cache_budget() const { return cache_budget_; }
+    void set_cache_budget(uint64_t bytes);
+    // Frees idle buffers, those cached longest first, until at most `keep_bytes` are cached.
+    void trim(uint64_t keep_bytes = 0);
 
-    // Where the host's time goes, summed since the context was made: buffers created (device
-    // memory allocated, mapped), and submissions (uploads and readbacks too) with the host's
+    // Where the host's time goes, summed since the context was made: buffers allocated (device
+    // memory allocated, mapped) and buffers taken from the idle cache instead, with the time
+    // create_buffer took for both; and submissions (uploads and readbacks too) with the host's
     // wall time from ending the recording to the results being back.
     struct HostTime {
-        uint64_t buffers = 0, submissions = 0;
+        uint64_t buffers = 0, buffers_reused = 0, submissions = 0;
         double buffer_ms = 0, submit_ms = 0;
     };
     const HostTime& host_time() const { return host_; }
@@ -129,6 +164,8 @@ class Context {
     double submit_part();
     void check(VkResult r, const char* what) const;
     uint32_t memory_type(uint32_t bits, bool host_visible) const;
+    // Unmaps and frees b's memory (not through the idle cache).
+    void free_buffer(Buffer& b);
 
     VkInstance instance_ = VK_NULL_HANDLE;
     VkPhysicalDevice physical_ = VK_NULL_HANDLE;
@@ -147,9 +184,13 @@ class Context {
     std::string device_name_;
     uint64_t max_range_ = 0;
     uint32_t max_groups_ = 65535;
+    uint64_t resident_threads_ = kAssumedResidentThreads;
     bool loop_limited_ = false;
     bool subgroups_ = false;
     uint64_t live_ = 0, peak_ = 0;
+    // Idle buffers, cached longest first; cached_ counts their capacities.
+    std::vector<Buffer> idle_;
+    uint64_t cached_ = 0, cache_budget_ = 0;
     uint32_t sets_used_ = 0;
     double carried_ms_ = 0;              // GPU time of the parts already submitted
     std::vector<double> stamps_ms_;      // the recording's stamps (stamp())

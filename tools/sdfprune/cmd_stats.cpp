@@ -123,6 +123,7 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
         std::string backend = "cpu";
         uint32_t edit_bench = 0;
         uint64_t seed = 1;
+        uint32_t repeat = 1;
     };
     auto args = std::make_shared<Args>();
     CLI::App* sub =
@@ -139,6 +140,12 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
         ->check(CLI::Range(0u, 100000u));
     sub->add_option("--seed", args->seed, "random seed of --edit-bench's moves")
         ->capture_default_str();
+    sub->add_option("--repeat", args->repeat,
+                    "prune N times on one device, each while the last grid is still held (as an "
+                    "animation's frames): the figures are the last call's, buffers by then "
+                    "reused; --json adds the first call's (first_*) (vulkan backend)")
+        ->capture_default_str()
+        ->check(CLI::Range(1u, 1000u));
     sub->footer(
         "Examples:\n  sdfprune stats scenes/molecule.json\n"
         "  sdfprune stats scenes/trees.json --grid 128 --no-farfield --json\n"
@@ -150,6 +157,8 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
              PruneOptions o = with_bounds_flag(args->prune, args->lipschitz);
              if (args->edit_bench > 0 && args->backend != "cpu")
                  throw std::invalid_argument("--edit-bench runs on the CPU backend only");
+             if (args->repeat > 1 && args->backend != "vulkan")
+                 throw std::invalid_argument("--repeat runs on the vulkan backend only");
              // Incremental updates need the coarse cells' own tapes.
              if (args->edit_bench > 0) o.coarse_tapes = true;
              if (!o.hierarchy && !args->json)
@@ -159,9 +168,15 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
              std::unique_ptr<PrunedGrid> cpu_grid;
              std::unique_ptr<gpu::Device> device;
              std::unique_ptr<gpu::Grid> device_grid;
+             gpu::DevicePruneStats first;  // the first call's, with --repeat
              if (args->backend == "vulkan") {
                  device = std::make_unique<gpu::Device>();
                  device_grid = std::make_unique<gpu::Grid>(gpu::prune(*device, sc, o));
+                 first = device_grid->stats();
+                 for (uint32_t i = 1; i < args->repeat; ++i) {
+                     auto next = std::make_unique<gpu::Grid>(gpu::prune(*device, sc, o));
+                     device_grid = std::move(next);
+                 }
              } else {
                  cpu_grid = std::make_unique<PrunedGrid>(prune(sc, o));
              }
@@ -220,10 +235,21 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          .add("subgroups", device_grid->stats().subgroups)
                          .add("pool_grows", device_grid->stats().pool_grows)
                          .add("host_buffers", device_grid->stats().host_buffers)
+                         .add("host_buffers_reused", device_grid->stats().host_buffers_reused)
                          .add("host_buffer_ms", device_grid->stats().host_buffer_ms)
                          .add("host_submissions", device_grid->stats().host_submissions)
-                         .add("host_submit_ms", device_grid->stats().host_submit_ms)
-                         .add("gpu_steps", steps);
+                         .add("host_submit_ms", device_grid->stats().host_submit_ms);
+                     // The device's idle buffers, kept for the next call (the grid held).
+                     j.add("idle_cache_bytes", device->memory_cached());
+                     if (args->repeat > 1)
+                         j.add("repeat", args->repeat)
+                             .add("first_prune_ms", first.prune_ms)
+                             .add("first_wall_ms", first.wall_ms)
+                             .add("first_prune_peak_bytes", first.prune_peak_bytes)
+                             .add("first_host_buffers", first.host_buffers)
+                             .add("first_host_buffers_reused", first.host_buffers_reused)
+                             .add("first_host_buffer_ms", first.host_buffer_ms);
+                     j.add("gpu_steps", steps);
                  }
                  if (args->edit_bench > 0)
                      j.add("edit_count", args->edit_bench)
@@ -255,11 +281,12 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                  std::printf(
                      "  pruning on %s: %.1f ms GPU (%.1f ms wall, %u submissions, %u pool "
                      "grows), peak %.1f MB device memory\n"
-                     "    host: %llu buffers made in %.1f ms, %llu submissions waited for in "
-                     "%.1f ms\n",
+                     "    host: %llu buffers made and %llu reused in %.1f ms, %llu submissions "
+                     "waited for in %.1f ms\n",
                      device->name().c_str(), s.prune_ms, ds.wall_ms, ds.submissions, ds.pool_grows,
                      double(s.prune_peak_bytes) / 1e6, (unsigned long long)ds.host_buffers,
-                     ds.host_buffer_ms, (unsigned long long)ds.host_submissions, ds.host_submit_ms);
+                     (unsigned long long)ds.host_buffers_reused, ds.host_buffer_ms,
+                     (unsigned long long)ds.host_submissions, ds.host_submit_ms);
                  static const char* const kModes[] = {"cells", "octants", "cells from octants",
                                                       "refinement"};
                  for (const gpu::GpuStepShape& st : device_grid->stats().steps)
