@@ -14,6 +14,7 @@
 #include "sdfprune/builtin.hpp"
 #include "sdfprune/discretize.hpp"
 #include "sdfprune/eval.hpp"
+#include "sdfprune/generate.hpp"
 #include "sdfprune/gpu.hpp"
 #include "sdfprune/io.hpp"
 #include "sdfprune/render.hpp"
@@ -316,6 +317,37 @@ TEST(Gpu, TopLevelsRunWide) {
     EXPECT_TRUE(steps[0].wide);  // the root's octants, from the full tape
     EXPECT_TRUE(steps[1].wide);
     expect_matches_cpu(sc, prune(sc, o), gpu, *dev, "demo 64³");
+}
+
+// Steps of many jobs run wide too where the teams would be held back by scratch: with a small
+// scratch budget (SDFPRUNE_VULKAN_SCRATCH_BYTES, standing in for a large scene's long tapes),
+// a generated fluid's finer levels have more than 1,024 jobs over tapes of hundreds of words;
+// some such step runs wide, its busiest lane walking less than in teams under the same budget,
+// and the grid is still the CPU's.
+TEST(Gpu, ScratchLimitedStepsRunWide) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Scene sc = generate_scene("fluid", 1, 1000);
+    PruneOptions o;
+    o.resolution = 64;
+    ::setenv("SDFPRUNE_VULKAN_SCRATCH_BYTES", "1048576", 1);
+    ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
+    const gpu::Grid teams = gpu::prune(*dev, sc, o);
+    ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+    const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+    ::unsetenv("SDFPRUNE_VULKAN_SCRATCH_BYTES");
+    const std::vector<gpu::GpuStepShape>& steps = gpu.stats().steps;
+    ASSERT_EQ(steps.size(), teams.stats().steps.size());
+    bool many_wide = false;
+    for (size_t i = 0; i < steps.size(); ++i) {
+        const gpu::GpuStepShape &st = steps[i], &team = teams.stats().steps[i];
+        SCOPED_TRACE("step " + std::to_string(i));
+        EXPECT_EQ(st.jobs, team.jobs);
+        if (!st.wide || st.level == 0) continue;
+        EXPECT_LT(st.longest_walk_words, team.longest_walk_words);
+        if (st.jobs > 8 * 1024) many_wide = true;  // team jobs: a team per 8 boxes
+    }
+    EXPECT_TRUE(many_wide) << "no step of more than 1,024 team jobs ran wide";
+    expect_matches_cpu(sc, prune(sc, o), gpu, *dev, "fluid 1000, 64³, 1 MiB of scratch");
 }
 
 // The host's share of a pruning call is accounted: every level's submission among the host's

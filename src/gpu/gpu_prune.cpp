@@ -152,10 +152,12 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     const uint32_t flags =
         (opt.far_field ? 1u : 0u) | (opt.bounds == CellBounds::kInterval ? 2u : 0u);
     uint32_t level_index = 0;  // the level being made (for the steps' shapes)
-    // Which steps run wide (prune_wide.comp): those with at most kWideMaxJobs team jobs (a
-    // workgroup each: about what a large GPU holds at once), parent tapes of kWideMinTape
-    // words or more, and a shorter longest walk than in teams. SDFPRUNE_VULKAN_WIDE=0 never,
-    // =1 wherever the kernel fits (for tests).
+    // Which steps run wide (prune_wide.comp): those with parent tapes of kWideMinTape words or
+    // more, a shorter longest walk than in teams, and at most kWideMaxJobs team jobs (a
+    // workgroup each: about what a large GPU holds at once), or more where the teams would be
+    // held back by scratch (long tapes: a team's scratch grows with them, and too few teams in
+    // flight walk them one round after another). SDFPRUNE_VULKAN_WIDE=0 never, =1 wherever the
+    // kernel fits (for tests).
     constexpr uint64_t kWideMaxJobs = 1024, kWideMinTape = 256;
     int wide_override = -1;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE"); env && *env)
@@ -172,7 +174,9 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         uint64_t team_jobs, teams, rounds, per_dispatch;
         uint32_t threads, groups;  // lanes that take jobs, and their workgroups
         bool wide;
-        // Fewer teams than jobs for want of scratch (not because the device runs no more).
+        // In teams, fewer teams than jobs for want of scratch (not because the device runs no
+        // more): then the step may run wide however many its jobs, and a level's octants run
+        // first, so that their shorter tapes size its other steps.
         bool scratch_limited;
         GpuStepShape shape;
         uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
@@ -200,7 +204,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         // the jobs in a grid-stride loop). Only teams with jobs hold scratch, so one parent
         // tape as long as the budget allows can be pruned (the root's, the full tree, at level
         // 0) even where a workgroup's 8 teams could not.
-        const uint64_t fit = ctx.scratch_budget_bytes() / team_bytes;
+        const uint64_t fit = ctx.prune_scratch_budget_bytes() / team_bytes;
         if (fit == 0)
             throw GpuError("Vulkan: pruning a tape of " + std::to_string(max_len) +
                            " words needs " + std::to_string(team_bytes) +
@@ -291,7 +295,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                                      4 * std::bit_width(kPruneWide);
             const uint64_t group_bytes =
                 (len * (2 + kPruneWideEntryWords * kPruneTeam) + 5 * heights) * 4;
-            const uint64_t fit_groups = ctx.scratch_budget_bytes() / group_bytes;
+            const uint64_t fit_groups = ctx.prune_scratch_budget_bytes() / group_bytes;
             const bool limited = ctx.loop_limited();
             if (fit_groups > 0 && (!limited || 2 * per_job + 1024 <= Context::kLoopLimit)) {
                 const uint64_t unlimited_groups =
@@ -300,12 +304,11 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                 const uint64_t groups = std::min(unlimited_groups, fit_groups);
                 const uint64_t walk =
                     s.team_jobs == 0 ? 0 : ceil_div(s.team_jobs, groups) * walk_job;
-                const bool pick =
-                    wide_override == 1 || (s.team_jobs <= kWideMaxJobs && len >= kWideMinTape &&
-                                           walk < s.shape.longest_walk_words);
+                const bool pick = wide_override == 1 ||
+                                  ((s.team_jobs <= kWideMaxJobs || s.scratch_limited) &&
+                                   len >= kWideMinTape && walk < s.shape.longest_walk_words);
                 if (pick) {
                     s.wide = true;
-                    s.scratch_limited = fit_groups < unlimited_groups;
                     s.teams = groups;
                     s.groups = uint32_t(groups);
                     s.threads = uint32_t(groups * kPruneWide);

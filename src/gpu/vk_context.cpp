@@ -232,7 +232,8 @@ Context::Context() {
             if (memory_.memoryHeaps[i].flags & VK_MEMORY_HEAP_DEVICE_LOCAL_BIT)
                 heap = std::max<uint64_t>(heap, memory_.memoryHeaps[i].size);
         }
-        cache_budget_ = std::min<uint64_t>(uint64_t(4) << 30, (heap ? heap : any_heap) / 4);
+        device_heap_ = heap ? heap : any_heap;
+        cache_budget_ = std::min<uint64_t>(uint64_t(4) << 30, device_heap_ / 4);
         if (const char* env = std::getenv("SDFPRUNE_VULKAN_CACHE_BYTES"); env && *env)
             cache_budget_ = std::strtoull(env, nullptr, 10);
     }
@@ -492,8 +493,20 @@ uint32_t Context::groups_for(uint64_t n) const {
         std::clamp<uint64_t>((n + kWorkgroupSize - 1) / kWorkgroupSize, 1, max_groups_));
 }
 
+namespace {
+// SDFPRUNE_VULKAN_SCRATCH_BYTES, or `fallback`.
+uint64_t scratch_override(uint64_t fallback) {
+    const char* env = std::getenv("SDFPRUNE_VULKAN_SCRATCH_BYTES");
+    return env && *env ? std::strtoull(env, nullptr, 10) : fallback;
+}
+}  // namespace
+
 uint64_t Context::scratch_budget_bytes() const {
-    return std::min(kScratchBudgetBytes, max_range_);
+    return std::min(scratch_override(kScratchBudgetBytes), max_range_);
+}
+
+uint64_t Context::prune_scratch_budget_bytes() const {
+    return std::min(scratch_override(std::max(kScratchBudgetBytes, device_heap_ / 16)), max_range_);
 }
 
 uint32_t Context::threads_for(uint64_t work, uint64_t bytes_per_thread) const {

@@ -75,6 +75,12 @@ class Context {
     // What threads_for shares out: the bytes of scratch all threads in flight may hold, and
     // the most workgroups one dispatch may have.
     uint64_t scratch_budget_bytes() const;
+    // The scratch one pruning step may hold: a sixteenth of the device-local heap, at least
+    // scratch_budget_bytes(), within one buffer's range. Its steps hold no more teams than the
+    // device runs at once (resident_threads), so only long parent tapes take this much: there,
+    // teams starved of scratch would walk them one round after another. Both budgets are
+    // SDFPRUNE_VULKAN_SCRATCH_BYTES where that is set (read at each call, for tests).
+    uint64_t prune_scratch_budget_bytes() const;
     uint32_t max_workgroups() const { return max_groups_; }
     // About how many invocations the device runs at once: more threads in flight only queue
     // behind these, so scratch for more is held for nothing. From VK_NV_shader_sm_builtins
@@ -185,6 +191,7 @@ class Context {
     uint64_t max_range_ = 0;
     uint32_t max_groups_ = 65535;
     uint64_t resident_threads_ = kAssumedResidentThreads;
+    uint64_t device_heap_ = 0;  // the largest device-local heap (or any heap), in bytes
     bool loop_limited_ = false;
     bool subgroups_ = false;
     uint64_t live_ = 0, peak_ = 0;
