@@ -17,17 +17,22 @@
 
 namespace sdfprune {
 
+namespace {
+// The progress reported after `done` of `count` chunks: never past hi, so that the reported
+// fractions stay sorted across calls.
+double progress_at(const ParallelOptions& o, uint64_t done, uint64_t count) {
+    return std::min(o.progress_hi,
+                    o.progress_lo + (o.progress_hi - o.progress_lo) * double(done) / double(count));
+}
+}  // namespace
+
 bool parallel_chunks(uint64_t count, const ParallelOptions& o,
                      const std::function<void(uint64_t)>& fn) {
     std::atomic<bool> cancelled{false};
     std::atomic<uint64_t> done{0};
     const std::thread::id caller = std::this_thread::get_id();
     const bool report = o.progress && *o.progress;
-    // Never past hi, so that the reported fractions stay sorted across calls.
-    const auto fraction = [&](uint64_t d) {
-        return std::min(o.progress_hi, o.progress_lo + (o.progress_hi - o.progress_lo) * double(d) /
-                                                           double(count));
-    };
+    const auto fraction = [&](uint64_t d) { return progress_at(o, d, count); };
     const auto run = [&] {
         tbb::parallel_for(tbb::blocked_range<uint64_t>(0, count, 1),
                           [&](const tbb::blocked_range<uint64_t>& r) {
@@ -62,10 +67,7 @@ bool parallel_chunks_ordered(uint64_t count, const ParallelOptions& o,
     std::exception_ptr error;
     const std::thread::id caller = std::this_thread::get_id();
     const bool report = o.progress && *o.progress;
-    const auto fraction = [&](uint64_t d) {
-        return std::min(o.progress_hi, o.progress_lo + (o.progress_hi - o.progress_lo) * double(d) /
-                                                           double(count));
-    };
+    const auto fraction = [&](uint64_t d) { return progress_at(o, d, count); };
     // Each worker takes the next chunk until none is left; finishing one, it commits the
     // finished prefix.
     const auto work = [&] {
