@@ -82,12 +82,17 @@ bool parallel_chunks_ordered(uint64_t count, const ParallelOptions& o,
             if (c >= count) return;
             try {
                 fn(c);
-                std::lock_guard lock(m);
-                finished[c] = 1;
-                ++done;
-                for (; committed < count && finished[committed] != 0 && !error; ++committed)
-                    commit(committed);
-                if (report && std::this_thread::get_id() == caller) (*o.progress)(fraction(done));
+                uint64_t now_done;
+                {
+                    std::lock_guard lock(m);
+                    finished[c] = 1;
+                    now_done = ++done;
+                    for (; committed < count && finished[committed] != 0 && !error; ++committed)
+                        commit(committed);
+                }
+                // (Outside the lock: a slow callback holds no other thread's commits back.)
+                if (report && std::this_thread::get_id() == caller)
+                    (*o.progress)(fraction(now_done));
             } catch (...) {
                 std::lock_guard lock(m);
                 if (!error) error = std::current_exception();
