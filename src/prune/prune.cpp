@@ -149,24 +149,19 @@ struct LevelBuffers {
 // The next level's blocks under the near-field cells [begin, end) of one chunk of `cells` (the
 // level just pruned, whose blocks are `blocks`, f wide), appended to `next` in cell order, their
 // children nf wide, each with its tape in the chunk's buffer `words`. Sets those cells'
-// `children`; returns the number of far-field cells among them.
-uint64_t link_chunk(std::span<PrunedCell> cells, std::span<const ParentBlock> blocks, uint32_t f,
-                    uint32_t nf, uint64_t begin, uint64_t end, const std::vector<uint32_t>& words,
-                    std::vector<ParentBlock>& next) {
+// `children`.
+void link_chunk(std::span<PrunedCell> cells, std::span<const ParentBlock> blocks, uint32_t f,
+                uint32_t nf, uint64_t begin, uint64_t end, const std::vector<uint32_t>& words,
+                std::vector<ParentBlock>& next) {
     const uint64_t per_block = uint64_t(f) * f * f;
-    uint64_t far = 0;
     for (uint64_t i = begin; i < end; ++i) {
         PrunedCell& cell = cells[i];
-        if (cell.tape == PrunedCell::kFarField) {
-            ++far;
-            continue;
-        }
+        if (cell.tape == PrunedCell::kFarField) continue;
         const CellCoord at = block_cell(blocks[i / per_block].origin, f, uint32_t(i % per_block));
         cell.children = uint32_t(next.size() * nf * nf * nf);
         const uint32_t* header = words.data() + cell.tape;
         next.push_back({{at.x * nf, at.y * nf, at.z * nf}, header[0], header + 2});
     }
-    return far;
 }
 
 }  // namespace
@@ -303,10 +298,8 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
                 // The next level's blocks under this chunk (before its tapes' offsets go).
                 first_block[k] = uint32_t(next.size());
                 const uint64_t begin = k * kChunkCells, end = std::min(total, begin + kChunkCells);
-                far_finest +=
-                    below * below * below *
-                    link_chunk(level.cells, blocks, f, nf, begin, end, outs[k].words, next);
-                place_chunk(uint32_t(k), opt.coarse_tapes);
+                link_chunk(level.cells, blocks, f, nf, begin, end, outs[k].words, next);
+                far_finest += below * below * below * place_chunk(uint32_t(k), opt.coarse_tapes);
                 level_bytes += bytes;
             }
             // Free the parents that no chunk after this one refers to.
