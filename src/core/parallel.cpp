@@ -1,10 +1,9 @@
-// parallel.cpp — the one parallel loop (parallel.hpp): fixed chunks on oneTBB, progress from the
-// calling thread, cancellation before every chunk.
+// parallel.cpp — the one parallel loop (parallel.hpp): fixed chunks handed out in order to oneTBB
+// workers, progress from the calling thread, cancellation before every chunk, and in the ordered
+// form commits in chunk order.
 #include "parallel.hpp"
 
-#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -26,54 +25,24 @@ double progress_at(const ParallelOptions& o, uint64_t done, uint64_t count) {
 }
 }  // namespace
 
-bool parallel_chunks(uint64_t count, const ParallelOptions& o,
-                     const std::function<void(uint64_t)>& fn) {
-    std::atomic<bool> cancelled{false};
-    std::atomic<uint64_t> done{0};
-    const std::thread::id caller = std::this_thread::get_id();
-    const bool report = o.progress && *o.progress;
-    const auto fraction = [&](uint64_t d) { return progress_at(o, d, count); };
-    const auto run = [&] {
-        tbb::parallel_for(tbb::blocked_range<uint64_t>(0, count, 1),
-                          [&](const tbb::blocked_range<uint64_t>& r) {
-                              for (uint64_t c = r.begin(); c != r.end(); ++c) {
-                                  if (cancelled.load(std::memory_order_relaxed)) return;
-                                  if (o.cancel && o.cancel->load(std::memory_order_relaxed)) {
-                                      cancelled = true;
-                                      return;
-                                  }
-                                  fn(c);
-                                  const uint64_t d = ++done;
-                                  if (report && std::this_thread::get_id() == caller)
-                                      (*o.progress)(fraction(d));
-                              }
-                          });
-    };
-    with_threads(o.threads, run);
-    if (cancelled) return false;
-    if (report) (*o.progress)(o.progress_hi);
-    return true;
-}
-
 bool parallel_chunks_ordered(uint64_t count, const ParallelOptions& o,
                              const std::function<void(uint64_t)>& fn,
                              const std::function<void(uint64_t)>& commit) {
     std::atomic<uint64_t> next{0};  // the next chunk to hand out
+    std::atomic<uint64_t> done{0};
     std::atomic<bool> stop{false};  // cancelled, or failed
-    bool cancelled = false;         // (under `m`, as the rest)
-    std::mutex m;
-    std::vector<uint8_t> finished(count, 0);
-    uint64_t committed = 0, done = 0;
+    std::atomic<bool> cancelled{false};
+    std::mutex m;  // the commits' state and the first error
+    std::vector<uint8_t> finished(commit ? count : 0, 0);
+    uint64_t committed = 0;
     std::exception_ptr error;
     const std::thread::id caller = std::this_thread::get_id();
     const bool report = o.progress && *o.progress;
-    const auto fraction = [&](uint64_t d) { return progress_at(o, d, count); };
     // Each worker takes the next chunk until none is left; finishing one, it commits the
     // finished prefix.
     const auto work = [&] {
         while (!stop.load(std::memory_order_relaxed)) {
             if (o.cancel && o.cancel->load(std::memory_order_relaxed)) {
-                std::lock_guard lock(m);
                 cancelled = true;
                 stop = true;
                 return;
@@ -82,17 +51,16 @@ bool parallel_chunks_ordered(uint64_t count, const ParallelOptions& o,
             if (c >= count) return;
             try {
                 fn(c);
-                uint64_t now_done;
-                {
+                if (commit) {
                     std::lock_guard lock(m);
                     finished[c] = 1;
-                    now_done = ++done;
                     for (; committed < count && finished[committed] != 0 && !error; ++committed)
                         commit(committed);
                 }
+                const uint64_t now_done = ++done;
                 // (Outside the lock: a slow callback holds no other thread's commits back.)
                 if (report && std::this_thread::get_id() == caller)
-                    (*o.progress)(fraction(now_done));
+                    (*o.progress)(progress_at(o, now_done, count));
             } catch (...) {
                 std::lock_guard lock(m);
                 if (!error) error = std::current_exception();
@@ -111,6 +79,11 @@ bool parallel_chunks_ordered(uint64_t count, const ParallelOptions& o,
     if (cancelled) return false;
     if (report) (*o.progress)(o.progress_hi);
     return true;
+}
+
+bool parallel_chunks(uint64_t count, const ParallelOptions& o,
+                     const std::function<void(uint64_t)>& fn) {
+    return parallel_chunks_ordered(count, o, fn, nullptr);
 }
 
 }  // namespace sdfprune

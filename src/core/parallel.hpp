@@ -34,22 +34,22 @@ ParallelOptions parallel_options(const Options& o, double lo = 0, double hi = 1)
     return p;
 }
 
-// Runs fn(c) once for every chunk c in [0, count), in parallel, on at most o.threads workers.
-// The chunks are the caller's (fixed, so results that are combined in chunk order do not
-// depend on the thread count). After each chunk run by the calling thread, progress gets
-// lo + (hi − lo)·(chunks done)/count; after the last, hi. Returns false, having skipped every
-// chunk not started, when o.cancel was seen set (checked before each chunk); exceptions from
-// fn propagate.
+// Runs fn(c) once for every chunk c in [0, count), in parallel, on at most o.threads workers
+// that take the chunks in increasing order. The chunks are the caller's (fixed, so results that are
+// combined in chunk order do not depend on the thread count). After each chunk run by the calling
+// thread, progress gets lo + (hi − lo)·(chunks done)/count; after the last, hi. Returns false,
+// having skipped every chunk not started, when o.cancel was seen set (checked before each chunk);
+// exceptions from fn propagate.
 bool parallel_chunks(uint64_t count, const ParallelOptions& o,
                      const std::function<void(uint64_t)>& fn);
 
-// parallel_chunks with chunks handed out in increasing order and an in-order epilogue:
-// commit(c) runs once for every chunk c that ran, in increasing order of c and never two at
-// once, on whichever thread finishes the chunk that completes the prefix [0, c] (so results can
-// be placed in chunk order while later chunks still run, with no barrier). A chunk not
-// committed yet waits for those before it: with chunks handed out in order, about one per
-// thread. Cancellation as parallel_chunks (the chunks before the first skipped one are
-// committed); an exception from fn or commit stops the handing out and propagates.
+// parallel_chunks with an in-order epilogue (parallel_chunks is this with none): commit(c) runs
+// once for every chunk c that ran, in increasing order of c and never two at once, on whichever
+// thread finishes the chunk that completes the prefix [0, c] (so results can be placed in chunk
+// order while later chunks still run, with no barrier). A chunk not committed yet waits for those
+// before it: with chunks handed out in order, about one per thread. Cancellation as parallel_chunks
+// (the chunks before the first skipped one are committed); an exception from fn or commit stops the
+// handing out and propagates.
 bool parallel_chunks_ordered(uint64_t count, const ParallelOptions& o,
                              const std::function<void(uint64_t)>& fn,
                              const std::function<void(uint64_t)>& commit);
