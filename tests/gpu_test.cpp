@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <memory>
 #include <optional>
+#include <set>
 
 #include "prune_check.hpp"
 #include "sdfprune/builtin.hpp"
@@ -791,6 +792,34 @@ TEST(Gpu, SmallBufferRangeSplitsTheWork) {
     // The device is still usable after the refused step.
     o.resolution = 16;
     expect_same_stats(cpu.stats(), gpu::prune(*small, sc, o).stats(), "after the error");
+}
+
+// Where a level's octants' and unrefined cells' tapes would outgrow the device's largest buffer
+// (the million-sphere fluid's finest level on a real GPU), its blocks are pruned a slice at a
+// time, the octant pool emptied between slices: the grid is still the CPU's, cell for cell. On
+// a device that addresses 1 MiB of a buffer, the generated city at 32³ needs slices.
+TEST(Gpu, LevelsTooLargeForOneBufferArePrunedInSlices) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const std::unique_ptr<gpu::Device> small =
+        device_with_env("SDFPRUNE_VULKAN_MAX_BUFFER", "1048576");
+    ASSERT_TRUE(small);
+    const Scene sc = generate_scene("city", 1);
+    PruneOptions o;
+    o.resolution = 32;
+    const PrunedGrid cpu = prune(sc, o);
+    const gpu::Grid gpu = gpu::prune(*small, sc, o);
+    const uint32_t levels = uint32_t(gpu.stats().levels.size());
+    EXPECT_GT(gpu.stats().slices, levels) << "no level was sliced";
+    expect_matches_cpu(sc, cpu, gpu, *small, "city 32³ in slices");
+    // Each step's shape is one, summed over the slices: one per level and mode.
+    std::set<std::pair<uint32_t, uint32_t>> seen;
+    for (const gpu::GpuStepShape& s : gpu.stats().steps)
+        EXPECT_TRUE(seen.insert({s.level, s.mode}).second)
+            << "level " << s.level << " mode " << s.mode << " reported twice";
+    // On the device as it is, the same scene needs a slice a level.
+    const gpu::Grid whole = gpu::prune(*dev, sc, o);
+    EXPECT_EQ(whole.stats().slices, levels);
+    expect_matches_cpu(sc, cpu, whole, *dev, "city 32³");
 }
 
 TEST(GpuCli, StatsOnVulkanEqualCpu) {

@@ -99,6 +99,9 @@ struct DevicePruneStats : PruneStats {
     double wall_ms = 0;
     uint32_t pool_grows = 0;
     uint32_t submissions = 0;
+    // Slices of blocks over all levels (one a level, unless a level's octant pool would outgrow
+    // the device's largest buffer: its blocks are then pruned a slice at a time).
+    uint32_t slices = 0;
     // The host's share of wall_ms: buffers newly allocated (device memory allocated; staging
     // buffers of uploads and readbacks too), buffers taken instead from the device's idle
     // cache (those a previous level or call gave back), the time of both; and every

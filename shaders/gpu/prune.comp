@@ -365,7 +365,7 @@ void main() {
                             // The host grows the pool and redoes the level; until then
                             // the box reads as far-field, so the steps after this one in the
                             // same submission read no garbage.
-                            overflow = 1u;
+                            atomicOr(overflow, transient ? 2u : 1u);
                             phase = kPhaseDone;
                             store(dest, false, value, constant, kFarField, 0u, c0);
                         } else {

@@ -12,7 +12,7 @@ layout(std430, binding = 6) buffer Cells { Cell cells[]; };
 layout(std430, binding = 7) buffer Counters {
     uint pool_used;
     uint pool_capacity;
-    uint overflow;
+    uint overflow;  // 1: the main pool overflowed, 2: the octant pool
     uint max_len;  // longest tape written or shared in this step
     uint near_jobs;  // near-field cells in this step
     uint next_blocks;

@@ -382,7 +382,7 @@ void main() {
                 if (at < start || at + out_len + 2u > capacity || at + out_len + 2u < at ||
                     at >= kInOctantPool) {
                     // The host grows the pool and redoes the level (see prune.comp).
-                    overflow = 1u;
+                    atomicOr(overflow, transient ? 2u : 1u);
                     s_state[box] = 0u;
                     store(dest, false, s_value[box], 0.0, kFarField, 0u, Cell(0u, 0u, 0.0, 0.0));
                 } else {

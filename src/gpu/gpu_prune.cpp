@@ -12,6 +12,8 @@
 #include <cstddef>
 #include <cstdlib>
 #include <cstring>
+#include <limits>
+#include <optional>
 
 #include "device_grid.hpp"
 
@@ -171,7 +173,9 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     struct Step {
         PrunePush push;
         const Buffer *octants, *cells;
-        uint64_t team_jobs, teams, rounds, per_dispatch;
+        // Its team jobs are [first_team_job, first_team_job + team_jobs): those of a slice of
+        // the level's blocks.
+        uint64_t first_team_job, team_jobs, teams, rounds, per_dispatch;
         uint32_t threads, groups;  // lanes that take jobs, and their workgroups
         bool wide;
         // In teams, fewer teams than jobs for want of scratch (not because the device runs no
@@ -181,18 +185,25 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         GpuStepShape shape;
         uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
     };
-    const auto plan_step = [&](uint32_t mode, uint32_t factor, uint64_t jobs, vec3 csize,
-                               const Buffer& octants, const Buffer& cells, bool transient) {
+    // The step's jobs are those of the blocks [first_block, first_block + blocks), `jobs` cells
+    // or octants.
+    const auto plan_step = [&](uint32_t mode, uint32_t factor, uint64_t first_block,
+                               uint64_t blocks, uint64_t jobs, vec3 csize, const Buffer& octants,
+                               const Buffer& cells, bool transient) {
         const uint64_t per_block = uint64_t(factor) * factor * factor, hf = factor / 2;
         const auto teams_for = [](uint64_t boxes) { return (boxes + kPruneTeam - 1) / kPruneTeam; };
         Step s;
         s.octants = &octants;
         s.cells = &cells;
-        s.team_jobs = mode == 0   ? block_count * teams_for(per_block)
-                      : mode == 1 ? block_count
-                      : mode == 2 ? block_count * 8 * teams_for(hf * hf * hf)
-                                  : jobs;
-        if (s.team_jobs > 0xfffffffeull) throw std::length_error("too many cells in one level");
+        // Team jobs run block by block in every mode (prune_common.glsl: job_box).
+        const uint64_t per_block_jobs = mode == 0   ? teams_for(per_block)
+                                        : mode == 1 ? 1
+                                        : mode == 2 ? 8 * teams_for(hf * hf * hf)
+                                                    : per_block;
+        s.first_team_job = first_block * per_block_jobs;
+        s.team_jobs = blocks * per_block_jobs;
+        if (s.first_team_job + s.team_jobs > 0xfffffffeull)
+            throw std::length_error("too many cells in one level");
         // A team's scratch: its lanes' state, per parent-tape entry a left operand and a word
         // per lane (decision and sweep flags), per stack slot and lane 4 words.
         const uint64_t team_bytes =
@@ -339,11 +350,12 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         s.first_stamp = ctx.stamp();
         PrunePush push = s.push;
         push.pool_start = g.pool_words;
-        for (uint64_t first = 0; first < std::max<uint64_t>(s.team_jobs, 1);
+        const uint64_t end = s.first_team_job + s.team_jobs;
+        for (uint64_t first = s.first_team_job; first < std::max<uint64_t>(end, 1);
              first += s.per_dispatch)
             for (uint32_t round = 0; round < s.rounds; ++round) {
                 push.first_job = uint32_t(first);
-                push.jobs = uint32_t(std::min<uint64_t>(s.team_jobs, first + s.per_dispatch));
+                push.jobs = uint32_t(std::min<uint64_t>(end, first + s.per_dispatch));
                 push.round = round;
                 if (s.wide)
                     ctx.dispatch(ctx.can_run(KernelId::kPruneWideSubgroups)
@@ -403,8 +415,11 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
 
         // Runs `steps` (and expand.comp when `expand`) in one submission, the octant pool
         // holding `octant_keep` words from before; grows a pool and runs them again while one
-        // overflows.
-        const auto run_steps = [&](std::vector<Step>& steps, bool expand, uint64_t octant_keep) {
+        // overflows. Gives nothing where the octant pool would have to outgrow the device's
+        // largest buffer and `may_slice`: the caller then takes fewer blocks at a time.
+        const size_t level_first_shape = st.steps.size();
+        const auto run_steps = [&](std::vector<Step>& steps, bool expand, uint64_t octant_keep,
+                                   bool may_slice) -> std::optional<GpuCounters> {
             for (;;) {
                 GpuCounters start{};
                 start.pool_used = g.pool_words;
@@ -435,55 +450,112 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                 ++st.submissions;
                 if (!counter->overflow) break;
                 // Grow the pool that overflowed (keeping what the steps started with) and run
-                // them again. A counter that wrapped past 2^32 words asks for the most the
-                // device allows.
-                const bool main_over = counter->pool_used > capacity,
-                           octant_over = counter->octant_used > octant_capacity;
-                if (main_over || !octant_over)
-                    grow(g.pool, capacity, main_over ? counter->pool_used : max_pool_words,
-                         g.pool_words);
+                // them again. A counter that wrapped past 2^32 words (it reads less than the
+                // capacity) asks for the most the device allows.
+                const bool main_over = (counter->overflow & 1u) != 0,
+                           octant_over = (counter->overflow & 2u) != 0;
+                const auto need = [](uint32_t used, uint64_t cap) {
+                    return used > cap ? uint64_t(used) : std::numeric_limits<uint64_t>::max();
+                };
+                if (octant_over && may_slice &&
+                    need(counter->octant_used, octant_capacity) > max_pool_words)
+                    return std::nullopt;
+                if (main_over)
+                    grow(g.pool, capacity, need(counter->pool_used, capacity), g.pool_words);
                 if (octant_over)
-                    grow(octant_pool, octant_capacity, counter->octant_used, octant_keep);
+                    grow(octant_pool, octant_capacity, need(counter->octant_used, octant_capacity),
+                         octant_keep);
             }
             g.pool_words = counter->pool_used;
             for (Step& s : steps) {
                 s.shape.gpu_ms = ctx.stamp_ms(s.last_stamp) - ctx.stamp_ms(s.first_stamp);
-                st.steps.push_back(s.shape);
+                // A step of an earlier slice of the level: one shape for the two.
+                const auto same =
+                    std::find_if(st.steps.begin() + level_first_shape, st.steps.end(),
+                                 [&](const GpuStepShape& o) { return o.mode == s.shape.mode; });
+                if (same == st.steps.end()) {
+                    st.steps.push_back(s.shape);
+                    continue;
+                }
+                same->wide = same->wide || s.shape.wide;
+                same->dispatches += s.shape.dispatches;
+                same->workgroups += s.shape.workgroups;
+                same->jobs += s.shape.jobs;
+                same->lanes = std::max(same->lanes, s.shape.lanes);
+                same->lanes_per_tape = std::max(same->lanes_per_tape, s.shape.lanes_per_tape);
+                same->longest_walk_words += s.shape.longest_walk_words;  // one slice after another
+                same->gpu_ms += s.shape.gpu_ms;
             }
             return *counter;
         };
 
-        // One submission for the level where the parents' longest tape sizes the cells' steps
-        // with a team for every job (or as many as the device runs at once); where scratch
-        // would hold the cells' teams back (long tapes), the octants first, so that their own
-        // longest tape sizes the rest.
-        std::vector<Step> steps;
-        uint64_t octant_keep = 0;
-        if (split) {
-            steps.push_back(plan_step(1, f, block_count * 8, csize, octants, cells, false));
-            Step cells_step = plan_step(2, f, total, csize, octants, cells, refine);
-            if (cells_step.scratch_limited) {
-                const GpuCounters oc = run_steps(steps, false, 0);
-                octant_keep = oc.octant_used;
-                max_len = std::max(std::min(oc.max_len, max_len), 1u);
-                max_depth = std::max(std::min(oc.max_depth, max_depth), 1u);
-                steps.clear();
-                cells_step = plan_step(2, f, total, csize, octants, cells, refine);
+        // The level's blocks in slices, each in its own submissions with the octant pool
+        // emptied between them: one slice of all blocks, unless the octants' and (refining)
+        // the unrefined cells' tapes would not fit the device's largest buffer at once (a
+        // million spheres' finest level); then half as many blocks at a time, and so on. A
+        // slice's steps take its blocks' jobs; the next level's blocks are made after the last.
+        // Per slice, one submission where the parents' longest tape sizes the cells' steps with
+        // a team for every job (or as many as the device runs at once); where scratch would
+        // hold the cells' teams back (long tapes), the octants first, so that their own longest
+        // tape sizes the rest.
+        const uint32_t parent_len = max_len, parent_depth = max_depth;
+        GpuCounters c{};  // the level's: near cells and words summed, longest tapes the longest
+        uint64_t octant_words = 0;
+        uint64_t slice_blocks = std::max<uint64_t>(block_count, 1);
+        for (uint64_t b0 = 0;;) {
+            const uint64_t b1 = std::min(block_count, b0 + slice_blocks), blocks_in = b1 - b0;
+            const bool last = b1 == block_count;
+            max_len = parent_len;
+            max_depth = parent_depth;
+            std::vector<Step> steps;
+            uint64_t octant_keep = 0;
+            std::optional<GpuCounters> sc;
+            if (split) {
+                steps.push_back(
+                    plan_step(1, f, b0, blocks_in, blocks_in * 8, csize, octants, cells, false));
+                Step cells_step = plan_step(2, f, b0, blocks_in, blocks_in * per_block, csize,
+                                            octants, cells, refine);
+                if (cells_step.scratch_limited) {
+                    sc = run_steps(steps, false, 0, blocks_in > 1);
+                    if (!sc) {
+                        slice_blocks = blocks_in / 2;
+                        continue;
+                    }
+                    octant_keep = sc->octant_used;
+                    max_len = std::max(std::min(sc->max_len, max_len), 1u);
+                    max_depth = std::max(std::min(sc->max_depth, max_depth), 1u);
+                    steps.clear();
+                    cells_step = plan_step(2, f, b0, blocks_in, blocks_in * per_block, csize,
+                                           octants, cells, refine);
+                }
+                steps.push_back(cells_step);
+            } else {
+                steps.push_back(plan_step(0, f, b0, blocks_in, blocks_in * per_block, csize, cells,
+                                          cells, refine));
             }
-            steps.push_back(cells_step);
-        } else {
-            steps.push_back(plan_step(0, f, total, csize, cells, cells, refine));
+            // The finest cells decided again over their sub-boxes (refine_cell), into a new
+            // cell array.
+            if (refine)
+                steps.push_back(plan_step(3, f, b0, blocks_in, blocks_in * per_block, csize,
+                                          refined, cells, false));
+            sc = run_steps(steps, !finest && last, octant_keep, blocks_in > 1);
+            if (!sc) {
+                slice_blocks = blocks_in / 2;
+                continue;
+            }
+            c.near_jobs += sc->near_jobs;
+            c.near_words += sc->near_words;
+            c.max_len = std::max(c.max_len, sc->max_len);
+            c.max_depth = std::max(c.max_depth, sc->max_depth);
+            octant_words += sc->octant_used;
+            ++st.slices;
+            if (last) break;
+            b0 = b1;
         }
-        // The finest cells decided again over their sub-boxes (refine_cell), into a new cell
-        // array.
-        if (refine) steps.push_back(plan_step(3, f, total, csize, refined, cells, false));
-        run_steps(steps, !finest, octant_keep);
         // (A level that wrote nothing, its tapes all shared with their parents, says nothing.)
         if (g.pool_words > pool_before)
             main_ratio = double(g.pool_words - pool_before) / double(main_bound);
-        if (counter->octant_used > 0 && !refine)
-            octant_ratio = double(counter->octant_used) / double(octant_bound);
-        const GpuCounters c = *counter;
+        if (octant_words > 0 && !refine) octant_ratio = double(octant_words) / double(octant_bound);
         ctx.destroy(octants);
         if (refine) {
             ctx.destroy(cells);

@@ -234,6 +234,7 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          .add("submissions", device_grid->stats().submissions)
                          .add("subgroups", device_grid->stats().subgroups)
                          .add("pool_grows", device_grid->stats().pool_grows)
+                         .add("slices", device_grid->stats().slices)
                          .add("host_buffers", device_grid->stats().host_buffers)
                          .add("host_buffers_reused", device_grid->stats().host_buffers_reused)
                          .add("host_buffer_ms", device_grid->stats().host_buffer_ms)
