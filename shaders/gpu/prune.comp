@@ -43,6 +43,13 @@ const uint kBatchesPerStep = 4u;
 // word of item k is at k · kTeam + l. In refinement a team's lanes read each other's decisions
 // and far-field flags, written at earlier steps (a barrier between).
 
+// The lanes' evaluation stacks, through a second view of the scratch buffer (binding 10, the
+// same buffer as binding 8) without `coherent`: only the lane that writes a stack slot reads it
+// (program order suffices; a job resumed in a later dispatch reads it after the dispatch's
+// barrier), so its loads may be served from the SM's cache, where the coherent view's go to
+// the device's. The two views never touch the same words.
+layout(std430, binding = 10) buffer LaneScratch { uint lane_scratch[]; };
+
 // A team's window of its parent tape, staged for the step.
 shared uint s_word[kTeams * kWindow];
 shared Node s_node[kTeams * kWindow];
@@ -74,6 +81,7 @@ uint team_decision(uint at) {
 }
 
 void main() {
+    counts_begin();
     uint tl = gl_LocalInvocationID.x / kTeam, lane = gl_LocalInvocationID.x % kTeam;
     uint team = gl_WorkGroupID.x * kTeams + tl;
     uint teams = pc.threads / kTeam;
@@ -215,17 +223,17 @@ void main() {
                         uint sr = sbase + 4u * (top - 1u) * kTeam + lane;
                         uint sl = sbase + 4u * (top - 2u) * kTeam + lane;
                         top -= 2u;
-                        float lv = uintBitsToFloat(scratch[sl]);
-                        float llo = uintBitsToFloat(scratch[sl + kTeam]);
-                        float lhi = uintBitsToFloat(scratch[sl + 2u * kTeam]);
-                        float rv = uintBitsToFloat(scratch[sr]);
-                        float rlo = uintBitsToFloat(scratch[sr + kTeam]);
-                        float rhi = uintBitsToFloat(scratch[sr + 2u * kTeam]);
+                        float lv = uintBitsToFloat(lane_scratch[sl]);
+                        float llo = uintBitsToFloat(lane_scratch[sl + kTeam]);
+                        float lhi = uintBitsToFloat(lane_scratch[sl + 2u * kTeam]);
+                        float rv = uintBitsToFloat(lane_scratch[sr]);
+                        float rlo = uintBitsToFloat(lane_scratch[sr + kTeam]);
+                        float rhi = uintBitsToFloat(lane_scratch[sr + 2u * kTeam]);
                         float sgn = operator_s(kind), k = nd.blend;
                         decision = prune_decision(sgn, k, llo, lhi, rlo, rhi);
                         // Written by every lane (the same value): a lane's sweep may follow in
                         // this very step, and reads its own write, with no barrier between.
-                        scratch[lbase + i] = scratch[sl + 3u * kTeam];
+                        scratch[lbase + i] = lane_scratch[sl + 3u * kTeam];
                         v = apply_operator(sgn, k, lv, rv);
                         if (decision == kLeftWins) {
                             lo = llo;
@@ -253,10 +261,10 @@ void main() {
                     scratch[e] =
                         batch == 0u || (scratch[e] & 3u) == decision ? decision : kKeepBoth;
                     uint so = sbase + 4u * top * kTeam + lane;
-                    scratch[so] = floatBitsToUint(v);
-                    scratch[so + kTeam] = floatBitsToUint(lo);
-                    scratch[so + 2u * kTeam] = floatBitsToUint(hi);
-                    scratch[so + 3u * kTeam] = i;
+                    lane_scratch[so] = floatBitsToUint(v);
+                    lane_scratch[so + kTeam] = floatBitsToUint(lo);
+                    lane_scratch[so + 2u * kTeam] = floatBitsToUint(hi);
+                    lane_scratch[so + 3u * kTeam] = i;
                     ++top;
                     pdepth = max(pdepth, top);
                 }
@@ -264,12 +272,12 @@ void main() {
                     // Stage 2 for this sub-box: the far-field test on its root range against
                     // the box's margin (is_near_field); the root is in this window.
                     uint s0 = sbase + lane;
-                    float v = uintBitsToFloat(scratch[s0]);
+                    float v = uintBitsToFloat(lane_scratch[s0]);
                     if (batch == 0u) value = v;
                     float L = s_node[win + len - 1u - w0].lipschitz;
                     float clearance = far_field_clearance(pc.csize.w, L, R);
-                    vec2 range = far_field_range(v, uintBitsToFloat(scratch[s0 + kTeam]),
-                                                 uintBitsToFloat(scratch[s0 + 2u * kTeam]), L,
+                    vec2 range = far_field_range(v, uintBitsToFloat(lane_scratch[s0 + kTeam]),
+                                                 uintBitsToFloat(lane_scratch[s0 + 2u * kTeam]), L,
                                                  sub_R);
                     if (!clears_above(range.x, clearance)) far_flags &= ~1u;
                     if (!clears_below(range.y, clearance)) far_flags &= ~2u;
@@ -349,10 +357,10 @@ void main() {
                     scratch[fl_w] = (scratch[fl_w] & 3u) | (1u << 2) | (neg << 4);
                 }
                 if (i == 0u) {
-                    atomicMax(max_len, out_len);
+                    note_len(out_len);
                     if (out_len == len && ((parent & kInOctantPool) == 0u || transient)) {
                         // Nothing pruned: share the parent's tape.
-                        atomicMax(max_depth, pdepth);
+                        note_depth(pdepth);
                         phase = kPhaseDone;
                         store(dest, true, value, constant, parent, out_len, c0);
                     } else {
@@ -391,7 +399,7 @@ void main() {
                     depth_max = max(depth_max, depth);
                 }
                 if (i == len) {
-                    atomicMax(max_depth, depth_max);
+                    note_depth(depth_max);
                     phase = kPhaseDone;
                     store(dest, true, value, constant, at, out_len, c0);
                 }
@@ -422,4 +430,5 @@ void main() {
             scratch[st + kStHighest * kTeam] = floatBitsToUint(highest);
         }
     }
+    counts_end();
 }

@@ -49,6 +49,37 @@ layout(push_constant) uniform Push {
     uint octant_start;  // octant pool words in use before this step
 } pc;
 
+// The step's counters (near_jobs, near_words, max_len, max_depth), summed and maxed first in
+// shared memory by the workgroup's lanes, then added to the device's once per workgroup at its
+// end: one atomic per workgroup instead of one per cell, on four words that every workgroup of
+// the device would otherwise queue on. Every lane calls counts_begin() first and counts_end()
+// last, in uniform control flow.
+shared uint s_counts[4];
+void counts_begin() {
+    if (gl_LocalInvocationIndex == 0u) {
+        s_counts[0] = 0u;
+        s_counts[1] = 0u;
+        s_counts[2] = 0u;
+        s_counts[3] = 0u;
+    }
+    memoryBarrierShared();
+    barrier();
+}
+void counts_end() {
+    memoryBarrierShared();
+    barrier();
+    if (gl_LocalInvocationIndex == 0u) {
+        if (s_counts[0] != 0u) {
+            atomicAdd(near_jobs, s_counts[0]);
+            atomicAdd(near_words, s_counts[1]);
+        }
+        if (s_counts[2] != 0u) atomicMax(max_len, s_counts[2]);
+        if (s_counts[3] != 0u) atomicMax(max_depth, s_counts[3]);
+    }
+}
+void note_len(uint len) { atomicMax(s_counts[2], len); }
+void note_depth(uint depth) { atomicMax(s_counts[3], depth); }
+
 uint tape_read(uint ref, uint k) {
     return (ref & kInOctantPool) != 0u ? octant_pool[(ref & ~kInOctantPool) + k] : pool[ref + k];
 }
@@ -78,8 +109,8 @@ void store(uint dest, bool near, float value, float constant, uint tape, uint wo
         return;
     }
     if (near) {
-        atomicAdd(near_jobs, 1u);
-        atomicAdd(near_words, words + 2u);
+        atomicAdd(s_counts[0], 1u);
+        atomicAdd(s_counts[1], words + 2u);
     }
     cells[dest] = result;
 }

@@ -113,6 +113,7 @@ void sync_all() {
 }
 
 void main() {
+    counts_begin();
     uint id = gl_LocalInvocationID.x;
 #ifdef PRUNE_WIDE_SUBGROUPS
     if (id == 0u) s_linear = 1u;
@@ -358,10 +359,10 @@ void main() {
         sync_all();
         if (id < kTeam && s_state[box] == 1u) {
             uint out_len = s_len[box];
-            atomicMax(max_len, out_len);
+            note_len(out_len);
             if (out_len == len && ((parent & kInOctantPool) == 0u || transient)) {
                 // Nothing pruned: share the parent's tape (its stack is as deep).
-                atomicMax(max_depth, s_depth[box]);
+                note_depth(s_depth[box]);
                 s_state[box] = 0u;
                 store(dest, true, s_value[box], 0.0, parent, out_len, Cell(0u, 0u, 0.0, 0.0));
             } else {
@@ -406,9 +407,10 @@ void main() {
         }
         sync_all();
         if (id < kTeam && s_state[box] == 2u) {
-            atomicMax(max_depth, s_depth[box]);
+            note_depth(s_depth[box]);
             store(dest, true, s_value[box], 0.0, s_at[box], s_len[box], Cell(0u, 0u, 0.0, 0.0));
         }
         sync_all();
     }
+    counts_end();
 }

@@ -155,12 +155,16 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         (opt.far_field ? 1u : 0u) | (opt.bounds == CellBounds::kInterval ? 2u : 0u);
     uint32_t level_index = 0;  // the level being made (for the steps' shapes)
     // Which steps run wide (prune_wide.comp): those with parent tapes of kWideMinTape words or
-    // more, a shorter longest walk than in teams, and at most kWideMaxJobs team jobs (a
-    // workgroup each: about what a large GPU holds at once), or more where the teams would be
-    // held back by scratch (long tapes: a team's scratch grows with them, and too few teams in
-    // flight walk them one round after another). SDFPRUNE_VULKAN_WIDE=0 never, =1 wherever the
-    // kernel fits (for tests).
-    constexpr uint64_t kWideMaxJobs = 1024, kWideMinTape = 256;
+    // more where the modelled cost is less than twice a team's longest walk. The cost is the
+    // wide walk with every round (a height of the tape, a workgroup barrier and a chain of
+    // global loads) counted kWideRoundCost times. Both constants fit the per-step GPU times
+    // measured on an NVIDIA H200 (stop 23: 18 steps of six scenes at levels 2 and 3, where the
+    // two kernels were timed against each other): a team's word costs up to twice a wide
+    // lane's, its scratch per lane being larger, and a round costs about four words. Any number
+    // of team jobs may run wide (a workgroup each, in a grid-stride loop): the generated fluid's
+    // level-2 octants, 3,518 team jobs, take 3.0 ms wide against 12.5 ms in teams.
+    // SDFPRUNE_VULKAN_WIDE=0 never, =1 wherever the kernel fits (for tests).
+    constexpr uint64_t kWideMinTape = 128, kWideRoundCost = 4;
     int wide_override = -1;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE"); env && *env)
         wide_override = std::atoi(env) != 0;
@@ -313,11 +317,11 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                     std::min({std::max<uint64_t>(s.team_jobs, 1), uint64_t(ctx.max_workgroups()),
                               std::max<uint64_t>(ctx.resident_threads() / kPruneWide, 1)});
                 const uint64_t groups = std::min(unlimited_groups, fit_groups);
-                const uint64_t walk =
-                    s.team_jobs == 0 ? 0 : ceil_div(s.team_jobs, groups) * walk_job;
+                const uint64_t group_jobs = ceil_div(s.team_jobs, groups);
+                const uint64_t walk = s.team_jobs == 0 ? 0 : group_jobs * walk_job;
+                const uint64_t cost = walk + group_jobs * 2 * (kWideRoundCost - 1) * rounds;
                 const bool pick = wide_override == 1 ||
-                                  ((s.team_jobs <= kWideMaxJobs || s.scratch_limited) &&
-                                   len >= kWideMinTape && walk < s.shape.longest_walk_words);
+                                  (len >= kWideMinTape && cost < 2 * s.shape.longest_walk_words);
                 if (pick) {
                     s.wide = true;
                     s.teams = groups;
@@ -367,7 +371,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                 else
                     ctx.dispatch(KernelId::kPrune,
                                  {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, s.octants,
-                                  s.cells, &counters, &scratch, &octant_pool},
+                                  s.cells, &counters, &scratch, &octant_pool, &scratch},
                                  &push, sizeof(push), s.groups);
                 ++s.shape.dispatches;
                 s.shape.workgroups += s.groups;

@@ -46,7 +46,7 @@ struct KernelCode {
 
 // Binding counts must match the shaders' layouts (shaders/gpu/*.comp).
 const KernelCode kKernels[] = {
-    {kPruneSpv, sizeof(kPruneSpv), 10},
+    {kPruneSpv, sizeof(kPruneSpv), 11},
     {kPruneWideSpv, sizeof(kPruneWideSpv), 11, uint32_t(kPruneWide)},
     {kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 11, uint32_t(kPruneWide), true},
     {kExpandSpv, sizeof(kExpandSpv), 4},
