@@ -358,8 +358,8 @@ void main() {
                 }
                 if (i == 0u) {
                     note_len(out_len);
-                    if (out_len == len && ((parent & kInOctantPool) == 0u || transient)) {
-                        // Nothing pruned: share the parent's tape.
+                    if (out_len == len && transient) {
+                        // Nothing pruned, and a transient tape: share the parent's.
                         note_depth(pdepth);
                         phase = kPhaseDone;
                         store(dest, true, value, constant, parent, out_len, c0);

@@ -29,6 +29,11 @@ layout(std430, binding = 8) coherent buffer Scratch { uint scratch[]; };
 // replaces (flag 4). Tapes for the main pool never share one of these: they copy it.
 layout(std430, binding = 9) buffer OctantPool { uint octant_pool[]; };
 const uint kInOctantPool = 0x80000000u;
+// The level's own pool, where its cells' tapes go; a main-pool reference read (tape_read) is a
+// parent's, in the last level's pool (binding 3). The parents' pool is freed after the level, so
+// a tape that outlives the level is never shared with its parent but copied (only transient
+// tapes, in the octant pool, share their parents').
+layout(std430, binding = 11) writeonly buffer LevelPool { uint level_pool[]; };
 
 layout(push_constant) uniform Push {
     vec4 origin;  // AABB min; w: Lipschitz bound of the root
@@ -87,7 +92,7 @@ void tape_write(uint ref, uint value) {
     if ((ref & kInOctantPool) != 0u)
         octant_pool[ref & ~kInOctantPool] = value;
     else
-        pool[ref] = value;
+        level_pool[ref] = value;
 }
 
 // Stores a finished box's result: `tape` of `words` words (near), or the far-field constant.

@@ -360,8 +360,8 @@ void main() {
         if (id < kTeam && s_state[box] == 1u) {
             uint out_len = s_len[box];
             note_len(out_len);
-            if (out_len == len && ((parent & kInOctantPool) == 0u || transient)) {
-                // Nothing pruned: share the parent's tape (its stack is as deep).
+            if (out_len == len && transient) {
+                // Nothing pruned, and a transient tape: share the parent's (as deep a stack).
                 note_depth(s_depth[box]);
                 s_state[box] = 0u;
                 store(dest, true, s_value[box], 0.0, parent, out_len, Cell(0u, 0u, 0.0, 0.0));

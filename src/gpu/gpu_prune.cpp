@@ -79,14 +79,17 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     }
     const uint32_t scene_height = spans[2 * sc.root() + 1];
 
-    // The pool starts with the full tape; it grows on overflow.
+    // Each level's tapes go to a pool of its own (g.pool while the level is made; it grows on
+    // overflow), read as the parents' by the next level and then freed: a level never holds
+    // its grandparents' tapes (the million-sphere fluid's coarse levels alone outgrew one 4 GiB
+    // buffer). Tracing reads only the finest cells' tapes. The first parents' pool holds the
+    // full tape.
     const uint64_t max_pool_words = std::min<uint64_t>(ctx.max_buffer_bytes() / 4, 0xfffffff0u);
     std::vector<uint32_t> head{sc.size(), sc.primitive_count()};
     head.insert(head.end(), sc.full_tape.begin(), sc.full_tape.end());
     if (head.size() > max_pool_words)
         throw GpuError("scene too large for the device's largest storage buffer");
-    uint64_t capacity =
-        std::min<uint64_t>(max_pool_words, std::max<uint64_t>(4 * head.size(), 1 << 20));
+    uint64_t capacity = head.size();
     g.pool = ctx.create_buffer(capacity * 4);
     ctx.upload(g.pool, head.data(), head.size() * 4);
     g.pool_words = uint32_t(head.size());
@@ -113,6 +116,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     Buffer& octant_pool = local.create(octant_capacity * 4);
     double gpu_ms = 0;
 
+    uint32_t level_index = 0;  // the level being made (for the steps' shapes and errors)
     // Replaces `pool` by one of `words` words (at most the device's limit), keeping its first
     // `keep` words (with none to keep, the old one goes first: the two are never held at once).
     const auto resize = [&](Buffer& pool, uint64_t& cap, uint64_t words, uint64_t keep) {
@@ -132,8 +136,14 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     // After an overflow: at least `need` words, at least twice as many as before.
     const auto grow = [&](Buffer& pool, uint64_t& cap, uint64_t need, uint64_t keep) {
         if (cap >= max_pool_words)
-            throw GpuError("tape pool exceeds the device's largest storage buffer (" +
-                           std::to_string(ctx.max_buffer_bytes()) + " bytes); use --backend cpu");
+            throw GpuError(
+                std::string(&pool == &g.pool ? "the tape pool" : "the octant pool") + " of level " +
+                std::to_string(level_index) + " needs " +
+                (need == std::numeric_limits<uint64_t>::max() ? std::string("over 4 Gi")
+                                                              : std::to_string(need)) +
+                " words (" + std::to_string(keep) +
+                " in use before it), more than the device's largest storage buffer holds (" +
+                std::to_string(ctx.max_buffer_bytes()) + " bytes); use --backend cpu");
         resize(pool, cap, std::max(cap * 2, need + need / 4), keep);
         ++st.pool_grows;
     };
@@ -153,7 +163,6 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     const float L = sc.lipschitz[sc.root()];
     const uint32_t flags =
         (opt.far_field ? 1u : 0u) | (opt.bounds == CellBounds::kInterval ? 2u : 0u);
-    uint32_t level_index = 0;  // the level being made (for the steps' shapes)
     // Which steps run wide (prune_wide.comp): those with parent tapes of kWideMinTape words or
     // more where the modelled cost is less than twice a team's longest walk. The cost is the
     // wide walk with every round (a height of the tape, a workgroup barrier and a chain of
@@ -350,6 +359,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         return s;
     };
     // Records a step's dispatches; the pools' words in use before the level start them.
+    Buffer* parent_pool = nullptr;  // the last level's pool (binding 3), the level's own is g.pool
     const auto record_step = [&](Step& s) {
         s.first_stamp = ctx.stamp();
         PrunePush push = s.push;
@@ -365,13 +375,13 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                     ctx.dispatch(ctx.can_run(KernelId::kPruneWideSubgroups)
                                      ? KernelId::kPruneWideSubgroups
                                      : KernelId::kPruneWide,
-                                 {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, s.octants,
-                                  s.cells, &counters, &scratch, &octant_pool, &node_spans},
+                                 {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants,
+                                  s.cells, &counters, &scratch, &octant_pool, &node_spans, &g.pool},
                                  &push, sizeof(push), s.groups);
                 else
                     ctx.dispatch(KernelId::kPrune,
-                                 {&g.nodes, &g.params, &g.extras, &g.pool, &blocks, s.octants,
-                                  s.cells, &counters, &scratch, &octant_pool, &scratch},
+                                 {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants,
+                                  s.cells, &counters, &scratch, &octant_pool, &scratch, &g.pool},
                                  &push, sizeof(push), s.groups);
                 ++s.shape.dispatches;
                 s.shape.workgroups += s.groups;
@@ -406,8 +416,24 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         const auto share = [](uint64_t bound, double ratio) {
             return uint64_t(std::ceil(double(bound) * std::min(1.0, 2 * ratio)));
         };
-        const uint64_t pool_before = g.pool_words;
-        presize(g.pool, capacity, g.pool_words, share(main_bound, main_ratio));
+        // The parents' pool, freed after the level, and the level's own.
+        Buffer& parents = local.slot();
+        parents = g.pool;
+        g.pool = Buffer{};
+        parent_pool = &parents;
+        capacity = 0;
+        g.pool_words = 0;
+        // The finest level's pool starts with the full tape: the tracing kernels' full-tree
+        // pass reads it there (scene.glsl: kFullTreeTape).
+        const uint64_t head_words = finest ? head.size() : 0;
+        resize(g.pool, capacity,
+               head_words + std::max<uint64_t>(std::min(share(main_bound, main_ratio), presize_cap),
+                                               1 << 16),
+               0);
+        if (finest) {
+            ctx.upload(g.pool, head.data(), head_words * 4);
+            g.pool_words = uint32_t(head_words);
+        }
         presize(octant_pool, octant_capacity, 0,
                 share(octant_bound, octant_ratio) + (refine ? share(main_bound, main_ratio) : 0));
         // The level's cells, made after the pools grew (a pool's old and new buffers, held at
@@ -556,11 +582,13 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             if (last) break;
             b0 = b1;
         }
-        // (A level that wrote nothing, its tapes all shared with their parents, says nothing.)
-        if (g.pool_words > pool_before)
-            main_ratio = double(g.pool_words - pool_before) / double(main_bound);
+        // (A level that wrote nothing, its cells all far-field, says nothing.)
+        if (g.pool_words > head_words)
+            main_ratio = double(g.pool_words - head_words) / double(main_bound);
         if (octant_words > 0 && !refine) octant_ratio = double(octant_words) / double(octant_bound);
         ctx.destroy(octants);
+        ctx.destroy(parents);
+        parent_pool = nullptr;
         if (refine) {
             ctx.destroy(cells);
             cells = refined;
@@ -642,12 +670,25 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         const uint64_t n = li + 1 < g.level_info.size()
                                ? g.level_info[li + 1].offset - g.level_info[li].offset
                                : cell_total - g.level_info[li].offset;
+        const uint64_t below = N / g.level_info[li].res;
+        const bool finest = li + 1 == g.level_info.size();
         Buffer& level = local.create(n * sizeof(PrunedCell));
-        Buffer& info = local.create(n * 8);
-        const CellInfoPush push{uint32_t(n)};
         ctx.begin();
         ctx.copy(g.cells, level, n * sizeof(PrunedCell),
                  uint64_t(g.level_info[li].offset) * sizeof(PrunedCell));
+        if (!finest) {
+            // A coarser level's far-field cells, from the cells themselves (their tapes went
+            // with their pools).
+            ctx.submit();
+            std::vector<PrunedCell> cells(n);
+            ctx.download(level, cells.data(), n * sizeof(PrunedCell));
+            ctx.destroy(level);
+            for (const PrunedCell& c : cells)
+                if (c.tape == PrunedCell::kFarField) far_finest += below * below * below;
+            continue;
+        }
+        Buffer& info = local.create(n * 8);
+        const CellInfoPush push{uint32_t(n)};
         ctx.dispatch(KernelId::kCellInfo, {&level, &g.pool, &info}, &push, sizeof(push),
                      ctx.groups_for(n));
         ctx.submit();
@@ -655,15 +696,12 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         ctx.download(info, host.data(), n * 8);
         ctx.destroy(level);
         ctx.destroy(info);
-        const uint64_t below = N / g.level_info[li].res;
-        const bool finest = li + 1 == g.level_info.size();
         for (uint64_t i = 0; i < n; ++i) {
             const uint32_t len = host[2 * i], prims = host[2 * i + 1];
             if (len == PrunedCell::kFarField) {
-                far_finest += finest ? 1 : below * below * below;
+                ++far_finest;
                 continue;
             }
-            if (!finest) continue;
             ++st.near_field_cells;
             tape_sum += len;
             st.tape_max = std::max(st.tape_max, len);
