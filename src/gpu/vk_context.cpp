@@ -46,9 +46,9 @@ struct KernelCode {
 
 // Binding counts must match the shaders' layouts (shaders/gpu/*.comp).
 const KernelCode kKernels[] = {
-    {kPruneSpv, sizeof(kPruneSpv), 10},
-    {kPruneWideSpv, sizeof(kPruneWideSpv), 11, uint32_t(kPruneWide)},
-    {kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 11, uint32_t(kPruneWide), true},
+    {kPruneSpv, sizeof(kPruneSpv), 11},
+    {kPruneWideSpv, sizeof(kPruneWideSpv), 12, uint32_t(kPruneWide)},
+    {kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 12, uint32_t(kPruneWide), true},
     {kExpandSpv, sizeof(kExpandSpv), 4},
     {kCellInfoSpv, sizeof(kCellInfoSpv), 3},
     {kTraceSpv, sizeof(kTraceSpv), 10},
