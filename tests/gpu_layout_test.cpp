@@ -248,7 +248,7 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(GpuCounters, near_jobs), SDFPRUNE_MEMBER(GpuCounters, next_blocks),
              SDFPRUNE_MEMBER(GpuCounters, max_depth), SDFPRUNE_MEMBER(GpuCounters, octant_used),
              SDFPRUNE_MEMBER(GpuCounters, octant_capacity),
-             SDFPRUNE_MEMBER(GpuCounters, near_words)},
+             SDFPRUNE_MEMBER(GpuCounters, near_words), SDFPRUNE_MEMBER(GpuCounters, refine_cells)},
             Scope::kKernel),
         mirror<TraceParams>(
             "TraceParams", {"trace"},

@@ -274,7 +274,11 @@ TEST(Gpu, StepShapesFollowTheLevels) {
         EXPECT_EQ(steps[2 * l + 1].jobs, cpu.level_cells(l).size()) << "level " << l;
     EXPECT_EQ(jobs,
               cpu.level_cells(0).size() + cpu.level_cells(1).size() + cpu.level_cells(2).size());
-    EXPECT_EQ(steps[6].jobs, steps[5].jobs);  // every finest cell is refined
+    // Refinement's jobs are the finest near-field cells before it (the CPU's without it).
+    PruneOptions unrefined = o;
+    unrefined.refine = 1;
+    EXPECT_EQ(steps[6].jobs, prune(sc, unrefined).stats().near_field_cells);
+    EXPECT_LT(steps[6].jobs, steps[5].jobs);
     // The root's octants walk the full tape: evaluation and compaction, and one more pass.
     EXPECT_GE(steps[0].longest_walk_words, 3ull * sc.size());
     // The steps' GPU times are parts of the pruning's GPU time; with timestamps (every device
@@ -288,6 +292,57 @@ TEST(Gpu, StepShapesFollowTheLevels) {
         sum += st.gpu_ms;
     }
     EXPECT_LE(sum, gpu.stats().prune_ms * 1.0001 + 1e-6);
+}
+
+// Refinement takes the finest near-field cells only (listed by the step that makes the finest
+// cells; the far ones are copied as they are): its jobs are as many as those cells before
+// refinement, and the grid is the CPU's, also where pools grow and the finest level is redone
+// (its refinement then runs again, from a list made again), where the finest cells come
+// from their blocks (no hierarchy: mode 0), and where the cells step runs wide.
+TEST(Gpu, RefinementTakesTheNearFieldCellsOnly) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Scene sc = builtin_scene("demo");
+    struct Case {
+        const char* what;
+        bool hierarchy, grow, wide;
+    };
+    const Case cases[] = {{"presized", true, false, false},
+                          {"pools grow", true, true, false},
+                          {"no hierarchy, pools grow", false, true, false},
+                          {"wide, pools grow", true, true, true}};
+    uint32_t presized_dispatches = 0;
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.what);
+        PruneOptions o;
+        o.resolution = 32;
+        o.hierarchy = c.hierarchy;
+        PruneOptions unrefined = o;
+        unrefined.refine = 1;
+        const uint64_t near_before = prune(sc, unrefined).stats().near_field_cells;
+        if (c.grow) ::setenv("SDFPRUNE_VULKAN_PRESIZE_WORDS", "0", 1);
+        ::setenv("SDFPRUNE_VULKAN_WIDE", c.wide ? "1" : "0", 1);
+        const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+        ::unsetenv("SDFPRUNE_VULKAN_PRESIZE_WORDS");
+        ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+        const std::vector<gpu::GpuStepShape>& steps = gpu.stats().steps;
+        ASSERT_GE(steps.size(), 2u);
+        const gpu::GpuStepShape &cells = steps[steps.size() - 2], &refine = steps.back();
+        ASSERT_EQ(refine.mode, 3u);
+        EXPECT_EQ(cells.mode, c.hierarchy ? 2u : 0u);
+        EXPECT_EQ(cells.wide, c.wide);
+        EXPECT_GT(near_before, 0u);
+        EXPECT_EQ(refine.jobs, near_before);
+        EXPECT_LE(refine.lanes, refine.lanes_per_tape * refine.jobs);
+        if (c.grow) {
+            EXPECT_GT(gpu.stats().pool_grows, 0u);
+        }
+        // The hierarchy's finest level, redone: its refinement recorded again.
+        if (!c.grow && c.hierarchy && !c.wide) presized_dispatches = refine.dispatches;
+        if (c.grow && c.hierarchy && !c.wide) {
+            EXPECT_GT(refine.dispatches, presized_dispatches);
+        }
+        expect_matches_cpu(sc, prune(sc, o), gpu, *dev, c.what);
+    }
 }
 
 // By default the top levels' steps, few jobs over long parent tapes, run wide: a workgroup

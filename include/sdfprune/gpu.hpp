@@ -75,7 +75,7 @@ struct GpuStepShape {
     uint32_t mode = 0;
     uint32_t dispatches = 0;  // redone levels (a pool grew) included
     uint64_t workgroups = 0;  // over all dispatches
-    uint64_t jobs = 0;        // cells or octants
+    uint64_t jobs = 0;        // cells or octants; in refinement, the near-field cells it takes
     uint64_t lanes = 0;       // invocations with a job (whole teams, see lanes_per_tape)
     // false: a team of lanes walks one parent tape in lockstep, one lane per child box (cell,
     // octant, or sub-box in refinement); true ("wide", modes 0–2 only): a whole workgroup

@@ -8,7 +8,9 @@
 //   mode 2: kTeam cells of an octant, from the octant's tape (or far-field from a far octant)
 //   mode 3: one finest near-field cell decided again over its refine³ sub-boxes, kTeam at a time
 //           (refine_cell), from `cells` into the buffer of binding 5; tapes longer than
-//           kRefineMaxTape are evaluated once over the cell (which copies them to the main pool)
+//           kRefineMaxTape are evaluated once over the cell (which copies them to the main pool).
+//           Job k takes cell refine_list[k], for k below refine_cells (the near-field cells the
+//           cells step listed); the far-field cells were copied there before, as they are
 // The kernel runs in steps, the same for every lane of a workgroup: at each step a team that
 // evaluates stages the next kWindow entries of its tape (words and nodes) in shared memory, then
 // every lane advances its phase by at most kWindow entries (evaluation from the window; the
@@ -43,12 +45,12 @@ const uint kBatchesPerStep = 4u;
 // word of item k is at k · kTeam + l. In refinement a team's lanes read each other's decisions
 // and far-field flags, written at earlier steps (a barrier between).
 
-// The lanes' evaluation stacks, through a second view of the scratch buffer (binding 10, the
+// The lanes' evaluation stacks, through a second view of the scratch buffer (binding 12, the
 // same buffer as binding 8) without `coherent`: only the lane that writes a stack slot reads it
 // (program order suffices; a job resumed in a later dispatch reads it after the dispatch's
 // barrier), so its loads may be served from the SM's cache, where the coherent view's go to
 // the device's. The two views never touch the same words.
-layout(std430, binding = 10) buffer LaneScratch { uint lane_scratch[]; };
+layout(std430, binding = 12) buffer LaneScratch { uint lane_scratch[]; };
 
 // A team's window of its parent tape, staged for the step.
 shared uint s_word[kTeams * kWindow];
@@ -102,11 +104,14 @@ void main() {
     bool interval = (pc.flags & 2u) != 0u;
     bool transient = pc.mode == 1u || (pc.flags & 4u) != 0u;
 
+    // The host records refinement's dispatches for every finest cell; its jobs are the listed
+    // ones only (the count is the same for every lane: the step before wrote it).
+    uint jobs = pc.mode == 3u ? min(pc.jobs, refine_cells) : pc.jobs;
     // Every lane of a workgroup sees the same trip count (barriers inside); teams past
     // pc.threads / kTeam hold no scratch and take no jobs.
-    for (uint first = pc.first_job; first < pc.jobs; first += teams) {
+    for (uint first = pc.first_job; first < jobs; first += teams) {
         uint job = first + team;
-        bool has_job = team < teams && job < pc.jobs;
+        bool has_job = team < teams && job < jobs;
         // This lane's box and the team's parent tape; `valid`: the lane stores a result.
         bool valid = has_job, walk = has_job;
         uint parent = 0u, dest = 0u, subs = 1u, nbatch = 1u;
@@ -118,16 +123,18 @@ void main() {
             // Reads `cells`, writes the refined cells to `octants` (binding 5): a step
             // redone after a pool overflow starts again from unchanged cells. Lane 0
             // stores the cell; the others evaluate sub-boxes.
-            uint bi = job / per_block, local = job % per_block;
+            uint cell = refine_list[job];
+            uint bi = cell / per_block, local = cell % per_block;
             Block b = blocks[bi];
             uvec3 lc = uvec3(local % f, (local / f) % f, local / (f * f));
             centre = origin + (vec3(b.x + lc.x, b.y + lc.y, b.z + lc.z) + 0.5) * cs;
-            dest = job;
-            c0 = cells[job];
+            dest = cell;
+            c0 = cells[cell];
             valid = lane == 0u;
             if (c0.tape == kFarField) {
+                // Only near cells are listed; were one not, it is copied as it is.
                 walk = false;
-                if (pc.round == 0u && valid) octants[job] = c0;
+                if (pc.round == 0u && valid) octants[cell] = c0;
             } else {
                 parent = c0.tape;
                 subs = tape_read(parent, 0u) > kRefineMaxTape ? 1u : pc.refine;

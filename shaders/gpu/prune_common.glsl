@@ -1,6 +1,6 @@
 // prune_common.glsl — what the two pruning kernels share: prune.comp (a team of kTeam lanes
 // walks one parent tape, one lane per child box) and prune_wide.comp (a whole workgroup takes
-// one parent tape, its nodes spread over the lanes): the step's buffers (bindings 4–9) and push
+// one parent tape, its nodes spread over the lanes): the step's buffers (bindings 4–10) and push
 // constants, the tape pools, the boxes of a job (modes 0–2) and the store of a box's result.
 // Include after scene.glsl and cells.glsl.
 
@@ -20,6 +20,7 @@ layout(std430, binding = 7) buffer Counters {
     uint octant_used;      // the octant pool, as pool_used, pool_capacity
     uint octant_capacity;
     uint near_words;  // words of the near-field cells' tapes with their headers (modes 0 and 2)
+    uint refine_cells;  // entries of refine_list
 };
 // The kernel's scratch (its layout is the kernel's own). Coherent: lanes read what other lanes
 // of their workgroup wrote at earlier steps (a barrier between).
@@ -29,6 +30,10 @@ layout(std430, binding = 8) coherent buffer Scratch { uint scratch[]; };
 // replaces (flag 4). Tapes for the main pool never share one of these: they copy it.
 layout(std430, binding = 9) buffer OctantPool { uint octant_pool[]; };
 const uint kInOctantPool = 0x80000000u;
+// The finest near-field cells, the only ones refinement (mode 3) has work for: the step that
+// makes the finest cells (flag 4) appends each near one's index; mode 3 takes its jobs from
+// here (the far ones are copied to the refined cells beforehand, by the host).
+layout(std430, binding = 10) buffer RefineList { uint refine_list[]; };
 // The level's own pool, where its cells' tapes go; a main-pool reference read (tape_read) is a
 // parent's, in the last level's pool (binding 3). The parents' pool is freed after the level, so
 // a tape that outlives the level is never shared with its parent but copied (only transient
@@ -46,6 +51,7 @@ layout(push_constant) uniform Push {
     uint max_stack;  // prune.comp: deepest evaluation stack of the parent tapes;
                      // prune_wide.comp: the highest node's height (scene_height)
     uint flags;      // 1: far field on; 2: interval bounds; 4: new tapes go to the octant pool
+                     // (the finest cells before refinement: near ones listed in refine_list)
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's team jobs: [first_job, jobs)
     uint round;       // 0: start the jobs; later rounds resume them (prune.comp)
@@ -116,6 +122,7 @@ void store(uint dest, bool near, float value, float constant, uint tape, uint wo
     if (near) {
         atomicAdd(s_counts[0], 1u);
         atomicAdd(s_counts[1], words + 2u);
+        if ((pc.flags & 4u) != 0u) refine_list[atomicAdd(refine_cells, 1u)] = dest;
     }
     cells[dest] = result;
 }

@@ -34,9 +34,10 @@ struct GpuGridParams {  // GridParams
 };
 
 // prune.comp: Counters (expand.comp sees the same buffer as uint[]: [5] is next_blocks).
+// refine_cells: the entries of the refinement's list (prune_common.glsl: RefineList).
 struct GpuCounters {
     uint32_t pool_used, pool_capacity, overflow, max_len, near_jobs, next_blocks, max_depth;
-    uint32_t octant_used, octant_capacity, near_words, pad[2];
+    uint32_t octant_used, octant_capacity, near_words, refine_cells, pad;
 };
 // prune.comp: kStateWords, the words of a lane's job state in its team's scratch; kTeam, the
 // lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step

@@ -114,6 +114,9 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     // The octants' tapes of the current level (prune.comp: OctantPool), reused level by level.
     uint64_t octant_capacity = 1 << 16;
     Buffer& octant_pool = local.create(octant_capacity * 4);
+    // Refinement's jobs: the finest near-field cells (prune_common.glsl: RefineList), listed by
+    // the step that makes them; sized at the finest level.
+    Buffer& refine_list = local.create(16);
     double gpu_ms = 0;
 
     uint32_t level_index = 0;  // the level being made (for the steps' shapes and errors)
@@ -187,8 +190,10 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         PrunePush push;
         const Buffer *octants, *cells;
         // Its team jobs are [first_team_job, first_team_job + team_jobs): those of a slice of
-        // the level's blocks.
-        uint64_t first_team_job, team_jobs, teams, rounds, per_dispatch;
+        // the level's blocks (refinement: of its list, from 0; its slice's cells start at
+        // first_cell).
+        uint64_t first_team_job, team_jobs, teams, rounds, per_dispatch, first_cell = 0;
+        uint64_t job_walk;         // in teams, the tape words a lane reads per job, at most
         uint32_t threads, groups;  // lanes that take jobs, and their workgroups
         bool wide;
         // In teams, fewer teams than jobs for want of scratch (not because the device runs no
@@ -215,6 +220,11 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                                                     : per_block;
         s.first_team_job = first_block * per_block_jobs;
         s.team_jobs = blocks * per_block_jobs;
+        if (mode == 3) {
+            // Refinement takes the slice's listed near cells (a list a run, from 0).
+            s.first_cell = s.first_team_job;
+            s.first_team_job = 0;
+        }
         if (s.first_team_job + s.team_jobs > 0xfffffffeull)
             throw std::length_error("too many cells in one level");
         // A team's scratch: its lanes' state, per parent-tape entry a left operand and a word
@@ -292,10 +302,9 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         s.shape.lanes_per_tape = uint32_t(kPruneTeam);
         s.shape.lanes = std::min<uint64_t>(s.team_jobs, s.teams) * kPruneTeam;
         // A lane's walk per job: the evaluation once per batch, the sweep and the write.
+        s.job_walk = std::max((batches + 2) * batch_len, uint64_t(3) * max_len);
         s.shape.longest_walk_words =
-            s.team_jobs == 0 ? 0
-                             : (s.team_jobs + s.teams - 1) / s.teams *
-                                   std::max((batches + 2) * batch_len, uint64_t(3) * max_len);
+            s.team_jobs == 0 ? 0 : (s.team_jobs + s.teams - 1) / s.teams * s.job_walk;
         s.wide = false;
         uint64_t scratch_bytes = s.teams * team_bytes;
         // The wide kernel: per job the tape entries a lane takes one after another
@@ -372,17 +381,18 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                 push.jobs = uint32_t(std::min<uint64_t>(end, first + s.per_dispatch));
                 push.round = round;
                 if (s.wide)
-                    ctx.dispatch(ctx.can_run(KernelId::kPruneWideSubgroups)
-                                     ? KernelId::kPruneWideSubgroups
-                                     : KernelId::kPruneWide,
-                                 {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants,
-                                  s.cells, &counters, &scratch, &octant_pool, &node_spans, &g.pool},
-                                 &push, sizeof(push), s.groups);
+                    ctx.dispatch(
+                        ctx.can_run(KernelId::kPruneWideSubgroups) ? KernelId::kPruneWideSubgroups
+                                                                   : KernelId::kPruneWide,
+                        {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants, s.cells,
+                         &counters, &scratch, &octant_pool, &refine_list, &g.pool, &node_spans},
+                        &push, sizeof(push), s.groups);
                 else
-                    ctx.dispatch(KernelId::kPrune,
-                                 {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants,
-                                  s.cells, &counters, &scratch, &octant_pool, &scratch, &g.pool},
-                                 &push, sizeof(push), s.groups);
+                    ctx.dispatch(
+                        KernelId::kPrune,
+                        {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants, s.cells,
+                         &counters, &scratch, &octant_pool, &refine_list, &g.pool, &scratch},
+                        &push, sizeof(push), s.groups);
                 ++s.shape.dispatches;
                 s.shape.workgroups += s.groups;
             }
@@ -442,6 +452,11 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         Buffer& octants = local.create(split ? block_count * 8 * sizeof(PrunedCell) : 16);
         Buffer& refined = local.create(refine ? total * sizeof(PrunedCell) : 16);
         Buffer& next = local.create(finest ? 16 : total * sizeof(GpuBlock));
+        // Room to list every finest cell for refinement.
+        if (refine && refine_list.size < total * 4) {
+            ctx.destroy(refine_list);
+            refine_list = ctx.create_buffer(total * 4);
+        }
 
         // Runs `steps` (and expand.comp when `expand`) in one submission, the octant pool
         // holding `octant_keep` words from before; grows a pool and runs them again while one
@@ -467,8 +482,15 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                         ctx.fill(counters, 0, offsetof(GpuCounters, max_len), 4);
                         ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
                     }
-                    if (s.push.mode == 3)
+                    if (s.push.mode == 3) {
                         ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
+                        // The far-field cells refined as they are: all cells copied, the
+                        // near ones (listed by the step before) then refined over them.
+                        if (s.team_jobs > 0)
+                            ctx.copy(*s.cells, *s.octants, s.team_jobs * sizeof(PrunedCell),
+                                     s.first_cell * sizeof(PrunedCell),
+                                     s.first_cell * sizeof(PrunedCell));
+                    }
                     record_step(s);
                 }
                 if (expand) {
@@ -498,6 +520,14 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             }
             g.pool_words = counter->pool_used;
             for (Step& s : steps) {
+                if (s.push.mode == 3) {
+                    // Refinement's jobs, the listed cells (its dispatches were recorded for
+                    // all, those past the list's end returning at once).
+                    const uint64_t jobs = counter->refine_cells;
+                    s.shape.jobs = jobs;
+                    s.shape.lanes = std::min(jobs, s.teams) * kPruneTeam;
+                    s.shape.longest_walk_words = (jobs + s.teams - 1) / s.teams * s.job_walk;
+                }
                 s.shape.gpu_ms = ctx.stamp_ms(s.last_stamp) - ctx.stamp_ms(s.first_stamp);
                 // A step of an earlier slice of the level: one shape for the two.
                 const auto same =
@@ -609,6 +639,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     ctx.destroy(blocks);
     ctx.destroy(scratch);
     ctx.destroy(octant_pool);
+    ctx.destroy(refine_list);
     g.finest_stack_depth = max_depth;  // the last level's: the finest cells' (refined)
 
     // All levels' cells in one buffer, for the lookups of the tracing and discretizing kernels.

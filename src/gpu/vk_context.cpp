@@ -46,9 +46,9 @@ struct KernelCode {
 
 // Binding counts must match the shaders' layouts (shaders/gpu/*.comp).
 const KernelCode kKernels[] = {
-    {kPruneSpv, sizeof(kPruneSpv), 12},
-    {kPruneWideSpv, sizeof(kPruneWideSpv), 12, uint32_t(kPruneWide)},
-    {kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 12, uint32_t(kPruneWide), true},
+    {kPruneSpv, sizeof(kPruneSpv), 13},
+    {kPruneWideSpv, sizeof(kPruneWideSpv), 13, uint32_t(kPruneWide)},
+    {kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 13, uint32_t(kPruneWide), true},
     {kExpandSpv, sizeof(kExpandSpv), 4},
     {kCellInfoSpv, sizeof(kCellInfoSpv), 3},
     {kTraceSpv, sizeof(kTraceSpv), 10},
@@ -56,7 +56,7 @@ const KernelCode kKernels[] = {
 };
 static_assert(std::size(kKernels) == size_t(KernelId::kCount));
 
-constexpr uint32_t kMaxBindings = 12;
+constexpr uint32_t kMaxBindings = 13;
 constexpr uint32_t kMaxSets = Context::kMaxDispatches;
 constexpr uint32_t kPushBytes = 128;
 // Scratch memory of the per-thread arrays and stacks of the kernels.
