@@ -590,6 +590,92 @@ TEST(Gpu, DeepChainPrunes) {
     }
 }
 
+// `base` grown into a left-deep chain by `ops` more operators, each with a small sphere on a
+// helix around `centre`, their kinds in turn: smooth and hard unions, a smooth difference (a
+// negated right operand), an intersection and a smooth intersection with large shapes, and a
+// union with the chain as its right operand; every 16th operator subtracts the chain from a
+// large sphere (the chain negated), the next 16th does so again.
+Shape mixed_chain(SceneBuilder& b, Shape base, uint32_t ops, vec3 centre) {
+    Shape chain = base;
+    for (uint32_t i = 1; i <= ops; ++i) {
+        const float a = float(i) * 0.21f;
+        const Shape s = b.sphere(0.03f + 0.01f * float(i % 3))
+                            .translated(centre + vec3(0.3f * std::cos(a), 0.3f * std::sin(a),
+                                                      0.5f * float(i) / float(ops) - 0.25f));
+        switch (i % 6) {
+            case 0:
+                chain = smooth_union(chain, s, 0.03f);
+                break;
+            case 1:
+                chain = chain | s;
+                break;
+            case 2:
+                chain = smooth_difference(chain, s.scaled(0.5f), 0.01f);
+                break;
+            case 3:
+                chain = chain & b.sphere(0.6f).translated(centre);
+                break;
+            case 4:
+                chain = smooth_union(s, chain, 0.02f);
+                break;
+            default:
+                chain = smooth_intersection(chain, b.box(vec3(0.8f)).translated(centre), 0.05f);
+        }
+        if (i % 16 == 0) chain = b.sphere(0.7f).translated(centre) - chain;
+    }
+    return chain;
+}
+
+// The wide kernel (forced wherever it fits) walks a run of rounds of one operator each (a
+// chain's) with a few lanes and no barriers between its rounds: the same cells as the CPU's,
+// bit for bit on lavapipe, on a left-deep chain of mixed operators, and on a chain whose lower
+// part is bushy (a balanced tree, and chains of other lengths: heights with several
+// operators below the run; at the finer levels, their pruned tapes leave runs between such
+// heights).
+TEST(Gpu, WideKernelWalksChainsSerially) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Aabb box{vec3(-1.2f), vec3(1.2f)};
+    std::vector<std::pair<std::string, Scene>> scenes;
+    {
+        SceneBuilder b;
+        scenes.emplace_back("mixed chain",
+                            b.build(mixed_chain(b, b.sphere(0.05f), 300, vec3(0.0f)), box));
+    }
+    {
+        SceneBuilder b;
+        // A balanced tree of 32 spheres, then chains of 90, 60 and 30 operators side by side,
+        // joined, under a chain of 120.
+        std::vector<Shape> leaves;
+        for (uint32_t i = 0; i < 32; ++i)
+            leaves.push_back(b.sphere(0.04f).translated(
+                vec3(-0.6f + 0.04f * float(i), 0.5f * std::sin(float(i)), -0.6f)));
+        while (leaves.size() > 1) {
+            std::vector<Shape> up;
+            for (size_t i = 0; i + 1 < leaves.size(); i += 2)
+                up.push_back(smooth_union(leaves[i], leaves[i + 1], 0.02f));
+            leaves = up;
+        }
+        const Shape a = mixed_chain(b, leaves[0], 90, vec3(-0.5f, 0.4f, 0.0f));
+        const Shape c = mixed_chain(b, b.sphere(0.05f), 60, vec3(0.5f, 0.4f, 0.0f));
+        const Shape d = mixed_chain(b, b.sphere(0.05f), 30, vec3(0.0f, -0.5f, 0.3f));
+        const Shape joined = smooth_union(a, c, 0.02f) | d;
+        scenes.emplace_back("bushy below a chain",
+                            b.build(mixed_chain(b, joined, 120, vec3(0.0f, 0.0f, -0.4f)), box));
+    }
+    for (const auto& [name, sc] : scenes) {
+        PruneOptions o;
+        o.resolution = 32;
+        const PrunedGrid cpu = prune(sc, o);
+        ::setenv("SDFPRUNE_VULKAN_WIDE", "1", 1);
+        const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+        ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+        EXPECT_TRUE(gpu.stats().steps[0].wide) << name;
+        EXPECT_TRUE(gpu.stats().steps[1].wide) << name;
+        expect_matches_cpu(sc, cpu, gpu, *dev, name + ", wide");
+        expect_valid_cells(sc, gpu, name + ", wide");
+    }
+}
+
 TEST(Gpu, ReferenceScenesMatchCpu) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     for (const char* file : {"molecule.json", "trees.json"}) {

@@ -88,7 +88,8 @@ struct GpuStepShape {
     // in a team the passes over a parent tape (evaluation once per batch of sub-boxes, the
     // sweep, the write) times the parents' longest tape; when wide, a lane's share of the
     // tape in each stage plus one step per height of the scene (the operators of one height
-    // after another). A bound, not a count.
+    // after another; heights of one operator each, a chain's, without a barrier between). A
+    // bound, not a count.
     uint64_t longest_walk_words = 0;
     // The step's GPU time (timestamps around its dispatches; 0 where the device has none), in
     // its level's last run.

@@ -14,9 +14,13 @@
 //   5. compaction: each lane counts the kept entries of a slice of the tape, a workgroup prefix
 //      sum gives each slice its place in the new tape, and the lanes write their slices.
 // A chain of operators (a left-deep tree) still takes one height after another: the walk of
-// a lane is at least twice the tape's number of distinct heights. gpu_prune.cpp picks this kernel by
-// tape length and scene height, and sizes its dispatches under lavapipe's loop limit (a job is
-// never resumed: it ends in the dispatch that starts it).
+// a lane is at least twice the tape's number of distinct heights. But a run of rounds of one
+// operator each (a chain's: for the reference molecule, a left-deep chain of 1,000 smooth
+// unions, every round above the primitives') needs no barrier between its rounds: lane b
+// walks box b of all of them alone (evaluate_run, sweep_run), its loads read ahead, then one
+// barrier. gpu_prune.cpp picks this kernel by tape length and scene height, and sizes its
+// dispatches under lavapipe's loop limit (a job is never resumed: it ends in the dispatch
+// that starts it).
 // PRUNE_WIDE_SUBGROUPS (prune_wide_subgroups.comp, for devices with subgroup arithmetic and
 // ballot in compute shaders): the prefix sums and the pool appends on subgroup operations,
 // else on shared memory and an atomic per box.
@@ -39,10 +43,23 @@ layout(std430, binding = 12) readonly buffer NodeSpans { uvec2 node_span[]; };
 
 // A workgroup's scratch (wide_words): per parent-tape entry its left operand and its place in
 // the height order, per height its count, its entries placed so far and its first place, per
-// round (a height the tape has) its first place and count, then per entry and box the value,
-// range and flags (kWideEntryWords, item (e · kTeam + b)).
+// round (a height the tape has) kRoundWords (below), the rounds in no run (breaks) in order,
+// then per entry and box the value, range and flags (kWideEntryWords, item
+// (e · kTeam + b)).
 const uint kWideEntryWords = 4u;
-uint wide_words() { return pc.max_len * (2u + kWideEntryWords * kTeam) + 5u * (pc.max_stack + 1u); }
+// Per round: its first place in the height order, its count of entries, and where it is in a
+// run (rounds 1 and up of one entry each: a chain's operators), the run's first round and the
+// round after its last (for any other round: itself and the next); in a run, its one entry's
+// record (kRunEntry...): the entry, its left operand, its tape word, and the tape signs of its
+// operands (1: the left's, 2: the right's).
+const uint kRoundWords = 8u;
+const uint kRunEntry = 4u, kRunLeft = 5u, kRunWord = 6u, kRunSigns = 7u;
+// Words per scene height: 3 per height, kRoundWords per round, 1 in the list of breaks
+// (device_layout.hpp: kPruneWideHeightWords).
+const uint kWideHeightWords = 3u + kRoundWords + 1u;
+uint wide_words() {
+    return pc.max_len * (2u + kWideEntryWords * kTeam) + kWideHeightWords * (pc.max_stack + 1u);
+}
 
 // Lanes per box in the compaction (kWide / kTeam), and the workgroup's prefix sums.
 const uint kSlices = kWide / kTeam;
@@ -52,6 +69,7 @@ shared uvec4 s_scan[kWide];
 shared uint s_state[kTeam], s_at[kTeam], s_len[kTeam], s_prims[kTeam], s_depth[kTeam];
 shared float s_value[kTeam];
 shared uint s_rounds;  // the job's rounds: the heights its tape has
+shared uint s_breaks;  // its rounds that are in no run
 
 #ifdef PRUNE_WIDE_SUBGROUPS
 // Per subgroup its total, then its first sum; whether subgroups hold consecutive lanes.
@@ -112,6 +130,171 @@ void sync_all() {
     barrier();
 }
 
+// Entry e's value, range (lo, hi) and decision at box b: item (e · kTeam + b) of scratch.
+uint item_at(uint vbase, uint e, uint b) { return vbase + (e * kTeam + b) * kWideEntryWords; }
+vec3 item_range(uint at) {
+    return vec3(uintBitsToFloat(scratch[at]), uintBitsToFloat(scratch[at + 1u]),
+                uintBitsToFloat(scratch[at + 2u]));
+}
+void store_item(uint at, vec3 x, uint decision) {
+    scratch[at] = floatBitsToUint(x.x);
+    scratch[at + 1u] = floatBitsToUint(x.y);
+    scratch[at + 2u] = floatBitsToUint(x.z);
+    scratch[at + 3u] = decision;  // the sweep's flags cleared
+}
+// A tape sign on an entry: its value negated, its range flipped.
+vec3 negate_range(vec3 x) { return vec3(-x.x, -x.z, -x.y); }
+
+// An operator's value and range (x: value, lo, hi) at a box and its decision, from its
+// operands' (evaluate_cell; the same float operations as the CPU backend).
+vec3 combine_operator(Node nd, float spread_r, bool interval, vec3 left, vec3 right,
+                      out uint decision) {
+    float spread = nd.lipschitz * spread_r;
+    float sgn = operator_s(nd.kind), k2 = nd.blend;
+    decision = prune_decision(sgn, k2, left.y, left.z, right.y, right.z);
+    float v = apply_operator(sgn, k2, left.x, right.x);
+    float lo, hi;
+    if (decision == kLeftWins) {
+        lo = left.y;
+        hi = left.z;
+    } else if (decision == kRightWins) {
+        lo = right.y;
+        hi = right.z;
+    } else if (interval) {
+        vec2 r2 = operator_range(sgn, k2, left.y, left.z, right.y, right.z);
+        lo = max(v - spread, r2.x);
+        hi = min(v + spread, r2.y);
+    } else {
+        lo = v - spread;
+        hi = v + spread;
+    }
+    return vec3(v, lo, hi);
+}
+
+// Round q's record in a run: its entry, left operand, and `third` (kRunWord or kRunSigns).
+uvec3 run_record(uint rbase, uint q, uint third) {
+    uint at = rbase + kRoundWords * q;
+    return uvec3(scratch[at + kRunEntry], scratch[at + kRunLeft], scratch[at + third]);
+}
+
+// From a run round's record: its operator node, and its operands' values and ranges at box b.
+void read_operator(uvec3 rec, uint vbase, uint b, out Node nd, out vec3 left, out vec3 right) {
+    nd = nodes[tape_node(rec.z)];
+    left = item_range(item_at(vbase, rec.y, b));
+    right = item_range(item_at(vbase, rec.x - 1u, b));
+}
+
+// Stage 2 over a run of rounds [r0, end), one operator each, for box b: one lane walks it
+// alone, with no barrier between its rounds (each operand is this lane's from earlier in the
+// run, or from before it). So that a round waits for no load, the loads run ahead: at round q,
+// round q + 3's record, and round q + 2's node and operands (from its record). Those operands
+// are read before rounds q and q + 1 store their results, so an operand that is one of those
+// two rounds' entries (in a chain, the left one) comes from registers instead.
+void evaluate_run(uint r0, uint end, uint rbase, uint vbase, uint b, float spread_r,
+                  bool interval) {
+    // Per round ahead: its record (entry, left operand, tape word), its node and operands.
+    uvec3 rec0 = run_record(rbase, r0, kRunWord);
+    uvec3 rec1 = r0 + 1u < end ? run_record(rbase, r0 + 1u, kRunWord) : uvec3(0u);
+    uvec3 rec2 = r0 + 2u < end ? run_record(rbase, r0 + 2u, kRunWord) : uvec3(0u);
+    Node nd0, nd1;
+    vec3 left0, right0, left1, right1;
+    read_operator(rec0, vbase, b, nd0, left0, right0);
+    if (r0 + 1u < end) read_operator(rec1, vbase, b, nd1, left1, right1);
+    // The two rounds before this one: their entries and results at box b.
+    uint e_back1 = 0xffffffffu, e_back2 = 0xffffffffu;
+    vec3 x_back1 = vec3(0.0), x_back2 = vec3(0.0);
+    for (uint q = r0; q < end; ++q) {
+        uvec3 rec3 = q + 3u < end ? run_record(rbase, q + 3u, kRunWord) : uvec3(0u);
+        Node nd2;
+        vec3 left2, right2;
+        if (q + 2u < end) read_operator(rec2, vbase, b, nd2, left2, right2);
+        // Operands stored by the two rounds before, after they were read ahead.
+        if (rec0.y == e_back1) left0 = x_back1;
+        else if (rec0.y == e_back2) left0 = x_back2;
+        if (rec0.x - 1u == e_back1) right0 = x_back1;
+        else if (rec0.x - 1u == e_back2) right0 = x_back2;
+        uint decision;
+        vec3 x = combine_operator(nd0, spread_r, interval, left0, right0, decision);
+        if (tape_negated(rec0.z)) x = negate_range(x);
+        store_item(item_at(vbase, rec0.x, b), x, decision);
+        e_back2 = e_back1;
+        x_back2 = x_back1;
+        e_back1 = rec0.x;
+        x_back1 = x;
+        rec0 = rec1;
+        rec1 = rec2;
+        rec2 = rec3;
+        nd0 = nd1;
+        nd1 = nd2;
+        left0 = left1;
+        left1 = left2;
+        right0 = right1;
+        right1 = right2;
+    }
+}
+
+// From a run round's record: the flags at box b of its entry, of its left operand and of its
+// right one.
+uvec3 read_flags(uvec3 rec, uint vbase, uint b) {
+    return uvec3(scratch[item_at(vbase, rec.x, b) + 3u], scratch[item_at(vbase, rec.y, b) + 3u],
+                 scratch[item_at(vbase, rec.x - 1u, b) + 3u]);
+}
+
+// Flags that a round of sweep_run has just set on entry x (its value v), taken over where x
+// is the entry of one of the next two rounds (e1, e2), whose flags were read ahead.
+void take_over(uint x, uint v, uint e1, uint e2, inout uint fl1, inout uint fl2) {
+    if (x == e1) fl1 = v;
+    if (x == e2) fl2 = v;
+}
+
+// Stage 4 over a run of rounds [r0, end), one operator each, for box b (whose tape is being
+// compacted): one lane walks it from its highest round down, with no barrier between rounds
+// (an entry's flags are set by its parent, this lane's at an earlier round of the run, or a
+// round above it). The loads run ahead as in evaluate_run: at round q, round q − 3's record,
+// and round q − 2's flags and its operands' decisions (the low two bits of their flags, which
+// do not change in this stage). Flags that rounds q and q − 1 set on a later round's entry
+// (in a chain, on its left operand) are taken over in registers.
+void sweep_run(uint r0, uint end, uint rbase, uint vbase, uint b) {
+    uint steps = end - r0;  // step i: round end − 1 − i
+    // Per step ahead: its record (entry, left operand, its operands' tape signs), its flags
+    // and its operands' decisions.
+    uvec3 rec0 = run_record(rbase, end - 1u, kRunSigns);
+    uvec3 rec1 = 1u < steps ? run_record(rbase, end - 2u, kRunSigns) : uvec3(0u);
+    uvec3 rec2 = 2u < steps ? run_record(rbase, end - 3u, kRunSigns) : uvec3(0u);
+    uvec3 fl0 = read_flags(rec0, vbase, b);
+    uvec3 fl1 = 1u < steps ? read_flags(rec1, vbase, b) : uvec3(0u);
+    for (uint i = 0u; i < steps; ++i) {
+        uvec3 rec3 = i + 3u < steps ? run_record(rbase, end - 4u - i, kRunSigns) : uvec3(0u);
+        uvec3 fl2 = i + 2u < steps ? read_flags(rec2, vbase, b) : uvec3(0u);
+        uint e = rec0.x, l = rec0.y, r = e - 1u, fl = fl0.x;
+        if (((fl >> 2) & 3u) == 1u) {
+            uint d = fl & 3u;
+            uint nl = rec0.z & 1u, nr = (rec0.z >> 1) & 1u;
+            if (d == kKeepBoth) {
+                uint set_l = (fl0.y & 3u) | (1u << 2) | (nl << 4);
+                uint set_r = (fl0.z & 3u) | (1u << 2) | (nr << 4);
+                scratch[item_at(vbase, l, b) + 3u] = set_l;
+                scratch[item_at(vbase, r, b) + 3u] = set_r;
+                take_over(l, set_l, rec1.x, rec2.x, fl1.x, fl2.x);
+                take_over(r, set_r, rec1.x, rec2.x, fl1.x, fl2.x);
+            } else {
+                bool left = d == kLeftWins;
+                uint wn = left ? l : r;
+                uint neg = ((fl >> 4) & 1u) ^ (left ? nl : nr);
+                scratch[item_at(vbase, e, b) + 3u] = (fl & 3u) | (2u << 2) | (fl & 16u);
+                uint set_w = ((left ? fl0.y : fl0.z) & 3u) | (1u << 2) | (neg << 4);
+                scratch[item_at(vbase, wn, b) + 3u] = set_w;
+                take_over(wn, set_w, rec1.x, rec2.x, fl1.x, fl2.x);
+            }
+        }
+        rec0 = rec1;
+        rec1 = rec2;
+        rec2 = rec3;
+        fl0 = fl1;
+        fl1 = fl2;
+    }
+}
+
 void main() {
     counts_begin();
     uint id = gl_LocalInvocationID.x;
@@ -129,8 +312,9 @@ void main() {
     uint lbase = base;                      // entry e's left operand
     uint obase = lbase + pc.max_len;        // the height order: entries
     uint hbase = obase + pc.max_len;        // per height: count, placed, first place
-    uint rbase = hbase + 3u * (pc.max_stack + 1u);  // per round: first place, count
-    uint vbase = rbase + 2u * (pc.max_stack + 1u);  // item (e · kTeam + b): v, lo, hi, flags
+    uint rbase = hbase + 3u * (pc.max_stack + 1u);  // per round: kRoundWords
+    uint bbase = rbase + kRoundWords * (pc.max_stack + 1u);  // the rounds in no run, in order
+    uint vbase = bbase + (pc.max_stack + 1u);  // item (e · kTeam + b): v, lo, hi, flags
     bool interval = (pc.flags & 2u) != 0u;
     bool transient = pc.mode == 1u || (pc.flags & 4u) != 0u;
 
@@ -156,31 +340,46 @@ void main() {
         for (uint e = id; e < len; e += kWide)
             atomicAdd(scratch[hbase + 3u * node_span[tape_node(tape_read(parent, 2u + e))].y], 1u);
         sync_all();
-        // Each lane sums a slice of the heights (entries, and heights with any), a prefix sum
-        // places the slices: each height's first place, and each round's.
+        // Each lane sums a slice of the heights (entries, heights with any, and those of them
+        // in no run: with other than one entry, or the primitives'), a prefix sum places the
+        // slices: each height's first place, each round's, and each break's in the list of
+        // breaks. A round in a run keeps, until the runs are found, the breaks before it.
         uint hs = (H + kWide) / kWide;
         uint h0 = min(id * hs, H + 1u), h1 = min(h0 + hs, H + 1u);
-        uint sum = 0u, present = 0u;
+        uint sum = 0u, present = 0u, breaks = 0u;
         for (uint h = h0; h < h1; ++h) {
             uint count = scratch[hbase + 3u * h];
             sum += count;
             present += count != 0u ? 1u : 0u;
+            breaks += count != 0u && (count != 1u || h == 0u) ? 1u : 0u;
         }
-        uvec4 places = wg_exclusive_scan(uvec4(sum, present, 0u, 0u));
-        if (id == 0u) s_rounds = s_scan[kWide - 1u].y;
-        uint place = places.x, rank = places.y;
+        uvec4 places = wg_exclusive_scan(uvec4(sum, present, breaks, 0u));
+        if (id == 0u) {
+            s_rounds = s_scan[kWide - 1u].y;
+            s_breaks = s_scan[kWide - 1u].z;
+        }
+        uint place = places.x, rank = places.y, brk = places.z;
         for (uint h = h0; h < h1; ++h) {
             uint count = scratch[hbase + 3u * h];
             scratch[hbase + 3u * h + 2u] = place;
             if (count != 0u) {
-                scratch[rbase + 2u * rank] = place;
-                scratch[rbase + 2u * rank + 1u] = count;
+                uint at = rbase + kRoundWords * rank;
+                scratch[at] = place;
+                scratch[at + 1u] = count;
+                if (count == 1u && h != 0u) {
+                    scratch[at + 2u] = brk;
+                } else {
+                    scratch[at + 2u] = rank;
+                    scratch[at + 3u] = rank + 1u;
+                    scratch[bbase + brk] = rank;
+                    ++brk;
+                }
                 ++rank;
             }
             place += count;
         }
         sync_all();
-        uint rounds = s_rounds;
+        uint rounds = s_rounds, round_breaks = s_breaks;
         for (uint e = id; e < len; e += kWide) {
             uint w = tape_read(parent, 2u + e);
             uint n = tape_node(w);
@@ -201,25 +400,50 @@ void main() {
             scratch[lbase + e] = lo - 1u;
         }
         sync_all();
+        // The runs: a round in one lies between the breaks before and after it (round 0, the
+        // primitives', is a break), and its entry is the first in its place. Its record, so
+        // that the serial walks start from one load a round.
+        for (uint r = id; r < rounds; r += kWide) {
+            uint at = rbase + kRoundWords * r;
+            if (scratch[at + 1u] != 1u || r == 0u) continue;
+            uint before = scratch[at + 2u];
+            scratch[at + 2u] = scratch[bbase + before - 1u] + 1u;
+            scratch[at + 3u] = before < round_breaks ? scratch[bbase + before] : rounds;
+            uint e = scratch[obase + scratch[at]], l = scratch[lbase + e];
+            scratch[at + kRunEntry] = e;
+            scratch[at + kRunLeft] = l;
+            scratch[at + kRunWord] = tape_read(parent, 2u + e);
+            scratch[at + kRunSigns] = (tape_negated(tape_read(parent, 2u + l)) ? 1u : 0u) |
+                                      (tape_negated(tape_read(parent, 1u + e)) ? 2u : 0u);
+        }
+        sync_all();
 
         // Stage 2: values and ranges at the boxes' centres, decisions (evaluate_cell), round by
-        // round. Item k of a round: its entry k / kTeam, box k % kTeam (this lane's box).
+        // round. Item k of a round: its entry k / kTeam, box k % kTeam (this lane's box). A run
+        // of rounds (one operator each) takes lanes 0 to kTeam − 1 alone, and one barrier.
         float spread_r = R;
-        for (uint r = 0u; r < rounds; ++r) {
-            uint first_place = scratch[rbase + 2u * r], count = scratch[rbase + 2u * r + 1u];
+        for (uint r = 0u; r < rounds;) {
+            uint at = rbase + kRoundWords * r;
+            uint first_place = scratch[at], count = scratch[at + 1u], next = scratch[at + 3u];
+            if (next > r + 1u) {
+                if (id < kTeam)
+                    evaluate_run(r, next, rbase, vbase, box, spread_r, interval);
+                sync_all();
+                r = next;
+                continue;
+            }
             for (uint k = id; k < count * kTeam; k += kWide) {
                 uint e = scratch[obase + first_place + k / kTeam];
                 uint w = tape_read(parent, 2u + e);
                 Node nd = nodes[tape_node(w)];
                 uint kind = nd.kind;
-                float spread = nd.lipschitz * spread_r;
-                float v, lo, hi;
+                vec3 x;
                 uint decision = kKeepBoth;
                 if (kind < kPrimitiveKindCount) {
+                    float spread = nd.lipschitz * spread_r;
                     uint p = nd.primitive;
-                    v = eval_primitive(kind, params[p], centre);
-                    lo = v - spread;
-                    hi = v + spread;
+                    float v = eval_primitive(kind, params[p], centre);
+                    float lo = v - spread, hi = v + spread;
                     vec4 b0 = extras[p].bound0;
                     if (interval && b0.w > 0.0) {
                         vec2 r = similarity_range(b0.xyz, b0.w, extras[p].bound1.x,
@@ -227,46 +451,17 @@ void main() {
                         lo = max(lo, r.x);
                         hi = min(hi, r.y);
                     }
+                    x = vec3(v, lo, hi);
                 } else {
-                    uint sl = vbase + (scratch[lbase + e] * kTeam + box) * kWideEntryWords;
-                    uint sr = vbase + ((e - 1u) * kTeam + box) * kWideEntryWords;
-                    float lv = uintBitsToFloat(scratch[sl]);
-                    float llo = uintBitsToFloat(scratch[sl + 1u]);
-                    float lhi = uintBitsToFloat(scratch[sl + 2u]);
-                    float rv = uintBitsToFloat(scratch[sr]);
-                    float rlo = uintBitsToFloat(scratch[sr + 1u]);
-                    float rhi = uintBitsToFloat(scratch[sr + 2u]);
-                    float sgn = operator_s(kind), k2 = nd.blend;
-                    decision = prune_decision(sgn, k2, llo, lhi, rlo, rhi);
-                    v = apply_operator(sgn, k2, lv, rv);
-                    if (decision == kLeftWins) {
-                        lo = llo;
-                        hi = lhi;
-                    } else if (decision == kRightWins) {
-                        lo = rlo;
-                        hi = rhi;
-                    } else if (interval) {
-                        vec2 r2 = operator_range(sgn, k2, llo, lhi, rlo, rhi);
-                        lo = max(v - spread, r2.x);
-                        hi = min(v + spread, r2.y);
-                    } else {
-                        lo = v - spread;
-                        hi = v + spread;
-                    }
+                    vec3 left = item_range(item_at(vbase, scratch[lbase + e], box));
+                    vec3 right = item_range(item_at(vbase, e - 1u, box));
+                    x = combine_operator(nd, spread_r, interval, left, right, decision);
                 }
-                if (tape_negated(w)) {
-                    v = -v;
-                    float tmp = lo;
-                    lo = -hi;
-                    hi = -tmp;
-                }
-                uint so = vbase + (e * kTeam + box) * kWideEntryWords;
-                scratch[so] = floatBitsToUint(v);
-                scratch[so + 1u] = floatBitsToUint(lo);
-                scratch[so + 2u] = floatBitsToUint(hi);
-                scratch[so + 3u] = decision;  // the sweep's flags cleared
+                if (tape_negated(w)) x = negate_range(x);
+                store_item(item_at(vbase, e, box), x, decision);
             }
             sync_all();
+            ++r;
         }
 
         // Stage 3: the far-field test on each box's root range (is_near_field).
@@ -296,8 +491,17 @@ void main() {
 
         // Stage 4: the top-down pass (compact_tape), from the highest operators down: an
         // entry's flags are final when its round is reached. (Round 0: the primitives.)
-        for (uint r = rounds - 1u; r >= 1u; --r) {
-            uint first_place = scratch[rbase + 2u * r], count = scratch[rbase + 2u * r + 1u];
+        // A run takes lanes 0 to kTeam − 1 alone, from its highest round down.
+        for (uint r = rounds - 1u; r >= 1u;) {
+            uint at = rbase + kRoundWords * r;
+            uint first_place = scratch[at], count = scratch[at + 1u], start = scratch[at + 2u];
+            if (start < r) {
+                if (id < kTeam && s_state[box] == 1u)
+                    sweep_run(start, r + 1u, rbase, vbase, box);
+                sync_all();
+                r = start - 1u;
+                continue;
+            }
             for (uint k = id; k < count * kTeam; k += kWide) {
                 if (s_state[box] != 1u) continue;
                 uint e = scratch[obase + first_place + k / kTeam];
@@ -322,6 +526,7 @@ void main() {
                 scratch[fl_w] = (scratch[fl_w] & 3u) | (1u << 2) | (neg << 4);
             }
             sync_all();
+            --r;
         }
 
         // Stage 5: compaction. Box b's kept entries in kSlices slices of the tape, one a lane

@@ -48,9 +48,11 @@ inline constexpr uint64_t kPruneTeam = 8;
 inline constexpr uint64_t kPruneWindow = 64;
 inline constexpr uint64_t kPruneBatchesPerStep = 4;
 // prune_wide.comp: kWide, the lanes of a workgroup that takes one team job (kPruneTeam boxes of
-// one parent tape); kWideEntryWords, its scratch words per tape entry and box.
+// one parent tape); kWideEntryWords, its scratch words per tape entry and box;
+// kWideHeightWords, per scene height (the counting sort's, the rounds' and their runs').
 inline constexpr uint64_t kPruneWide = 256;
 inline constexpr uint64_t kPruneWideEntryWords = 4;
+inline constexpr uint64_t kPruneWideHeightWords = 12;
 struct PrunePush {  // prune.comp and prune_wide.comp: Push
     vec4 origin, csize;
     uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;

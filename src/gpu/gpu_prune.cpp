@@ -312,11 +312,14 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         // search for an operator's left operand), in the evaluation and the top-down pass its
         // share of each round's entries and kPruneTeam boxes (at most one more than an even
         // share per round: a round per height the tape has, no more than its operators plus
-        // one), and the compaction's two passes over a slice. Its loops add the heights
-        // cleared and summed, the rounds themselves and the prefix sums' steps: a job ends in
-        // the dispatch that starts it, within lavapipe's loop limit; only where twice that
-        // count fits (a deep chain near the limit came out wrong on lavapipe: the count is
-        // taken as approximate).
+        // one), and the compaction's two passes over a slice. A run of rounds of one operator
+        // each (a chain) is walked by kPruneTeam lanes, a step a round as before, but with no
+        // barrier between its rounds: the walk is the same, its barriers fewer (how many, only
+        // the tapes on the device say). Its loops add the heights cleared and summed, the
+        // rounds (and the runs found among them) themselves and the prefix sums' steps: a job
+        // ends in the dispatch that starts it, within lavapipe's loop limit; only where twice
+        // that count fits (a deep chain near the limit came out wrong on lavapipe: the count
+        // is taken as approximate).
         if (mode != 3 && wide_override != 0 && ctx.can_run(KernelId::kPruneWide)) {
             const auto ceil_div = [](uint64_t a, uint64_t b) { return (a + b - 1) / b; };
             const uint64_t len = max_len, heights = uint64_t(scene_height) + 1;
@@ -324,10 +327,12 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
             const uint64_t walk_job = ceil_div(len, kPruneWide) * (2 + std::bit_width(len)) +
                                       2 * (rounds + ceil_div(len * kPruneTeam, kPruneWide)) +
                                       2 * ceil_div(len, kPruneWide / kPruneTeam);
-            const uint64_t per_job = walk_job + 3 * ceil_div(heights, kPruneWide) + 2 * rounds +
+            const uint64_t per_job = walk_job + 3 * ceil_div(heights, kPruneWide) +
+                                     ceil_div(rounds, kPruneWide) + 2 * rounds +
                                      4 * std::bit_width(kPruneWide);
             const uint64_t group_bytes =
-                (len * (2 + kPruneWideEntryWords * kPruneTeam) + 5 * heights) * 4;
+                (len * (2 + kPruneWideEntryWords * kPruneTeam) + kPruneWideHeightWords * heights) *
+                4;
             const uint64_t fit_groups = ctx.prune_scratch_budget_bytes() / group_bytes;
             const bool limited = ctx.loop_limited();
             if (fit_groups > 0 && (!limited || 2 * per_job + 1024 <= Context::kLoopLimit)) {
