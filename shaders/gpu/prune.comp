@@ -55,6 +55,13 @@ layout(std430, binding = 12) buffer LaneScratch { uint lane_scratch[]; };
 // A team's window of its parent tape, staged for the step.
 shared uint s_word[kTeams * kWindow];
 shared Node s_node[kTeams * kWindow];
+// Refinement of a tape that fits the window, in a dispatch that finishes its jobs (flag 8): per
+// entry, bits 0-2 the decisions its lanes made over all their sub-boxes (1 << decision, OR-ed:
+// the team's decision is the one seen, if it is the only one; team_decision's rule), bits 8-15
+// lane 0's sweep flags (an entry's scratch word shifted, its decision bits unused), bits 16-23
+// the entry's left operand. The sweep and the write then read no scratch, and the tape's words
+// from the window: a refined cell's chain of loads stays in the SM.
+shared uint s_meta[kTeams * kWindow];
 // Lanes still busy after a step, counted in one word while the other is reset.
 shared uint s_busy[2];
 
@@ -175,6 +182,7 @@ void main() {
             highest = uintBitsToFloat(scratch[st + kStHighest * kTeam]);
         }
         uint nsub = subs * subs * subs;
+        bool windowed = pc.mode == 3u && len <= kWindow && (pc.flags & 8u) != 0u;
         vec3 sub_half = subs == 1u ? half_size : half_size / float(subs);
         float sub_R = subs == 1u ? R : length(sub_half);
 
@@ -193,6 +201,7 @@ void main() {
                     uint w = tape_read(parent, 2u + k);
                     s_word[win + k - w0] = w;
                     s_node[win + k - w0] = nodes[tape_node(w)];
+                    if (windowed && batch == 0u) s_meta[win + k] = 0u;
                 }
             }
             memoryBarrierShared();
@@ -240,7 +249,11 @@ void main() {
                         decision = prune_decision(sgn, k, llo, lhi, rlo, rhi);
                         // Written by every lane (the same value): a lane's sweep may follow in
                         // this very step, and reads its own write, with no barrier between.
-                        scratch[lbase + i] = lane_scratch[sl + 3u * kTeam];
+                        uint left = lane_scratch[sl + 3u * kTeam];
+                        if (windowed)
+                            atomicOr(s_meta[win + i], (1u << decision) | (left << 16));
+                        else
+                            scratch[lbase + i] = left;
                         v = apply_operator(sgn, k, lv, rv);
                         if (decision == kLeftWins) {
                             lo = llo;
@@ -263,10 +276,11 @@ void main() {
                         lo = -hi;
                         hi = -tmp;
                     }
-                    // Flags cleared for stage 3.
+                    // Flags cleared for stage 3 (windowed: in s_meta, cleared when staged).
                     uint e = dbase + i * kTeam + lane;
-                    scratch[e] =
-                        batch == 0u || (scratch[e] & 3u) == decision ? decision : kKeepBoth;
+                    if (!windowed)
+                        scratch[e] =
+                            batch == 0u || (scratch[e] & 3u) == decision ? decision : kKeepBoth;
                     uint so = sbase + 4u * top * kTeam + lane;
                     lane_scratch[so] = floatBitsToUint(v);
                     lane_scratch[so + kTeam] = floatBitsToUint(lo);
@@ -325,7 +339,10 @@ void main() {
                 } else {
                     uint root_neg = tape_negated(tape_read(parent, 2u + len - 1u)) ? 1u : 0u;
                     uint e = dbase + (len - 1u) * kTeam + lane;
-                    scratch[e] = (scratch[e] & 3u) | (1u << 2) | (root_neg << 4);
+                    if (windowed)
+                        s_meta[win + len - 1u] |= ((1u << 2) | (root_neg << 4)) << 8;
+                    else
+                        scratch[e] = (scratch[e] & 3u) | (1u << 2) | (root_neg << 4);
                     i = len;
                     phase = kPhaseSweep;
                 }
@@ -335,6 +352,34 @@ void main() {
                 // flags are final when the reverse sweep reaches it (parents come later), so
                 // the sweep also counts the kept entries.
                 uint stop = i > kWindow ? i - kWindow : 0u;
+                // Windowed (see s_meta): the same pass over the window, its flags in s_meta.
+                for (; windowed && i > 0u; --i) {
+                    uint e = i - 1u;
+                    uint meta = s_meta[win + e];
+                    uint fl = (meta >> 8) & 0xffu;
+                    if (((fl >> 2) & 3u) != 1u) continue;
+                    uint w = s_word[win + e];
+                    if (is_primitive(tape_node(w))) {
+                        ++out_len;
+                        ++prims;
+                        continue;
+                    }
+                    uint l = meta >> 16, r = e - 1u;
+                    uint seen = meta & 7u;
+                    uint d = bitCount(seen) == 1 ? uint(findLSB(seen)) : kKeepBoth;
+                    if (d == kKeepBoth) {
+                        ++out_len;
+                        uint nl = tape_negated(s_word[win + l]) ? 1u : 0u;
+                        uint nr = tape_negated(s_word[win + r]) ? 1u : 0u;
+                        s_meta[win + l] = (s_meta[win + l] & ~0xff00u) | (((1u << 2) | (nl << 4)) << 8);
+                        s_meta[win + r] = (s_meta[win + r] & ~0xff00u) | (((1u << 2) | (nr << 4)) << 8);
+                        continue;
+                    }
+                    uint wn = d == kLeftWins ? l : r;
+                    uint neg = ((fl >> 4) & 1u) ^ (tape_negated(s_word[win + wn]) ? 1u : 0u);
+                    s_meta[win + e] = (meta & ~0xff00u) | (((2u << 2) | (fl & 16u)) << 8);
+                    s_meta[win + wn] = (s_meta[win + wn] & ~0xff00u) | (((1u << 2) | (neg << 4)) << 8);
+                }
                 for (; i > stop; --i) {
                     uint e = i - 1u;
                     uint fe = dbase + e * kTeam + lane;
@@ -396,9 +441,10 @@ void main() {
             if (phase == kPhaseWrite) {
                 uint we = min(i + kWindow, len);
                 for (; i < we; ++i) {
-                    uint fl = scratch[dbase + i * kTeam + lane];
+                    uint fl = windowed ? (s_meta[win + i] >> 8) & 0xffu
+                                       : scratch[dbase + i * kTeam + lane];
                     if (((fl >> 2) & 3u) != 1u) continue;
-                    uint node = tape_node(tape_read(parent, 2u + i));
+                    uint node = tape_node(windowed ? s_word[win + i] : tape_read(parent, 2u + i));
                     tape_write(top++, tape_word(node, ((fl >> 4) & 1u) != 0u));
                     // Stack depth of the new tape: a primitive pushes, an operator pops two,
                     // pushes one.

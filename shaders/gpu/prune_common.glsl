@@ -50,7 +50,8 @@ layout(push_constant) uniform Push {
     uint max_len;    // longest parent tape (scratch per team or workgroup)
     uint max_stack;  // prune.comp: deepest evaluation stack of the parent tapes;
                      // prune_wide.comp: the highest node's height (scene_height)
-    uint flags;      // 1: far field on; 2: interval bounds; 4: new tapes go to the octant pool
+    uint flags;      // 1: far field on; 2: interval bounds; 4: new tapes go to the octant pool;
+                     // 8: jobs end in the dispatch that starts them (prune.comp: s_meta)
                      // (the finest cells before refinement: near ones listed in refine_list)
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's team jobs: [first_job, jobs)

@@ -289,7 +289,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                            s.threads,
                            max_len,
                            max_depth,
-                           flags | (transient ? 4u : 0u),
+                           flags | (transient ? 4u : 0u) | (s.rounds == 1 ? 8u : 0u),
                            0,
                            0,
                            0,
@@ -468,6 +468,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         // overflows. Gives nothing where the octant pool would have to outgrow the device's
         // largest buffer and `may_slice`: the caller then takes fewer blocks at a time.
         const size_t level_first_shape = st.steps.size();
+        uint32_t listed_cells = 0;  // refinement's list, from the run that made the cells
         const auto run_steps = [&](std::vector<Step>& steps, bool expand, uint64_t octant_keep,
                                    bool may_slice) -> std::optional<GpuCounters> {
             for (;;) {
@@ -476,6 +477,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                 start.pool_capacity = uint32_t(capacity);
                 start.octant_used = uint32_t(octant_keep);
                 start.octant_capacity = uint32_t(octant_capacity);
+                start.refine_cells = listed_cells;
                 *counter = start;
                 ctx.begin();
                 for (Step& s : steps) {
@@ -598,15 +600,28 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                 steps.push_back(plan_step(0, f, b0, blocks_in, blocks_in * per_block, csize, cells,
                                           cells, refine));
             }
-            // The finest cells decided again over their sub-boxes (refine_cell), into a new
-            // cell array.
-            if (refine)
-                steps.push_back(plan_step(3, f, b0, blocks_in, blocks_in * per_block, csize,
-                                          refined, cells, false));
+            listed_cells = 0;
             sc = run_steps(steps, !finest && last, octant_keep, blocks_in > 1);
             if (!sc) {
                 slice_blocks = blocks_in / 2;
                 continue;
+            }
+            if (refine) {
+                // The finest cells decided again over their sub-boxes (refine_cell), into a new
+                // cell array, in a run of its own: a refined tape is never longer than its
+                // cell's, so the level's pool is first made room for as many words as the
+                // cells' tapes have (near_words: shared tapes too), and refinement (the level's
+                // costliest step) is never redone for want of it. The cells' longest tape and
+                // deepest stack size its teams.
+                listed_cells = sc->refine_cells;
+                const uint64_t room = uint64_t(g.pool_words) + sc->near_words;
+                if (room > capacity) resize(g.pool, capacity, room, g.pool_words);
+                max_len = std::max(sc->max_len, 1u);
+                max_depth = std::max(sc->max_depth, 1u);
+                std::vector<Step> refinement{plan_step(3, f, b0, blocks_in, blocks_in * per_block,
+                                                       csize, refined, cells, false)};
+                const GpuCounters rc = *run_steps(refinement, false, sc->octant_used, false);
+                sc->max_depth = rc.max_depth;
             }
             c.near_jobs += sc->near_jobs;
             c.near_words += sc->near_words;
