@@ -207,11 +207,11 @@ Mirror mirror(std::string name, std::vector<std::string> kernels, std::vector<Me
 const std::vector<Mirror>& mirrors() {
     using namespace gpu;
     using math::PrimitiveParams;
-    const std::vector<std::string> all = {"prune",     "prune_wide", "prune_wide_subgroups",
-                                          "expand",    "cell_info",  "trace",
-                                          "discretize"};
-    const std::vector<std::string> scene = {"prune", "prune_wide", "prune_wide_subgroups", "trace",
-                                            "discretize"};
+    const std::vector<std::string> all = {
+        "prune",  "prune_refine", "prune_wide", "prune_wide_subgroups",
+        "expand", "cell_info",    "trace",      "discretize"};
+    const std::vector<std::string> scene = {
+        "prune", "prune_refine", "prune_wide", "prune_wide_subgroups", "trace", "discretize"};
     const std::vector<std::string> grid = {"trace", "discretize"};
     static const std::vector<Mirror> table = {
         mirror<GpuNode>("Node", scene,
@@ -230,7 +230,8 @@ const std::vector<Mirror>& mirrors() {
             "Cell", all,
             {SDFPRUNE_MEMBER(PrunedCell, tape), SDFPRUNE_MEMBER(PrunedCell, children),
              SDFPRUNE_MEMBER(PrunedCell, value), SDFPRUNE_MEMBER(PrunedCell, bound)}),
-        mirror<GpuBlock>("Block", {"prune", "prune_wide", "prune_wide_subgroups", "expand"},
+        mirror<GpuBlock>("Block",
+                         {"prune", "prune_refine", "prune_wide", "prune_wide_subgroups", "expand"},
                          {SDFPRUNE_MEMBER(GpuBlock, x), SDFPRUNE_MEMBER(GpuBlock, y),
                           SDFPRUNE_MEMBER(GpuBlock, z), SDFPRUNE_MEMBER(GpuBlock, tape)}),
         mirror<GpuLevel>("Level", grid,
@@ -242,7 +243,7 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(GpuGridParams, cell_size), SDFPRUNE_MEMBER(GpuGridParams, inv_cell)}),
         // GpuCounters' trailing pad is the host's only.
         mirror<GpuCounters>(
-            "Counters", {"prune", "prune_wide", "prune_wide_subgroups"},
+            "Counters", {"prune", "prune_refine", "prune_wide", "prune_wide_subgroups"},
             {SDFPRUNE_MEMBER(GpuCounters, pool_used), SDFPRUNE_MEMBER(GpuCounters, pool_capacity),
              SDFPRUNE_MEMBER(GpuCounters, overflow), SDFPRUNE_MEMBER(GpuCounters, max_len),
              SDFPRUNE_MEMBER(GpuCounters, near_jobs), SDFPRUNE_MEMBER(GpuCounters, next_blocks),
@@ -268,7 +269,7 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(DiscretizeParams, pad0), SDFPRUNE_MEMBER(DiscretizeParams, pad1),
              SDFPRUNE_MEMBER(DiscretizeParams, pad2)}),
         mirror<PrunePush>(
-            "Push", {"prune", "prune_wide", "prune_wide_subgroups"},
+            "Push", {"prune", "prune_refine", "prune_wide", "prune_wide_subgroups"},
             {SDFPRUNE_MEMBER(PrunePush, origin), SDFPRUNE_MEMBER(PrunePush, csize),
              SDFPRUNE_MEMBER(PrunePush, mode), SDFPRUNE_MEMBER(PrunePush, factor),
              SDFPRUNE_MEMBER(PrunePush, jobs), SDFPRUNE_MEMBER(PrunePush, threads),
@@ -377,6 +378,9 @@ struct EmbeddedKernel {
 constexpr uint32_t kPruneSpv[] = {
 #include "prune.reflect.spv.inc"
 };
+constexpr uint32_t kPruneRefineSpv[] = {
+#include "prune_refine.reflect.spv.inc"
+};
 constexpr uint32_t kPruneWideSpv[] = {
 #include "prune_wide.reflect.spv.inc"
 };
@@ -395,13 +399,11 @@ constexpr uint32_t kTraceSpv[] = {
 constexpr uint32_t kDiscretizeSpv[] = {
 #include "discretize.reflect.spv.inc"
 };
-const EmbeddedKernel kKernels[] = {{"prune", kPruneSpv},
-                                   {"prune_wide", kPruneWideSpv},
-                                   {"prune_wide_subgroups", kPruneWideSubgroupsSpv},
-                                   {"expand", kExpandSpv},
-                                   {"cell_info", kCellInfoSpv},
-                                   {"trace", kTraceSpv},
-                                   {"discretize", kDiscretizeSpv}};
+const EmbeddedKernel kKernels[] = {
+    {"prune", kPruneSpv},          {"prune_refine", kPruneRefineSpv},
+    {"prune_wide", kPruneWideSpv}, {"prune_wide_subgroups", kPruneWideSubgroupsSpv},
+    {"expand", kExpandSpv},        {"cell_info", kCellInfoSpv},
+    {"trace", kTraceSpv},          {"discretize", kDiscretizeSpv}};
 #else
 const std::vector<EmbeddedKernel> kKernels;
 #endif
@@ -465,6 +467,9 @@ void check_kernel(const std::string& kernel) {
 
 TEST(GpuLayout, Prune) {
     check_kernel("prune");
+}
+TEST(GpuLayout, PruneRefine) {
+    check_kernel("prune_refine");
 }
 TEST(GpuLayout, PruneWide) {
     check_kernel("prune_wide");

@@ -394,7 +394,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
                         &push, sizeof(push), s.groups);
                 else
                     ctx.dispatch(
-                        KernelId::kPrune,
+                        s.push.mode == 3 ? KernelId::kPruneRefine : KernelId::kPrune,
                         {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants, s.cells,
                          &counters, &scratch, &octant_pool, &refine_list, &g.pool, &scratch},
                         &push, sizeof(push), s.groups);

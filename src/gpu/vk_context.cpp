@@ -17,6 +17,9 @@ namespace {
 const uint32_t kPruneSpv[] = {
 #include "prune.spv.inc"
 };
+const uint32_t kPruneRefineSpv[] = {
+#include "prune_refine.spv.inc"
+};
 const uint32_t kPruneWideSpv[] = {
 #include "prune_wide.spv.inc"
 };
@@ -47,6 +50,7 @@ struct KernelCode {
 // Binding counts must match the shaders' layouts (shaders/gpu/*.comp).
 const KernelCode kKernels[] = {
     {kPruneSpv, sizeof(kPruneSpv), 13},
+    {kPruneRefineSpv, sizeof(kPruneRefineSpv), 13},
     {kPruneWideSpv, sizeof(kPruneWideSpv), 13, uint32_t(kPruneWide)},
     {kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 13, uint32_t(kPruneWide), true},
     {kExpandSpv, sizeof(kExpandSpv), 4},
