@@ -1,10 +1,16 @@
 // gpu_prune.cpp — hierarchical pruning on the device (gpu.hpp): the host walks the levels as
-// src/prune/prune.cpp does; each level is one submission of prune.comp's steps (the octants,
-// the cells, the refinement), each over all its jobs in teams of lanes that share a parent
-// tape, then expand.comp to make the next level's blocks. Steps with few jobs and long parent
-// tapes (the top levels) run prune_wide.comp instead: a workgroup per parent tape. The pools are
-// sized before each level from the parents' tapes; one that overflows all the same grows and the
-// level is redone. Statistics are read back at the end.
+// src/prune/prune.cpp does. A level's steps (prune.comp: the octants, the cells; then
+// prune_refine.comp: the finest cells' refinement) each run over all their jobs in teams of
+// lanes that share a parent tape, then expand.comp makes the next level's blocks. Steps with few
+// jobs and long parent tapes (the top levels) run prune_wide.comp instead: a workgroup per
+// parent tape. Each level's tapes go to a pool of their own, sized before the level from the
+// parents' tapes; one that overflows all the same grows and the level is redone. Statistics
+// are read back at the end.
+//
+// Reading order: Pruner::run (the levels), prune_level (a level: its pools and buffers),
+// prune_slices (its blocks, a slice at a time, and the steps of a slice), run_steps (one
+// submission), plan_step / plan_wide (a step's shape: teams or wide) and record_step (its
+// dispatches).
 #include <algorithm>
 #include <bit>
 #include <chrono>
@@ -35,19 +41,138 @@ GpuGridParams DeviceGrid::grid_params() const {
     return g;
 }
 
-Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
-    const auto t_start = std::chrono::steady_clock::now();
-    if (!(opt.far_field_c >= 1.0f)) throw std::invalid_argument("far-field C must be >= 1");
-    const std::vector<uint32_t> res = grid_levels(opt.resolution, opt.factor, opt.hierarchy);
-    Context& ctx = device.context();
-    ctx.reset_peak();
-    const uint64_t live_before = ctx.bytes_live();
-    const Context::HostTime host_before = ctx.host_time();
-    Grid grid;
-    grid.impl_ = std::make_unique<DeviceGrid>(ctx, sc);
-    DeviceGrid& g = *grid.impl_;
-    DevicePruneStats& st = g.stats;
+namespace {
 
+// Which steps run wide (prune_wide.comp): those with parent tapes of kWideMinTape words or
+// more where the modelled cost is less than twice a team's longest walk. The cost is the wide
+// walk with every round (a height of the tape, a workgroup barrier and a chain of global loads)
+// counted kWideRoundCost times. Both constants fit the per-step GPU times measured on an NVIDIA
+// H200 (stop 23: 18 steps of six scenes at levels 2 and 3, where the two kernels were timed
+// against each other): a team's word costs up to twice a wide lane's, its scratch per lane
+// being larger, and a round costs about four words. Any number of team jobs may run wide (a
+// workgroup each, in a grid-stride loop): the generated fluid's level-2 octants, 3,518 team
+// jobs, take 3.0 ms wide against 12.5 ms in teams. SDFPRUNE_VULKAN_WIDE=0 never, =1 wherever
+// the kernel fits (for tests).
+constexpr uint64_t kWideMinTape = 128, kWideRoundCost = 4;
+
+uint64_t ceil_div(uint64_t a, uint64_t b) {
+    return (a + b - 1) / b;
+}
+
+// A step of a level (prune.comp): `jobs` cells or octants from their parents' tapes into
+// `octants`/`cells`, run as team jobs that each walk one parent tape with kPruneTeam lanes,
+// sized by the parents' longest tape and deepest stack (a child's tape is never longer or
+// deeper than its parent's); or wide (prune_wide.comp), a workgroup a team job.
+struct Step {
+    PrunePush push;
+    const Buffer *octants, *cells;
+    // Its team jobs are [first_team_job, first_team_job + team_jobs): those of a slice of the
+    // level's blocks (refinement: of its list, from 0; its slice's cells start at first_cell).
+    uint64_t first_team_job, team_jobs, teams, rounds, per_dispatch, first_cell = 0;
+    uint64_t job_walk;         // in teams, the tape words a lane reads per job, at most
+    uint32_t threads, groups;  // lanes that take jobs, and their workgroups
+    bool wide;
+    // In teams, fewer teams than jobs for want of scratch (not because the device runs no
+    // more): then a level's octants run first, so that their shorter tapes size its other
+    // steps.
+    bool scratch_limited;
+    GpuStepShape shape;
+    uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
+};
+
+// A level as it is made: its blocks' shape and its buffers (held by the pruner's LocalBuffers).
+struct Level {
+    uint32_t index = 0;
+    uint32_t f = 0;                     // cells per axis of a block
+    uint32_t nf = 0;                    // of the next level's blocks (0 at the finest)
+    uint64_t per_block = 0, total = 0;  // cells of a block, of the level
+    vec3 csize;
+    bool finest = false, refine = false;
+    bool split = false;  // octants first (as prune.cpp)
+    Buffer *cells = nullptr, *octants = nullptr, *refined = nullptr, *next = nullptr;
+    size_t first_shape = 0;     // the level's steps' shapes in the statistics
+    uint32_t listed_cells = 0;  // refinement's list, from the run that made the cells
+};
+
+class Pruner {
+  public:
+    Pruner(Device& device, const Scene& sc, const PruneOptions& opt, DeviceGrid& g);
+    // All levels, then the cells of all levels in one buffer (timed: prune_ms, wall_ms).
+    void run();
+    // The statistics, read back (not timed).
+    void read_statistics();
+
+  private:
+    void prune_level(uint32_t li);
+    GpuCounters prune_slices(Level& lv, uint64_t& octant_words);
+    std::optional<GpuCounters> run_steps(Level& lv, std::vector<Step>& steps, bool expand,
+                                         uint64_t octant_keep, bool may_slice);
+    void add_shape(const Level& lv, const GpuStepShape& shape);
+    Step plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
+                   uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient);
+    void plan_wide(Step& s, uint64_t& scratch_bytes);
+    void record_step(Step& s);
+    void resize(Buffer& pool, uint64_t& cap, uint64_t words, uint64_t keep);
+    void grow(Buffer& pool, uint64_t& cap, uint64_t need, uint64_t keep);
+    void presize(Buffer& pool, uint64_t& cap, uint64_t used, uint64_t bound);
+    void gather_cells();
+
+    Context& ctx;
+    const Scene& sc;
+    const PruneOptions& opt;
+    DeviceGrid& g;
+    DevicePruneStats& st;
+    const std::vector<uint32_t> res;
+    // Temporaries: what is left of them is freed on return, or when an error is thrown.
+    LocalBuffers local;
+    const uint64_t max_pool_words;
+    std::vector<uint32_t> head;                        // the full tape with its header
+    uint32_t scene_height = 0;                         // the root's height (prune_wide.comp)
+    uint64_t capacity = 0, octant_capacity = 1 << 16;  // of g.pool and octant_pool, in words
+    Buffer& node_spans;
+    Buffer& counters;
+    GpuCounters* counter;
+    Buffer& blocks;  // the current level's blocks
+    Buffer& scratch;
+    // The octants' tapes of the current level (prune.comp: OctantPool), reused level by level.
+    Buffer& octant_pool;
+    // Refinement's jobs: the finest near-field cells (prune_common.glsl: RefineList), listed by
+    // the step that makes them; sized at the finest level.
+    Buffer& refine_list;
+    Buffer* parent_pool = nullptr;  // the last level's pool (binding 3); the level's own: g.pool
+    uint64_t block_count = 1;
+    uint64_t parent_words = 0;  // the parents' tapes, headers included
+    // The share of the pools' bound (see presize) the last level used.
+    double main_ratio = 1, octant_ratio = 1;
+    uint32_t max_len = 0;    // longest tape of the current parents
+    uint32_t max_depth = 0;  // deepest evaluation stack of the current parents
+    double gpu_ms = 0;
+    uint32_t level_index = 0;  // the level being made (for the steps' shapes and errors)
+    uint64_t presize_cap = uint64_t(64) << 20;
+    int wide_override = -1;
+    vec3 origin, extent;
+    float L = 1;
+    uint32_t flags = 0;  // the push constants' (prune_common.glsl)
+    std::vector<Buffer*> level_cells;
+    uint64_t cell_total = 0;  // of all levels
+};
+
+Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, DeviceGrid& grid)
+    : ctx(device.context()),
+      sc(scene),
+      opt(options),
+      g(grid),
+      st(grid.stats),
+      res(grid_levels(options.resolution, options.factor, options.hierarchy)),
+      local(ctx),
+      max_pool_words(std::min<uint64_t>(ctx.max_buffer_bytes() / 4, 0xfffffff0u)),
+      node_spans(local.slot()),
+      counters(local.create(sizeof(GpuCounters), true)),
+      counter(static_cast<GpuCounters*>(counters.mapped)),
+      blocks(local.create(sizeof(GpuBlock))),
+      scratch(local.slot()),
+      octant_pool(local.create(octant_capacity * 4)),
+      refine_list(local.create(16)) {
     // The scene.
     std::vector<GpuNode> nodes(sc.size());
     for (uint32_t n = 0; n < sc.size(); ++n)
@@ -77,593 +202,548 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
         spans[2 * n + 1] =
             prim ? 0 : 1 + std::max(spans[2 * sc.left[n] + 1], spans[2 * sc.right[n] + 1]);
     }
-    const uint32_t scene_height = spans[2 * sc.root() + 1];
+    scene_height = spans[2 * sc.root() + 1];
+    node_spans = ctx.create_buffer(spans.size() * 4);
+    ctx.upload(node_spans, spans.data(), spans.size() * 4);
 
     // Each level's tapes go to a pool of its own (g.pool while the level is made; it grows on
     // overflow), read as the parents' by the next level and then freed: a level never holds
     // its grandparents' tapes (the million-sphere fluid's coarse levels alone outgrew one 4 GiB
     // buffer). Tracing reads only the finest cells' tapes. The first parents' pool holds the
     // full tape.
-    const uint64_t max_pool_words = std::min<uint64_t>(ctx.max_buffer_bytes() / 4, 0xfffffff0u);
-    std::vector<uint32_t> head{sc.size(), sc.primitive_count()};
+    head = {sc.size(), sc.primitive_count()};
     head.insert(head.end(), sc.full_tape.begin(), sc.full_tape.end());
     if (head.size() > max_pool_words)
         throw GpuError("scene too large for the device's largest storage buffer");
-    uint64_t capacity = head.size();
+    capacity = head.size();
     g.pool = ctx.create_buffer(capacity * 4);
     ctx.upload(g.pool, head.data(), head.size() * 4);
     g.pool_words = uint32_t(head.size());
+    parent_words = head.size();
 
-    // Temporaries: what is left of them is freed on return, or when an error is thrown.
-    LocalBuffers local(ctx);
-    Buffer& node_spans = local.create(spans.size() * 4);
-    ctx.upload(node_spans, spans.data(), spans.size() * 4);
-    std::vector<uint32_t>().swap(spans);
-    Buffer& counters = local.create(sizeof(GpuCounters), true);
-    auto* counter = static_cast<GpuCounters*>(counters.mapped);
-    Buffer& blocks = local.create(sizeof(GpuBlock));
     const GpuBlock root_block{0, 0, 0, 0};
     ctx.upload(blocks, &root_block, sizeof(root_block));
-    uint64_t block_count = 1;
-    uint64_t parent_words = head.size();  // the parents' tapes, headers included
-    // The share of the pools' bound (see presize) the last level used.
-    double main_ratio = 1, octant_ratio = 1;
-    uint32_t max_len = sc.size();       // longest tape of the current parents
-    uint32_t max_depth = sc.max_stack;  // deepest evaluation stack of the current parents
-    Buffer& scratch = local.slot();
-    // The octants' tapes of the current level (prune.comp: OctantPool), reused level by level.
-    uint64_t octant_capacity = 1 << 16;
-    Buffer& octant_pool = local.create(octant_capacity * 4);
-    // Refinement's jobs: the finest near-field cells (prune_common.glsl: RefineList), listed by
-    // the step that makes them; sized at the finest level.
-    Buffer& refine_list = local.create(16);
-    double gpu_ms = 0;
-
-    uint32_t level_index = 0;  // the level being made (for the steps' shapes and errors)
-    // Replaces `pool` by one of `words` words (at most the device's limit), keeping its first
-    // `keep` words (with none to keep, the old one goes first: the two are never held at once).
-    const auto resize = [&](Buffer& pool, uint64_t& cap, uint64_t words, uint64_t keep) {
-        const uint64_t grown = std::min(words, max_pool_words);
-        if (keep == 0) ctx.destroy(pool);
-        Buffer& bigger = local.create(grown * 4);
-        if (keep > 0) {
-            ctx.begin();
-            ctx.copy(pool, bigger, keep * 4);
-            ctx.submit();
-        }
-        ctx.destroy(pool);
-        pool = bigger;
-        bigger = Buffer{};
-        cap = grown;
-    };
-    // After an overflow: at least `need` words, at least twice as many as before.
-    const auto grow = [&](Buffer& pool, uint64_t& cap, uint64_t need, uint64_t keep) {
-        if (cap >= max_pool_words)
-            throw GpuError(
-                std::string(&pool == &g.pool ? "the tape pool" : "the octant pool") + " of level " +
-                std::to_string(level_index) + " needs " +
-                (need == std::numeric_limits<uint64_t>::max() ? std::string("over 4 Gi")
-                                                              : std::to_string(need)) +
-                " words (" + std::to_string(keep) +
-                " in use before it), more than the device's largest storage buffer holds (" +
-                std::to_string(ctx.max_buffer_bytes()) + " bytes); use --backend cpu");
-        resize(pool, cap, std::max(cap * 2, need + need / 4), keep);
-        ++st.pool_grows;
-    };
-    // Before a level: room for what its parents' tapes can give, within 64 Mi words more
-    // than in use (a bound: a child's tape is never longer than its parent's; past the cap
-    // an overflow grows the pool and redoes the level).
-    // SDFPRUNE_VULKAN_PRESIZE_WORDS=N sets the cap (0: pools only grow on overflow, for tests).
-    uint64_t presize_cap = uint64_t(64) << 20;
+    max_len = sc.size();
+    max_depth = sc.max_stack;
+    // Before a level: room for what its parents' tapes can give, within 64 Mi words more than
+    // in use (presize). SDFPRUNE_VULKAN_PRESIZE_WORDS=N sets the cap (0: pools only grow on
+    // overflow, for tests).
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_PRESIZE_WORDS"))
         presize_cap = std::strtoull(env, nullptr, 10);
-    const auto presize = [&](Buffer& pool, uint64_t& cap, uint64_t used, uint64_t bound) {
-        const uint64_t want = used + std::min(bound, presize_cap);
-        if (want > cap) resize(pool, cap, want, used);
-    };
-
-    const vec3 origin = sc.aabb.min, extent = sc.aabb.max - sc.aabb.min;
-    const float L = sc.lipschitz[sc.root()];
-    const uint32_t flags =
-        (opt.far_field ? 1u : 0u) | (opt.bounds == CellBounds::kInterval ? 2u : 0u);
-    // Which steps run wide (prune_wide.comp): those with parent tapes of kWideMinTape words or
-    // more where the modelled cost is less than twice a team's longest walk. The cost is the
-    // wide walk with every round (a height of the tape, a workgroup barrier and a chain of
-    // global loads) counted kWideRoundCost times. Both constants fit the per-step GPU times
-    // measured on an NVIDIA H200 (stop 23: 18 steps of six scenes at levels 2 and 3, where the
-    // two kernels were timed against each other): a team's word costs up to twice a wide
-    // lane's, its scratch per lane being larger, and a round costs about four words. Any number
-    // of team jobs may run wide (a workgroup each, in a grid-stride loop): the generated fluid's
-    // level-2 octants, 3,518 team jobs, take 3.0 ms wide against 12.5 ms in teams.
-    // SDFPRUNE_VULKAN_WIDE=0 never, =1 wherever the kernel fits (for tests).
-    constexpr uint64_t kWideMinTape = 128, kWideRoundCost = 4;
-    int wide_override = -1;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE"); env && *env)
         wide_override = std::atoi(env) != 0;
+    origin = sc.aabb.min;
+    extent = sc.aabb.max - sc.aabb.min;
+    L = sc.lipschitz[sc.root()];
+    flags = (opt.far_field ? 1u : 0u) | (opt.bounds == CellBounds::kInterval ? 2u : 0u);
+}
 
-    // A step of a level (prune.comp): `jobs` cells or octants from their parents' tapes into
-    // `octants`/`cells`, run as team jobs that each walk one parent tape with kPruneTeam lanes,
-    // sized by the parents' longest tape and deepest stack (a child's tape is never longer or
-    // deeper than its parent's). `transient`: new tapes go to the octant pool (the finest cells'
-    // tapes before refinement).
-    struct Step {
-        PrunePush push;
-        const Buffer *octants, *cells;
-        // Its team jobs are [first_team_job, first_team_job + team_jobs): those of a slice of
-        // the level's blocks (refinement: of its list, from 0; its slice's cells start at
-        // first_cell).
-        uint64_t first_team_job, team_jobs, teams, rounds, per_dispatch, first_cell = 0;
-        uint64_t job_walk;         // in teams, the tape words a lane reads per job, at most
-        uint32_t threads, groups;  // lanes that take jobs, and their workgroups
-        bool wide;
-        // In teams, fewer teams than jobs for want of scratch (not because the device runs no
-        // more): then the step may run wide however many its jobs, and a level's octants run
-        // first, so that their shorter tapes size its other steps.
-        bool scratch_limited;
-        GpuStepShape shape;
-        uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
-    };
-    // The step's jobs are those of the blocks [first_block, first_block + blocks), `jobs` cells
-    // or octants.
-    const auto plan_step = [&](uint32_t mode, uint32_t factor, uint64_t first_block,
-                               uint64_t blocks, uint64_t jobs, vec3 csize, const Buffer& octants,
-                               const Buffer& cells, bool transient) {
-        const uint64_t per_block = uint64_t(factor) * factor * factor, hf = factor / 2;
-        const auto teams_for = [](uint64_t boxes) { return (boxes + kPruneTeam - 1) / kPruneTeam; };
-        Step s;
-        s.octants = &octants;
-        s.cells = &cells;
-        // Team jobs run block by block in every mode (prune_common.glsl: job_box).
-        const uint64_t per_block_jobs = mode == 0   ? teams_for(per_block)
-                                        : mode == 1 ? 1
-                                        : mode == 2 ? 8 * teams_for(hf * hf * hf)
-                                                    : per_block;
-        s.first_team_job = first_block * per_block_jobs;
-        s.team_jobs = blocks * per_block_jobs;
-        if (mode == 3) {
-            // Refinement takes the slice's listed near cells (a list a run, from 0).
-            s.first_cell = s.first_team_job;
-            s.first_team_job = 0;
-        }
-        if (s.first_team_job + s.team_jobs > 0xfffffffeull)
-            throw std::length_error("too many cells in one level");
-        // A team's scratch: its lanes' state, per parent-tape entry a left operand and a word
-        // per lane (decision and sweep flags), per stack slot and lane 4 words.
-        const uint64_t team_bytes =
-            (kPruneStateWords * kPruneTeam + uint64_t(max_len) * (1 + kPruneTeam) +
-             4ull * max_depth * kPruneTeam) *
-            4;
-        // Teams in flight: as many as have jobs, their scratch fits the budget and the device
-        // runs at once (more would only queue, their scratch held for nothing; the teams take
-        // the jobs in a grid-stride loop). Only teams with jobs hold scratch, so one parent
-        // tape as long as the budget allows can be pruned (the root's, the full tree, at level
-        // 0) even where a workgroup's 8 teams could not.
-        const uint64_t fit = ctx.prune_scratch_budget_bytes() / team_bytes;
-        if (fit == 0)
-            throw GpuError("Vulkan: pruning a tape of " + std::to_string(max_len) +
-                           " words needs " + std::to_string(team_bytes) +
-                           " bytes of scratch, more than the device's buffers allow; use "
-                           "--backend cpu");
-        const uint64_t unlimited =
-            std::min({std::max<uint64_t>(s.team_jobs, 1),
-                      uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kPruneTeam),
-                      std::max<uint64_t>(ctx.resident_threads() / kPruneTeam, 1)});
-        s.teams = std::min(unlimited, fit);
-        s.scratch_limited = fit < unlimited;
-        s.threads = uint32_t(s.teams * kPruneTeam);
-        s.groups = uint32_t((s.threads + kWorkgroupSize - 1) / kWorkgroupSize);
-        // Steps of a job: per batch of sub-boxes an evaluation window by window, the far-field
-        // test, the sweep and the write window by window (and one to spare).
-        const uint64_t batches =
-            mode == 3 ? teams_for(uint64_t(opt.refine) * opt.refine * opt.refine) : 1;
-        // Refinement takes its batches of sub-boxes only over tapes up to kRefineMaxTape; a
-        // longer tape is evaluated once.
-        const auto windows = [](uint64_t words) {
-            return (words + kPruneWindow - 1) / kPruneWindow;
-        };
-        const uint64_t batch_len =
-            mode == 3 ? std::min<uint64_t>(max_len, math::kRefineMaxTape) : max_len;
-        const uint64_t per_job =
-            std::max((batches + 2) * windows(batch_len), 3 * windows(max_len)) + 2;
-        // Under a loop limit (lavapipe), as many jobs per team and dispatch as fit the limit,
-        // or one job resumed over as many rounds as its steps need; elsewhere one unlimited
-        // round. A step's loops: staging the window, evaluating it (in refinement up to
-        // kPruneBatchesPerStep times, over a tape that fits it), refinement's far-field test
-        // over the team, the sweep, the write; each over at most the longest tape.
-        const bool limited = ctx.loop_limited();
-        const uint64_t step_len = std::min<uint64_t>(max_len, kPruneWindow);
-        const uint64_t step_loops = kPruneWindow / kPruneTeam +
-                                    (mode == 3 ? kPruneBatchesPerStep : 1) * step_len + kPruneTeam +
-                                    2 * step_len + 8;
-        const uint64_t max_steps = (Context::kLoopLimit - 1024) / step_loops;
-        s.rounds = limited ? (per_job + max_steps - 1) / max_steps : 1;
-        const uint32_t budget =
-            !limited ? 0xffffffffu : uint32_t(s.rounds > 1 ? max_steps : per_job);
-        s.per_dispatch = limited ? s.teams * std::max<uint64_t>(1, max_steps / per_job)
-                                 : std::max<uint64_t>(s.team_jobs, 1);
-        s.push = PrunePush{vec4(origin.x, origin.y, origin.z, L),
-                           vec4(csize.x, csize.y, csize.z, opt.far_field_c),
-                           mode,
-                           factor,
-                           0,
-                           s.threads,
-                           max_len,
-                           max_depth,
-                           flags | (transient ? 4u : 0u) | (s.rounds == 1 ? 8u : 0u),
-                           0,
-                           0,
-                           0,
-                           budget,
-                           opt.refine,
-                           0};
-        s.shape.level = level_index;
-        s.shape.mode = mode;
-        s.shape.jobs = jobs;
-        s.shape.lanes_per_tape = uint32_t(kPruneTeam);
-        s.shape.lanes = std::min<uint64_t>(s.team_jobs, s.teams) * kPruneTeam;
-        // A lane's walk per job: the evaluation once per batch, the sweep and the write.
-        s.job_walk = std::max((batches + 2) * batch_len, uint64_t(3) * max_len);
-        s.shape.longest_walk_words =
-            s.team_jobs == 0 ? 0 : (s.team_jobs + s.teams - 1) / s.teams * s.job_walk;
-        s.wide = false;
-        uint64_t scratch_bytes = s.teams * team_bytes;
-        // The wide kernel: per job the tape entries a lane takes one after another
-        // (prune_wide.comp): its share of the entries counted, then placed (with a binary
-        // search for an operator's left operand), in the evaluation and the top-down pass its
-        // share of each round's entries and kPruneTeam boxes (at most one more than an even
-        // share per round: a round per height the tape has, no more than its operators plus
-        // one), and the compaction's two passes over a slice. A run of rounds of one operator
-        // each (a chain) is walked by kPruneTeam lanes, a step a round as before, but with no
-        // barrier between its rounds: the walk is the same, its barriers fewer (how many, only
-        // the tapes on the device say). Its loops add the heights cleared and summed, the
-        // rounds (and the runs found among them) themselves and the prefix sums' steps: a job
-        // ends in the dispatch that starts it, within lavapipe's loop limit; only where twice
-        // that count fits (a deep chain near the limit came out wrong on lavapipe: the count
-        // is taken as approximate).
-        if (mode != 3 && wide_override != 0 && ctx.can_run(KernelId::kPruneWide)) {
-            const auto ceil_div = [](uint64_t a, uint64_t b) { return (a + b - 1) / b; };
-            const uint64_t len = max_len, heights = uint64_t(scene_height) + 1;
-            const uint64_t rounds = std::min<uint64_t>(heights, len / 2 + 1);
-            const uint64_t walk_job = ceil_div(len, kPruneWide) * (2 + std::bit_width(len)) +
-                                      2 * (rounds + ceil_div(len * kPruneTeam, kPruneWide)) +
-                                      2 * ceil_div(len, kPruneWide / kPruneTeam);
-            const uint64_t per_job = walk_job + 3 * ceil_div(heights, kPruneWide) +
-                                     ceil_div(rounds, kPruneWide) + 2 * rounds +
-                                     4 * std::bit_width(kPruneWide);
-            const uint64_t group_bytes =
-                (len * (2 + kPruneWideEntryWords * kPruneTeam) + kPruneWideHeightWords * heights) *
-                4;
-            const uint64_t fit_groups = ctx.prune_scratch_budget_bytes() / group_bytes;
-            const bool limited = ctx.loop_limited();
-            if (fit_groups > 0 && (!limited || 2 * per_job + 1024 <= Context::kLoopLimit)) {
-                const uint64_t unlimited_groups =
-                    std::min({std::max<uint64_t>(s.team_jobs, 1), uint64_t(ctx.max_workgroups()),
-                              std::max<uint64_t>(ctx.resident_threads() / kPruneWide, 1)});
-                const uint64_t groups = std::min(unlimited_groups, fit_groups);
-                const uint64_t group_jobs = ceil_div(s.team_jobs, groups);
-                const uint64_t walk = s.team_jobs == 0 ? 0 : group_jobs * walk_job;
-                const uint64_t cost = walk + group_jobs * 2 * (kWideRoundCost - 1) * rounds;
-                const bool pick = wide_override == 1 ||
-                                  (len >= kWideMinTape && cost < 2 * s.shape.longest_walk_words);
-                if (pick) {
-                    s.wide = true;
-                    s.teams = groups;
-                    s.groups = uint32_t(groups);
-                    s.threads = uint32_t(groups * kPruneWide);
-                    s.rounds = 1;
-                    s.per_dispatch =
-                        limited ? groups * std::max<uint64_t>(
-                                               1, (Context::kLoopLimit - 1024) / (2 * per_job))
-                                : std::max<uint64_t>(s.team_jobs, 1);
-                    s.push.threads = s.threads;
-                    s.push.max_stack = scene_height;
-                    s.push.budget = 0;
-                    s.shape.wide = true;
-                    s.shape.lanes_per_tape = uint32_t(kPruneWide);
-                    s.shape.lanes = std::min<uint64_t>(s.team_jobs, groups) * kPruneWide;
-                    s.shape.longest_walk_words = walk;
-                    scratch_bytes = groups * group_bytes;
-                }
-            }
-        }
-        if (scratch.size < scratch_bytes) {
-            ctx.destroy(scratch);
-            scratch = ctx.create_buffer(scratch_bytes);
-        }
-        return s;
-    };
-    // Records a step's dispatches; the pools' words in use before the level start them.
-    Buffer* parent_pool = nullptr;  // the last level's pool (binding 3), the level's own is g.pool
-    const auto record_step = [&](Step& s) {
-        s.first_stamp = ctx.stamp();
-        PrunePush push = s.push;
-        push.pool_start = g.pool_words;
-        const uint64_t end = s.first_team_job + s.team_jobs;
-        for (uint64_t first = s.first_team_job; first < std::max<uint64_t>(end, 1);
-             first += s.per_dispatch)
-            for (uint32_t round = 0; round < s.rounds; ++round) {
-                push.first_job = uint32_t(first);
-                push.jobs = uint32_t(std::min<uint64_t>(end, first + s.per_dispatch));
-                push.round = round;
-                if (s.wide)
-                    ctx.dispatch(
-                        ctx.can_run(KernelId::kPruneWideSubgroups) ? KernelId::kPruneWideSubgroups
-                                                                   : KernelId::kPruneWide,
-                        {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants, s.cells,
-                         &counters, &scratch, &octant_pool, &refine_list, &g.pool, &node_spans},
-                        &push, sizeof(push), s.groups);
-                else
-                    ctx.dispatch(
-                        s.push.mode == 3 ? KernelId::kPruneRefine : KernelId::kPrune,
-                        {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants, s.cells,
-                         &counters, &scratch, &octant_pool, &refine_list, &g.pool, &scratch},
-                        &push, sizeof(push), s.groups);
-                ++s.shape.dispatches;
-                s.shape.workgroups += s.groups;
-            }
-        s.last_stamp = ctx.stamp();
-    };
-
-    // Each level in one submission: its steps (the octants, the cells, the refinement) and the
-    // next level's blocks (expand.comp, into a buffer for as many blocks as the level has
-    // cells). The counters are read back once; a pool that overflowed grows and the level is
-    // redone.
-    std::vector<Buffer*> level_cells;
-    for (uint32_t li = 0; li < res.size(); ++li) {
-        level_index = li;
-        const bool finest = li + 1 == res.size();
-        const bool refine = finest && opt.refine > 1;
-        const uint32_t f = li == 0 ? res[0] : res[li] / res[li - 1];
-        const uint64_t per_block = uint64_t(f) * f * f;
-        const uint64_t total = per_block * block_count;
-        if (total > 0xfffffffeull) throw std::length_error("too many cells in one level");
-        const vec3 csize = extent / float(res[li]);
-        // The same split as the CPU backend (prune.cpp): octants first where it applies.
-        const bool split = opt.hierarchy && f >= 4 && f % 2 == 0 && 1024 % per_block == 0;
-        const uint32_t nf = finest ? 0 : res[li + 1] / res[li];
-        // Every cell's tape (with its header) is at most its parent's: the octants' go to the
-        // octant pool, the cells' to the main pool (or first to the octant pool, refined into
-        // the main pool). Sized for twice the share of that bound the last level used (finer
-        // levels tend to use less of it, more of their cells being far-field; with 1.25 times,
-        // the generated fluid's finest level overflowed and was redone).
-        const uint64_t main_bound = per_block * parent_words;
-        const uint64_t octant_bound = split ? 8 * parent_words : 0;
-        const auto share = [](uint64_t bound, double ratio) {
-            return uint64_t(std::ceil(double(bound) * std::min(1.0, 2 * ratio)));
-        };
-        // The parents' pool, freed after the level, and the level's own.
-        Buffer& parents = local.slot();
-        parents = g.pool;
-        g.pool = Buffer{};
-        parent_pool = &parents;
-        capacity = 0;
-        g.pool_words = 0;
-        // The finest level's pool starts with the full tape: the tracing kernels' full-tree
-        // pass reads it there (scene.glsl: kFullTreeTape).
-        const uint64_t head_words = finest ? head.size() : 0;
-        resize(g.pool, capacity,
-               head_words + std::max<uint64_t>(std::min(share(main_bound, main_ratio), presize_cap),
-                                               1 << 16),
-               0);
-        if (finest) {
-            ctx.upload(g.pool, head.data(), head_words * 4);
-            g.pool_words = uint32_t(head_words);
-        }
-        presize(octant_pool, octant_capacity, 0,
-                share(octant_bound, octant_ratio) + (refine ? share(main_bound, main_ratio) : 0));
-        // The level's cells, made after the pools grew (a pool's old and new buffers, held at
-        // once while its words are copied, are not held beside them).
-        Buffer& cells = local.create(total * sizeof(PrunedCell));
-        Buffer& octants = local.create(split ? block_count * 8 * sizeof(PrunedCell) : 16);
-        Buffer& refined = local.create(refine ? total * sizeof(PrunedCell) : 16);
-        Buffer& next = local.create(finest ? 16 : total * sizeof(GpuBlock));
-        // Room to list every finest cell for refinement.
-        if (refine && refine_list.size < total * 4) {
-            ctx.destroy(refine_list);
-            refine_list = ctx.create_buffer(total * 4);
-        }
-
-        // Runs `steps` (and expand.comp when `expand`) in one submission, the octant pool
-        // holding `octant_keep` words from before; grows a pool and runs them again while one
-        // overflows. Gives nothing where the octant pool would have to outgrow the device's
-        // largest buffer and `may_slice`: the caller then takes fewer blocks at a time.
-        const size_t level_first_shape = st.steps.size();
-        uint32_t listed_cells = 0;  // refinement's list, from the run that made the cells
-        const auto run_steps = [&](std::vector<Step>& steps, bool expand, uint64_t octant_keep,
-                                   bool may_slice) -> std::optional<GpuCounters> {
-            for (;;) {
-                GpuCounters start{};
-                start.pool_used = g.pool_words;
-                start.pool_capacity = uint32_t(capacity);
-                start.octant_used = uint32_t(octant_keep);
-                start.octant_capacity = uint32_t(octant_capacity);
-                start.refine_cells = listed_cells;
-                *counter = start;
-                ctx.begin();
-                for (Step& s : steps) {
-                    // The longest tape and deepest stack read back: the cells' (the next
-                    // parents'), not the octants'; and after refinement, the refined cells'
-                    // deepest stack (what the tracing kernels' stacks are sized by; every
-                    // near-field cell's refinement adds its tape's depth).
-                    if (s.push.mode == 2) {
-                        ctx.fill(counters, 0, offsetof(GpuCounters, max_len), 4);
-                        ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
-                    }
-                    if (s.push.mode == 3) {
-                        ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
-                        // The far-field cells refined as they are: all cells copied, the
-                        // near ones (listed by the step before) then refined over them.
-                        if (s.team_jobs > 0)
-                            ctx.copy(*s.cells, *s.octants, s.team_jobs * sizeof(PrunedCell),
-                                     s.first_cell * sizeof(PrunedCell),
-                                     s.first_cell * sizeof(PrunedCell));
-                    }
-                    record_step(s);
-                }
-                if (expand) {
-                    const ExpandPush push{f, uint32_t(total), nf};
-                    ctx.dispatch(KernelId::kExpand, {&blocks, &cells, &next, &counters}, &push,
-                                 sizeof(push), ctx.groups_for(total));
-                }
-                gpu_ms += ctx.submit();
-                ++st.submissions;
-                if (!counter->overflow) break;
-                // Grow the pool that overflowed (keeping what the steps started with) and run
-                // them again. A counter that wrapped past 2^32 words (it reads less than the
-                // capacity) asks for the most the device allows.
-                const bool main_over = (counter->overflow & 1u) != 0,
-                           octant_over = (counter->overflow & 2u) != 0;
-                const auto need = [](uint32_t used, uint64_t cap) {
-                    return used > cap ? uint64_t(used) : std::numeric_limits<uint64_t>::max();
-                };
-                if (octant_over && may_slice &&
-                    need(counter->octant_used, octant_capacity) > max_pool_words)
-                    return std::nullopt;
-                if (main_over)
-                    grow(g.pool, capacity, need(counter->pool_used, capacity), g.pool_words);
-                if (octant_over)
-                    grow(octant_pool, octant_capacity, need(counter->octant_used, octant_capacity),
-                         octant_keep);
-            }
-            g.pool_words = counter->pool_used;
-            for (Step& s : steps) {
-                if (s.push.mode == 3) {
-                    // Refinement's jobs, the listed cells (its dispatches were recorded for
-                    // all, those past the list's end returning at once).
-                    const uint64_t jobs = counter->refine_cells;
-                    s.shape.jobs = jobs;
-                    s.shape.lanes = std::min(jobs, s.teams) * kPruneTeam;
-                    s.shape.longest_walk_words = (jobs + s.teams - 1) / s.teams * s.job_walk;
-                }
-                s.shape.gpu_ms = ctx.stamp_ms(s.last_stamp) - ctx.stamp_ms(s.first_stamp);
-                // A step of an earlier slice of the level: one shape for the two.
-                const auto same =
-                    std::find_if(st.steps.begin() + level_first_shape, st.steps.end(),
-                                 [&](const GpuStepShape& o) { return o.mode == s.shape.mode; });
-                if (same == st.steps.end()) {
-                    st.steps.push_back(s.shape);
-                    continue;
-                }
-                same->wide = same->wide || s.shape.wide;
-                same->dispatches += s.shape.dispatches;
-                same->workgroups += s.shape.workgroups;
-                same->jobs += s.shape.jobs;
-                same->lanes = std::max(same->lanes, s.shape.lanes);
-                same->lanes_per_tape = std::max(same->lanes_per_tape, s.shape.lanes_per_tape);
-                same->longest_walk_words += s.shape.longest_walk_words;  // one slice after another
-                same->gpu_ms += s.shape.gpu_ms;
-            }
-            return *counter;
-        };
-
-        // The level's blocks in slices, each in its own submissions with the octant pool
-        // emptied between them: one slice of all blocks, unless the octants' and (refining)
-        // the unrefined cells' tapes would not fit the device's largest buffer at once (a
-        // million spheres' finest level); then half as many blocks at a time, and so on. A
-        // slice's steps take its blocks' jobs; the next level's blocks are made after the last.
-        // Per slice, one submission where the parents' longest tape sizes the cells' steps with
-        // a team for every job (or as many as the device runs at once); where scratch would
-        // hold the cells' teams back (long tapes), the octants first, so that their own longest
-        // tape sizes the rest.
-        const uint32_t parent_len = max_len, parent_depth = max_depth;
-        GpuCounters c{};  // the level's: near cells and words summed, longest tapes the longest
-        uint64_t octant_words = 0;
-        uint64_t slice_blocks = std::max<uint64_t>(block_count, 1);
-        for (uint64_t b0 = 0;;) {
-            const uint64_t b1 = std::min(block_count, b0 + slice_blocks), blocks_in = b1 - b0;
-            const bool last = b1 == block_count;
-            max_len = parent_len;
-            max_depth = parent_depth;
-            std::vector<Step> steps;
-            uint64_t octant_keep = 0;
-            std::optional<GpuCounters> sc;
-            if (split) {
-                steps.push_back(
-                    plan_step(1, f, b0, blocks_in, blocks_in * 8, csize, octants, cells, false));
-                Step cells_step = plan_step(2, f, b0, blocks_in, blocks_in * per_block, csize,
-                                            octants, cells, refine);
-                if (cells_step.scratch_limited) {
-                    sc = run_steps(steps, false, 0, blocks_in > 1);
-                    if (!sc) {
-                        slice_blocks = blocks_in / 2;
-                        continue;
-                    }
-                    octant_keep = sc->octant_used;
-                    max_len = std::max(std::min(sc->max_len, max_len), 1u);
-                    max_depth = std::max(std::min(sc->max_depth, max_depth), 1u);
-                    steps.clear();
-                    cells_step = plan_step(2, f, b0, blocks_in, blocks_in * per_block, csize,
-                                           octants, cells, refine);
-                }
-                steps.push_back(cells_step);
-            } else {
-                steps.push_back(plan_step(0, f, b0, blocks_in, blocks_in * per_block, csize, cells,
-                                          cells, refine));
-            }
-            listed_cells = 0;
-            sc = run_steps(steps, !finest && last, octant_keep, blocks_in > 1);
-            if (!sc) {
-                slice_blocks = blocks_in / 2;
-                continue;
-            }
-            if (refine) {
-                // The finest cells decided again over their sub-boxes (refine_cell), into a new
-                // cell array, in a run of its own: a refined tape is never longer than its
-                // cell's, so the level's pool is first made room for as many words as the
-                // cells' tapes have (near_words: shared tapes too), and refinement (the level's
-                // costliest step) is never redone for want of it. The cells' longest tape and
-                // deepest stack size its teams.
-                listed_cells = sc->refine_cells;
-                const uint64_t room = uint64_t(g.pool_words) + sc->near_words;
-                if (room > capacity) resize(g.pool, capacity, room, g.pool_words);
-                max_len = std::max(sc->max_len, 1u);
-                max_depth = std::max(sc->max_depth, 1u);
-                std::vector<Step> refinement{plan_step(3, f, b0, blocks_in, blocks_in * per_block,
-                                                       csize, refined, cells, false)};
-                const GpuCounters rc = *run_steps(refinement, false, sc->octant_used, false);
-                sc->max_depth = rc.max_depth;
-            }
-            c.near_jobs += sc->near_jobs;
-            c.near_words += sc->near_words;
-            c.max_len = std::max(c.max_len, sc->max_len);
-            c.max_depth = std::max(c.max_depth, sc->max_depth);
-            octant_words += sc->octant_used;
-            ++st.slices;
-            if (last) break;
-            b0 = b1;
-        }
-        // (A level that wrote nothing, its cells all far-field, says nothing.)
-        if (g.pool_words > head_words)
-            main_ratio = double(g.pool_words - head_words) / double(main_bound);
-        if (octant_words > 0 && !refine) octant_ratio = double(octant_words) / double(octant_bound);
-        ctx.destroy(octants);
-        ctx.destroy(parents);
-        parent_pool = nullptr;
-        if (refine) {
-            ctx.destroy(cells);
-            cells = refined;
-            refined = Buffer{};
-        }
-        max_len = std::max(c.max_len, 1u);
-        max_depth = std::max(c.max_depth, 1u);
-        if (!finest) {
-            ctx.destroy(blocks);
-            blocks = next;
-            next = Buffer{};
-            block_count = c.near_jobs;
-            parent_words = c.near_words;
-        }
-        g.level_info.push_back({res[li], f, 0, 0});
-        level_cells.push_back(&cells);
-    }
+void Pruner::run() {
+    for (uint32_t li = 0; li < res.size(); ++li) prune_level(li);
     ctx.destroy(blocks);
     ctx.destroy(scratch);
     ctx.destroy(octant_pool);
     ctx.destroy(refine_list);
     g.finest_stack_depth = max_depth;  // the last level's: the finest cells' (refined)
+    gather_cells();
+}
 
-    // All levels' cells in one buffer, for the lookups of the tracing and discretizing kernels.
-    uint64_t cell_total = 0;
+// One level: its pool (the parents' freed after it), its cells (and octants, refined cells,
+// next blocks), its blocks' steps (prune_slices), and what the next level starts from.
+void Pruner::prune_level(uint32_t li) {
+    level_index = li;
+    Level lv;
+    lv.index = li;
+    lv.finest = li + 1 == res.size();
+    lv.refine = lv.finest && opt.refine > 1;
+    lv.f = li == 0 ? res[0] : res[li] / res[li - 1];
+    lv.per_block = uint64_t(lv.f) * lv.f * lv.f;
+    lv.total = lv.per_block * block_count;
+    if (lv.total > 0xfffffffeull) throw std::length_error("too many cells in one level");
+    lv.csize = extent / float(res[li]);
+    // The same split as the CPU backend (prune.cpp): octants first where it applies.
+    lv.split = opt.hierarchy && lv.f >= 4 && lv.f % 2 == 0 && 1024 % lv.per_block == 0;
+    lv.nf = lv.finest ? 0 : res[li + 1] / res[li];
+    // Every cell's tape (with its header) is at most its parent's: the octants' go to the
+    // octant pool, the cells' to the main pool (or first to the octant pool, refined into the
+    // main pool). Sized for twice the share of that bound the last level used (finer levels
+    // tend to use less of it, more of their cells being far-field; with 1.25 times, the
+    // generated fluid's finest level overflowed and was redone).
+    const uint64_t main_bound = lv.per_block * parent_words;
+    const uint64_t octant_bound = lv.split ? 8 * parent_words : 0;
+    const auto share = [](uint64_t bound, double ratio) {
+        return uint64_t(std::ceil(double(bound) * std::min(1.0, 2 * ratio)));
+    };
+    // The parents' pool, freed after the level, and the level's own.
+    Buffer& parents = local.slot();
+    parents = g.pool;
+    g.pool = Buffer{};
+    parent_pool = &parents;
+    capacity = 0;
+    g.pool_words = 0;
+    // The finest level's pool starts with the full tape: the tracing kernels' full-tree pass
+    // reads it there (scene.glsl: kFullTreeTape).
+    const uint64_t head_words = lv.finest ? head.size() : 0;
+    resize(g.pool, capacity,
+           head_words +
+               std::max<uint64_t>(std::min(share(main_bound, main_ratio), presize_cap), 1 << 16),
+           0);
+    if (lv.finest) {
+        ctx.upload(g.pool, head.data(), head_words * 4);
+        g.pool_words = uint32_t(head_words);
+    }
+    presize(octant_pool, octant_capacity, 0,
+            share(octant_bound, octant_ratio) + (lv.refine ? share(main_bound, main_ratio) : 0));
+    // The level's cells, made after the pools grew (a pool's old and new buffers, held at once
+    // while its words are copied, are not held beside them).
+    lv.cells = &local.create(lv.total * sizeof(PrunedCell));
+    lv.octants = &local.create(lv.split ? block_count * 8 * sizeof(PrunedCell) : 16);
+    lv.refined = &local.create(lv.refine ? lv.total * sizeof(PrunedCell) : 16);
+    lv.next = &local.create(lv.finest ? 16 : lv.total * sizeof(GpuBlock));
+    // Room to list every finest cell for refinement.
+    if (lv.refine && refine_list.size < lv.total * 4) {
+        ctx.destroy(refine_list);
+        refine_list = ctx.create_buffer(lv.total * 4);
+    }
+    lv.first_shape = st.steps.size();
+
+    uint64_t octant_words = 0;
+    const GpuCounters c = prune_slices(lv, octant_words);
+
+    // (A level that wrote nothing, its cells all far-field, says nothing.)
+    if (g.pool_words > head_words)
+        main_ratio = double(g.pool_words - head_words) / double(main_bound);
+    if (octant_words > 0 && !lv.refine) octant_ratio = double(octant_words) / double(octant_bound);
+    ctx.destroy(*lv.octants);
+    ctx.destroy(parents);
+    parent_pool = nullptr;
+    if (lv.refine) {
+        ctx.destroy(*lv.cells);
+        *lv.cells = *lv.refined;
+        *lv.refined = Buffer{};
+    }
+    max_len = std::max(c.max_len, 1u);
+    max_depth = std::max(c.max_depth, 1u);
+    if (!lv.finest) {
+        ctx.destroy(blocks);
+        blocks = *lv.next;
+        *lv.next = Buffer{};
+        block_count = c.near_jobs;
+        parent_words = c.near_words;
+    }
+    g.level_info.push_back({res[li], lv.f, 0, 0});
+    level_cells.push_back(lv.cells);
+}
+
+// The level's blocks in slices, each in its own submissions with the octant pool emptied
+// between them: one slice of all blocks, unless the octants' and (refining) the unrefined
+// cells' tapes would not fit the device's largest buffer at once (a million spheres' finest
+// level); then half as many blocks at a time, and so on. A slice's steps take its blocks'
+// jobs; the next level's blocks are made after the last. Per slice, one submission where the
+// parents' longest tape sizes the cells' steps with a team for every job (or as many as the
+// device runs at once); where scratch would hold the cells' teams back (long tapes), the
+// octants first, so that their own longest tape sizes the rest; and refinement after them.
+// Gives the level's counters: near cells and words summed, longest tapes the longest (and
+// the octant pool's words summed over the slices in `octant_words`).
+GpuCounters Pruner::prune_slices(Level& lv, uint64_t& octant_words) {
+    const uint32_t parent_len = max_len, parent_depth = max_depth;
+    GpuCounters c{};
+    uint64_t slice_blocks = std::max<uint64_t>(block_count, 1);
+    for (uint64_t b0 = 0;;) {
+        const uint64_t b1 = std::min(block_count, b0 + slice_blocks), blocks_in = b1 - b0;
+        const bool last = b1 == block_count;
+        max_len = parent_len;
+        max_depth = parent_depth;
+        std::vector<Step> steps;
+        uint64_t octant_keep = 0;
+        std::optional<GpuCounters> sc;
+        if (lv.split) {
+            steps.push_back(
+                plan_step(lv, 1, b0, blocks_in, blocks_in * 8, *lv.octants, *lv.cells, false));
+            Step cells_step = plan_step(lv, 2, b0, blocks_in, blocks_in * lv.per_block, *lv.octants,
+                                        *lv.cells, lv.refine);
+            if (cells_step.scratch_limited) {
+                sc = run_steps(lv, steps, false, 0, blocks_in > 1);
+                if (!sc) {
+                    slice_blocks = blocks_in / 2;
+                    continue;
+                }
+                octant_keep = sc->octant_used;
+                max_len = std::max(std::min(sc->max_len, max_len), 1u);
+                max_depth = std::max(std::min(sc->max_depth, max_depth), 1u);
+                steps.clear();
+                cells_step = plan_step(lv, 2, b0, blocks_in, blocks_in * lv.per_block, *lv.octants,
+                                       *lv.cells, lv.refine);
+            }
+            steps.push_back(cells_step);
+        } else {
+            steps.push_back(plan_step(lv, 0, b0, blocks_in, blocks_in * lv.per_block, *lv.cells,
+                                      *lv.cells, lv.refine));
+        }
+        lv.listed_cells = 0;
+        sc = run_steps(lv, steps, !lv.finest && last, octant_keep, blocks_in > 1);
+        if (!sc) {
+            slice_blocks = blocks_in / 2;
+            continue;
+        }
+        if (lv.refine) {
+            // The finest cells decided again over their sub-boxes (refine_cell), into a new
+            // cell array, in a run of its own: a refined tape is never longer than its cell's,
+            // so the level's pool is first made room for as many words as the cells' tapes
+            // have (near_words: shared tapes too), and refinement (the level's costliest step)
+            // is never redone for want of it. The cells' longest tape and deepest stack size
+            // its teams.
+            lv.listed_cells = sc->refine_cells;
+            const uint64_t room = uint64_t(g.pool_words) + sc->near_words;
+            if (room > capacity) resize(g.pool, capacity, room, g.pool_words);
+            max_len = std::max(sc->max_len, 1u);
+            max_depth = std::max(sc->max_depth, 1u);
+            std::vector<Step> refinement{plan_step(lv, 3, b0, blocks_in, blocks_in * lv.per_block,
+                                                   *lv.refined, *lv.cells, false)};
+            const GpuCounters rc = *run_steps(lv, refinement, false, sc->octant_used, false);
+            sc->max_depth = rc.max_depth;
+        }
+        c.near_jobs += sc->near_jobs;
+        c.near_words += sc->near_words;
+        c.max_len = std::max(c.max_len, sc->max_len);
+        c.max_depth = std::max(c.max_depth, sc->max_depth);
+        octant_words += sc->octant_used;
+        ++st.slices;
+        if (last) break;
+        b0 = b1;
+    }
+    return c;
+}
+
+// Runs `steps` (and expand.comp when `expand`) in one submission, the octant pool holding
+// `octant_keep` words from before; grows a pool and runs them again while one overflows. Gives
+// nothing where the octant pool would have to outgrow the device's largest buffer and
+// `may_slice`: the caller then takes fewer blocks at a time.
+std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps, bool expand,
+                                             uint64_t octant_keep, bool may_slice) {
+    for (;;) {
+        GpuCounters start{};
+        start.pool_used = g.pool_words;
+        start.pool_capacity = uint32_t(capacity);
+        start.octant_used = uint32_t(octant_keep);
+        start.octant_capacity = uint32_t(octant_capacity);
+        start.refine_cells = lv.listed_cells;
+        *counter = start;
+        ctx.begin();
+        for (Step& s : steps) {
+            // The longest tape and deepest stack read back: the cells' (the next parents'),
+            // not the octants'; and after refinement, the refined cells' deepest stack (what
+            // the tracing kernels' stacks are sized by; every near-field cell's refinement adds
+            // its tape's depth).
+            if (s.push.mode == 2) {
+                ctx.fill(counters, 0, offsetof(GpuCounters, max_len), 4);
+                ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
+            }
+            if (s.push.mode == 3) {
+                ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
+                // The far-field cells refined as they are: the slice's cells copied, the near
+                // ones (listed by the step before) then refined over them.
+                if (s.team_jobs > 0)
+                    ctx.copy(*s.cells, *s.octants, s.team_jobs * sizeof(PrunedCell),
+                             s.first_cell * sizeof(PrunedCell), s.first_cell * sizeof(PrunedCell));
+            }
+            record_step(s);
+        }
+        if (expand) {
+            const ExpandPush push{lv.f, uint32_t(lv.total), lv.nf};
+            ctx.dispatch(KernelId::kExpand, {&blocks, lv.cells, lv.next, &counters}, &push,
+                         sizeof(push), ctx.groups_for(lv.total));
+        }
+        gpu_ms += ctx.submit();
+        ++st.submissions;
+        if (!counter->overflow) break;
+        // Grow the pool that overflowed (keeping what the steps started with) and run them
+        // again. A counter that wrapped past 2^32 words (it reads less than the capacity) asks
+        // for the most the device allows.
+        const bool main_over = (counter->overflow & 1u) != 0,
+                   octant_over = (counter->overflow & 2u) != 0;
+        const auto need = [](uint32_t used, uint64_t cap) {
+            return used > cap ? uint64_t(used) : std::numeric_limits<uint64_t>::max();
+        };
+        if (octant_over && may_slice &&
+            need(counter->octant_used, octant_capacity) > max_pool_words)
+            return std::nullopt;
+        if (main_over) grow(g.pool, capacity, need(counter->pool_used, capacity), g.pool_words);
+        if (octant_over)
+            grow(octant_pool, octant_capacity, need(counter->octant_used, octant_capacity),
+                 octant_keep);
+    }
+    g.pool_words = counter->pool_used;
+    for (Step& s : steps) {
+        if (s.push.mode == 3) {
+            // Refinement's jobs, the listed cells (its dispatches were recorded for all, those
+            // past the list's end returning at once).
+            const uint64_t jobs = counter->refine_cells;
+            s.shape.jobs = jobs;
+            s.shape.lanes = std::min(jobs, s.teams) * kPruneTeam;
+            s.shape.longest_walk_words = ceil_div(jobs, s.teams) * s.job_walk;
+        }
+        s.shape.gpu_ms = ctx.stamp_ms(s.last_stamp) - ctx.stamp_ms(s.first_stamp);
+        add_shape(lv, s.shape);
+    }
+    return *counter;
+}
+
+// A step's shape into the statistics; a step of an earlier slice of the level makes one
+// shape with it.
+void Pruner::add_shape(const Level& lv, const GpuStepShape& shape) {
+    const auto same = std::find_if(st.steps.begin() + lv.first_shape, st.steps.end(),
+                                   [&](const GpuStepShape& o) { return o.mode == shape.mode; });
+    if (same == st.steps.end()) {
+        st.steps.push_back(shape);
+        return;
+    }
+    same->wide = same->wide || shape.wide;
+    same->dispatches += shape.dispatches;
+    same->workgroups += shape.workgroups;
+    same->jobs += shape.jobs;
+    same->lanes = std::max(same->lanes, shape.lanes);
+    same->lanes_per_tape = std::max(same->lanes_per_tape, shape.lanes_per_tape);
+    same->longest_walk_words += shape.longest_walk_words;  // one slice after another
+    same->gpu_ms += shape.gpu_ms;
+}
+
+// A step over the blocks [first_block, first_block + blocks), `jobs` cells or octants, in
+// teams (or wide, plan_wide); `transient`: new tapes go to the octant pool (the finest cells'
+// tapes before refinement).
+Step Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
+                       uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient) {
+    const uint64_t hf = lv.f / 2;
+    const auto teams_for = [](uint64_t boxes) { return ceil_div(boxes, kPruneTeam); };
+    Step s;
+    s.octants = &octants;
+    s.cells = &cells;
+    // Team jobs run block by block in every mode (prune_common.glsl: job_box).
+    const uint64_t per_block_jobs = mode == 0   ? teams_for(lv.per_block)
+                                    : mode == 1 ? 1
+                                    : mode == 2 ? 8 * teams_for(hf * hf * hf)
+                                                : lv.per_block;
+    s.first_team_job = first_block * per_block_jobs;
+    s.team_jobs = blocks * per_block_jobs;
+    if (mode == 3) {
+        // Refinement takes the slice's listed near cells (a list a run, from 0).
+        s.first_cell = s.first_team_job;
+        s.first_team_job = 0;
+    }
+    if (s.first_team_job + s.team_jobs > 0xfffffffeull)
+        throw std::length_error("too many cells in one level");
+    // A team's scratch: its lanes' state, per parent-tape entry a left operand and a word per
+    // lane (decision and sweep flags), per stack slot and lane 4 words.
+    const uint64_t team_bytes =
+        (kPruneStateWords * kPruneTeam + uint64_t(max_len) * (1 + kPruneTeam) +
+         4ull * max_depth * kPruneTeam) *
+        4;
+    // Teams in flight: as many as have jobs, their scratch fits the budget and the device runs
+    // at once (more would only queue, their scratch held for nothing; the teams take the jobs
+    // in a grid-stride loop). Only teams with jobs hold scratch, so one parent tape as long as
+    // the budget allows can be pruned (the root's, the full tree, at level 0) even where a
+    // workgroup's 8 teams could not.
+    const uint64_t fit = ctx.prune_scratch_budget_bytes() / team_bytes;
+    if (fit == 0)
+        throw GpuError("Vulkan: pruning a tape of " + std::to_string(max_len) + " words needs " +
+                       std::to_string(team_bytes) +
+                       " bytes of scratch, more than the device's buffers allow; use "
+                       "--backend cpu");
+    const uint64_t unlimited =
+        std::min({std::max<uint64_t>(s.team_jobs, 1),
+                  uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kPruneTeam),
+                  std::max<uint64_t>(ctx.resident_threads() / kPruneTeam, 1)});
+    s.teams = std::min(unlimited, fit);
+    s.scratch_limited = fit < unlimited;
+    s.threads = uint32_t(s.teams * kPruneTeam);
+    s.groups = uint32_t(ceil_div(s.threads, kWorkgroupSize));
+    // Steps of a job: per batch of sub-boxes an evaluation window by window, the far-field
+    // test, the sweep and the write window by window (and one to spare).
+    const uint64_t batches =
+        mode == 3 ? teams_for(uint64_t(opt.refine) * opt.refine * opt.refine) : 1;
+    // Refinement takes its batches of sub-boxes only over tapes up to kRefineMaxTape; a longer
+    // tape is evaluated once.
+    const auto windows = [](uint64_t words) { return ceil_div(words, kPruneWindow); };
+    const uint64_t batch_len =
+        mode == 3 ? std::min<uint64_t>(max_len, math::kRefineMaxTape) : max_len;
+    const uint64_t per_job = std::max((batches + 2) * windows(batch_len), 3 * windows(max_len)) + 2;
+    // Under a loop limit (lavapipe), as many jobs per team and dispatch as fit the limit, or
+    // one job resumed over as many rounds as its steps need; elsewhere one unlimited round. A
+    // step's loops: staging the window, evaluating it (in refinement up to
+    // kPruneBatchesPerStep times, over a tape that fits it), refinement's far-field test over
+    // the team, the sweep, the write; each over at most the longest tape.
+    const bool limited = ctx.loop_limited();
+    const uint64_t step_len = std::min<uint64_t>(max_len, kPruneWindow);
+    const uint64_t step_loops = kPruneWindow / kPruneTeam +
+                                (mode == 3 ? kPruneBatchesPerStep : 1) * step_len + kPruneTeam +
+                                2 * step_len + 8;
+    const uint64_t max_steps = (Context::kLoopLimit - 1024) / step_loops;
+    s.rounds = limited ? ceil_div(per_job, max_steps) : 1;
+    const uint32_t budget = !limited ? 0xffffffffu : uint32_t(s.rounds > 1 ? max_steps : per_job);
+    s.per_dispatch = limited ? s.teams * std::max<uint64_t>(1, max_steps / per_job)
+                             : std::max<uint64_t>(s.team_jobs, 1);
+    s.push = PrunePush{vec4(origin.x, origin.y, origin.z, L),
+                       vec4(lv.csize.x, lv.csize.y, lv.csize.z, opt.far_field_c),
+                       mode,
+                       lv.f,
+                       0,
+                       s.threads,
+                       max_len,
+                       max_depth,
+                       flags | (transient ? 4u : 0u) | (s.rounds == 1 ? 8u : 0u),
+                       0,
+                       0,
+                       0,
+                       budget,
+                       opt.refine,
+                       0};
+    s.shape.level = lv.index;
+    s.shape.mode = mode;
+    s.shape.jobs = jobs;
+    s.shape.lanes_per_tape = uint32_t(kPruneTeam);
+    s.shape.lanes = std::min<uint64_t>(s.team_jobs, s.teams) * kPruneTeam;
+    // A lane's walk per job: the evaluation once per batch, the sweep and the write.
+    s.job_walk = std::max((batches + 2) * batch_len, uint64_t(3) * max_len);
+    s.shape.longest_walk_words = s.team_jobs == 0 ? 0 : ceil_div(s.team_jobs, s.teams) * s.job_walk;
+    s.wide = false;
+    uint64_t scratch_bytes = s.teams * team_bytes;
+    if (mode != 3 && wide_override != 0 && ctx.can_run(KernelId::kPruneWide))
+        plan_wide(s, scratch_bytes);
+    if (scratch.size < scratch_bytes) {
+        ctx.destroy(scratch);
+        scratch = ctx.create_buffer(scratch_bytes);
+    }
+    return s;
+}
+
+// The wide kernel instead of teams, where it fits and its modelled cost wins (kWideRoundCost).
+// Per job the tape entries a lane takes one after another (prune_wide.comp): its share of the
+// entries counted, then placed (with a binary search for an operator's left operand), in the
+// evaluation and the top-down pass its share of each round's entries and kPruneTeam boxes (at
+// most one more than an even share per round: a round per height the tape has, no more than
+// its operators plus one), and the compaction's two passes over a slice. A run of rounds of
+// one operator each (a chain) is walked by kPruneTeam lanes, a step a round as before, but
+// with no barrier between its rounds: the walk is the same, its barriers fewer (how many, only
+// the tapes on the device say). Its loops add the heights cleared and summed, the rounds (and
+// the runs found among them) themselves and the prefix sums' steps: a job ends in the dispatch
+// that starts it, within lavapipe's loop limit; only where twice that count fits (a deep chain
+// near the limit came out wrong on lavapipe: the count is taken as approximate).
+void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
+    const uint64_t len = max_len, heights = uint64_t(scene_height) + 1;
+    const uint64_t rounds = std::min<uint64_t>(heights, len / 2 + 1);
+    const uint64_t walk_job = ceil_div(len, kPruneWide) * (2 + std::bit_width(len)) +
+                              2 * (rounds + ceil_div(len * kPruneTeam, kPruneWide)) +
+                              2 * ceil_div(len, kPruneWide / kPruneTeam);
+    const uint64_t per_job = walk_job + 3 * ceil_div(heights, kPruneWide) +
+                             ceil_div(rounds, kPruneWide) + 2 * rounds +
+                             4 * std::bit_width(kPruneWide);
+    const uint64_t group_bytes =
+        (len * (2 + kPruneWideEntryWords * kPruneTeam) + kPruneWideHeightWords * heights) * 4;
+    const uint64_t fit_groups = ctx.prune_scratch_budget_bytes() / group_bytes;
+    const bool limited = ctx.loop_limited();
+    if (fit_groups == 0 || (limited && 2 * per_job + 1024 > Context::kLoopLimit)) return;
+    const uint64_t unlimited_groups =
+        std::min({std::max<uint64_t>(s.team_jobs, 1), uint64_t(ctx.max_workgroups()),
+                  std::max<uint64_t>(ctx.resident_threads() / kPruneWide, 1)});
+    const uint64_t groups = std::min(unlimited_groups, fit_groups);
+    const uint64_t group_jobs = ceil_div(s.team_jobs, groups);
+    const uint64_t walk = s.team_jobs == 0 ? 0 : group_jobs * walk_job;
+    const uint64_t cost = walk + group_jobs * 2 * (kWideRoundCost - 1) * rounds;
+    const bool pick =
+        wide_override == 1 || (len >= kWideMinTape && cost < 2 * s.shape.longest_walk_words);
+    if (!pick) return;
+    s.wide = true;
+    s.teams = groups;
+    s.groups = uint32_t(groups);
+    s.threads = uint32_t(groups * kPruneWide);
+    s.rounds = 1;
+    s.per_dispatch =
+        limited ? groups * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / (2 * per_job))
+                : std::max<uint64_t>(s.team_jobs, 1);
+    s.push.threads = s.threads;
+    s.push.max_stack = scene_height;
+    s.push.budget = 0;
+    s.shape.wide = true;
+    s.shape.lanes_per_tape = uint32_t(kPruneWide);
+    s.shape.lanes = std::min<uint64_t>(s.team_jobs, groups) * kPruneWide;
+    s.shape.longest_walk_words = walk;
+    scratch_bytes = groups * group_bytes;
+}
+
+// Records a step's dispatches; the pools' words in use before the level start them.
+void Pruner::record_step(Step& s) {
+    s.first_stamp = ctx.stamp();
+    PrunePush push = s.push;
+    push.pool_start = g.pool_words;
+    const uint64_t end = s.first_team_job + s.team_jobs;
+    for (uint64_t first = s.first_team_job; first < std::max<uint64_t>(end, 1);
+         first += s.per_dispatch)
+        for (uint32_t round = 0; round < s.rounds; ++round) {
+            push.first_job = uint32_t(first);
+            push.jobs = uint32_t(std::min<uint64_t>(end, first + s.per_dispatch));
+            push.round = round;
+            if (s.wide)
+                ctx.dispatch(
+                    ctx.can_run(KernelId::kPruneWideSubgroups) ? KernelId::kPruneWideSubgroups
+                                                               : KernelId::kPruneWide,
+                    {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants, s.cells,
+                     &counters, &scratch, &octant_pool, &refine_list, &g.pool, &node_spans},
+                    &push, sizeof(push), s.groups);
+            else
+                ctx.dispatch(
+                    s.push.mode == 3 ? KernelId::kPruneRefine : KernelId::kPrune,
+                    {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants, s.cells,
+                     &counters, &scratch, &octant_pool, &refine_list, &g.pool, &scratch},
+                    &push, sizeof(push), s.groups);
+            ++s.shape.dispatches;
+            s.shape.workgroups += s.groups;
+        }
+    s.last_stamp = ctx.stamp();
+}
+
+// Replaces `pool` by one of `words` words (at most the device's limit), keeping its first
+// `keep` words (with none to keep, the old one goes first: the two are never held at once).
+void Pruner::resize(Buffer& pool, uint64_t& cap, uint64_t words, uint64_t keep) {
+    const uint64_t grown = std::min(words, max_pool_words);
+    if (keep == 0) ctx.destroy(pool);
+    Buffer& bigger = local.create(grown * 4);
+    if (keep > 0) {
+        ctx.begin();
+        ctx.copy(pool, bigger, keep * 4);
+        ctx.submit();
+    }
+    ctx.destroy(pool);
+    pool = bigger;
+    bigger = Buffer{};
+    cap = grown;
+}
+
+// After an overflow: at least `need` words, at least twice as many as before.
+void Pruner::grow(Buffer& pool, uint64_t& cap, uint64_t need, uint64_t keep) {
+    if (cap >= max_pool_words)
+        throw GpuError(std::string(&pool == &g.pool ? "the tape pool" : "the octant pool") +
+                       " of level " + std::to_string(level_index) + " needs " +
+                       (need == std::numeric_limits<uint64_t>::max() ? std::string("over 4 Gi")
+                                                                     : std::to_string(need)) +
+                       " words (" + std::to_string(keep) +
+                       " in use before it), more than the device's largest storage buffer "
+                       "holds (" +
+                       std::to_string(ctx.max_buffer_bytes()) + " bytes); use --backend cpu");
+    resize(pool, cap, std::max(cap * 2, need + need / 4), keep);
+    ++st.pool_grows;
+}
+
+// Before a level: room for what its parents' tapes can give (a bound: a child's tape is never
+// longer than its parent's), within presize_cap words more than in use; past the cap an
+// overflow grows the pool and redoes the level.
+void Pruner::presize(Buffer& pool, uint64_t& cap, uint64_t used, uint64_t bound) {
+    const uint64_t want = used + std::min(bound, presize_cap);
+    if (want > cap) resize(pool, cap, want, used);
+}
+
+// All levels' cells in one buffer, for the lookups of the tracing and discretizing kernels,
+// and their far-field clearances.
+void Pruner::gather_cells() {
     for (size_t li = 0; li < level_cells.size(); ++li) {
         g.level_info[li].offset = uint32_t(cell_total);
         cell_total += level_cells[li]->size / sizeof(PrunedCell);
@@ -699,18 +779,10 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     }
     st.prune_ms = gpu_ms;
     st.subgroups = ctx.can_run(KernelId::kPruneWideSubgroups);
-    st.prune_peak_bytes = ctx.bytes_peak() - live_before;
-    st.wall_ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start)
-            .count();
-    const Context::HostTime& host = ctx.host_time();
-    st.host_buffers = host.buffers - host_before.buffers;
-    st.host_buffers_reused = host.buffers_reused - host_before.buffers_reused;
-    st.host_submissions = host.submissions - host_before.submissions;
-    st.host_buffer_ms = host.buffer_ms - host_before.buffer_ms;
-    st.host_submit_ms = host.submit_ms - host_before.submit_ms;
+}
 
-    // Statistics (not timed): per cell (length, primitives) or far-field, level by level.
+// Statistics (not timed): per cell (length, primitives) or far-field, level by level.
+void Pruner::read_statistics() {
     const uint32_t N = res.back();
     st.grid = N;
     st.cells = uint64_t(N) * N * N;
@@ -763,6 +835,34 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     }
     finish_prune_stats(st, prim_sum, prim_sq, tape_sum, far_finest);
     st.tape_bytes = uint64_t(g.pool_words) * 4 + cell_total * sizeof(PrunedCell);
+}
+
+}  // namespace
+
+Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
+    const auto t_start = std::chrono::steady_clock::now();
+    if (!(opt.far_field_c >= 1.0f)) throw std::invalid_argument("far-field C must be >= 1");
+    Context& ctx = device.context();
+    ctx.reset_peak();
+    const uint64_t live_before = ctx.bytes_live();
+    const Context::HostTime host_before = ctx.host_time();
+    Grid grid;
+    grid.impl_ = std::make_unique<DeviceGrid>(ctx, sc);
+    DeviceGrid& g = *grid.impl_;
+    DevicePruneStats& st = g.stats;
+    Pruner pruner(device, sc, opt, g);
+    pruner.run();
+    st.prune_peak_bytes = ctx.bytes_peak() - live_before;
+    st.wall_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start)
+            .count();
+    const Context::HostTime& host = ctx.host_time();
+    st.host_buffers = host.buffers - host_before.buffers;
+    st.host_buffers_reused = host.buffers_reused - host_before.buffers_reused;
+    st.host_submissions = host.submissions - host_before.submissions;
+    st.host_buffer_ms = host.buffer_ms - host_before.buffer_ms;
+    st.host_submit_ms = host.submit_ms - host_before.submit_ms;
+    pruner.read_statistics();
     return grid;
 }
 
