@@ -19,7 +19,8 @@ layout(std430, binding = 7) buffer Counters {
     uint max_depth;  // deepest evaluation stack of the tapes written or shared in this step
     uint octant_used;      // the octant pool, as pool_used, pool_capacity
     uint octant_capacity;
-    uint near_words;  // words of the near-field cells' tapes with their headers (modes 0 and 2)
+    uint near_words;  // words of the near-field cells' tapes with their headers (modes 0 and 2;
+                      // mode 1: the octants' tapes, shared ones too)
     uint refine_cells;  // entries of refine_list
 };
 // The kernel's scratch (its layout is the kernel's own). Coherent: lanes read what other lanes
@@ -81,10 +82,8 @@ void counts_end() {
     memoryBarrierShared();
     barrier();
     if (gl_LocalInvocationIndex == 0u) {
-        if (s_counts[0] != 0u) {
-            atomicAdd(near_jobs, s_counts[0]);
-            atomicAdd(near_words, s_counts[1]);
-        }
+        if (s_counts[0] != 0u) atomicAdd(near_jobs, s_counts[0]);
+        if (s_counts[1] != 0u) atomicAdd(near_words, s_counts[1]);
         if (s_counts[2] != 0u) atomicMax(max_len, s_counts[2]);
         if (s_counts[3] != 0u) atomicMax(max_depth, s_counts[3]);
     }
@@ -117,6 +116,8 @@ void store(uint dest, bool near, float value, float constant, uint tape, uint wo
     }
     Cell result = Cell(near ? tape : kFarField, 0u, value, constant);
     if (pc.mode == 1u) {
+        // The octants' tape words (shared ones too), which bound their cells' (gpu_prune.cpp).
+        if (near) atomicAdd(s_counts[1], words + 2u);
         octants[dest] = result;
         return;
     }

@@ -104,7 +104,7 @@ class Pruner {
 
   private:
     void prune_level(uint32_t li);
-    GpuCounters prune_slices(Level& lv, uint64_t& octant_words);
+    GpuCounters prune_slices(Level& lv);
     std::optional<GpuCounters> run_steps(Level& lv, std::vector<Step>& steps, bool expand,
                                          uint64_t octant_keep, bool may_slice);
     void add_shape(const Level& lv, const GpuStepShape& shape);
@@ -142,13 +142,16 @@ class Pruner {
     Buffer* parent_pool = nullptr;  // the last level's pool (binding 3); the level's own: g.pool
     uint64_t block_count = 1;
     uint64_t parent_words = 0;  // the parents' tapes, headers included
-    // The share of the pools' bound (see presize) the last level used.
-    double main_ratio = 1, octant_ratio = 1;
+    // The share of the main pool's bound (see presize) the last level used.
+    double main_ratio = 1;
     uint32_t max_len = 0;    // longest tape of the current parents
     uint32_t max_depth = 0;  // deepest evaluation stack of the current parents
     double gpu_ms = 0;
     uint32_t level_index = 0;  // the level being made (for the steps' shapes and errors)
     uint64_t presize_cap = uint64_t(64) << 20;
+    // At most the room made for the cells from their octants' words (the device's largest
+    // buffer, or SDFPRUNE_VULKAN_PRESIZE_WORDS).
+    uint64_t room_cap = 0;
     int wide_override = -1;
     vec3 origin, extent;
     float L = 1;
@@ -228,8 +231,9 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
     // Before a level: room for what its parents' tapes can give, within 64 Mi words more than
     // in use (presize). SDFPRUNE_VULKAN_PRESIZE_WORDS=N sets the cap (0: pools only grow on
     // overflow, for tests).
+    room_cap = max_pool_words;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_PRESIZE_WORDS"))
-        presize_cap = std::strtoull(env, nullptr, 10);
+        room_cap = presize_cap = std::strtoull(env, nullptr, 10);
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE"); env && *env)
         wide_override = std::atoi(env) != 0;
     origin = sc.aabb.min;
@@ -292,8 +296,15 @@ void Pruner::prune_level(uint32_t li) {
         ctx.upload(g.pool, head.data(), head_words * 4);
         g.pool_words = uint32_t(head_words);
     }
-    presize(octant_pool, octant_capacity, 0,
-            share(octant_bound, octant_ratio) + (lv.refine ? share(main_bound, main_ratio) : 0));
+    // Split, the octants run first and their pool is made room for their bound (each octant's
+    // tape no longer than its block's), the cells' room made after them (prune_slices);
+    // otherwise the transient cells' share too.
+    if (lv.split) {
+        const uint64_t want = std::min(octant_bound, room_cap);
+        if (want > octant_capacity) resize(octant_pool, octant_capacity, want, 0);
+    } else {
+        presize(octant_pool, octant_capacity, 0, lv.refine ? share(main_bound, main_ratio) : 0);
+    }
     // The level's cells, made after the pools grew (a pool's old and new buffers, held at once
     // while its words are copied, are not held beside them).
     lv.cells = &local.create(lv.total * sizeof(PrunedCell));
@@ -307,13 +318,11 @@ void Pruner::prune_level(uint32_t li) {
     }
     lv.first_shape = st.steps.size();
 
-    uint64_t octant_words = 0;
-    const GpuCounters c = prune_slices(lv, octant_words);
+    const GpuCounters c = prune_slices(lv);
 
     // (A level that wrote nothing, its cells all far-field, says nothing.)
     if (g.pool_words > head_words)
         main_ratio = double(g.pool_words - head_words) / double(main_bound);
-    if (octant_words > 0 && !lv.refine) octant_ratio = double(octant_words) / double(octant_bound);
     ctx.destroy(*lv.octants);
     ctx.destroy(parents);
     parent_pool = nullptr;
@@ -343,9 +352,8 @@ void Pruner::prune_level(uint32_t li) {
 // parents' longest tape sizes the cells' steps with a team for every job (or as many as the
 // device runs at once); where scratch would hold the cells' teams back (long tapes), the
 // octants first, so that their own longest tape sizes the rest; and refinement after them.
-// Gives the level's counters: near cells and words summed, longest tapes the longest (and
-// the octant pool's words summed over the slices in `octant_words`).
-GpuCounters Pruner::prune_slices(Level& lv, uint64_t& octant_words) {
+// Gives the level's counters: near cells and words summed, longest tapes the longest.
+GpuCounters Pruner::prune_slices(Level& lv) {
     const uint32_t parent_len = max_len, parent_depth = max_depth;
     GpuCounters c{};
     uint64_t slice_blocks = std::max<uint64_t>(block_count, 1);
@@ -358,24 +366,33 @@ GpuCounters Pruner::prune_slices(Level& lv, uint64_t& octant_words) {
         uint64_t octant_keep = 0;
         std::optional<GpuCounters> sc;
         if (lv.split) {
+            // The octants first: their longest tape sizes the cells' teams, and their tapes'
+            // words (near_words, shared tapes too) bound the cells' (each no longer than its
+            // octant's), so the cells' pool is made room for them before they run: a level is
+            // not redone for want of room (generated car-chase and city at 256³ with
+            // --lipschitz-bounds were, their finest pool sized by the last level's share),
+            // unless the bound passes the device's largest buffer.
             steps.push_back(
                 plan_step(lv, 1, b0, blocks_in, blocks_in * 8, *lv.octants, *lv.cells, false));
-            Step cells_step = plan_step(lv, 2, b0, blocks_in, blocks_in * lv.per_block, *lv.octants,
-                                        *lv.cells, lv.refine);
-            if (cells_step.scratch_limited) {
-                sc = run_steps(lv, steps, false, 0, blocks_in > 1);
-                if (!sc) {
-                    slice_blocks = blocks_in / 2;
-                    continue;
-                }
-                octant_keep = sc->octant_used;
-                max_len = std::max(std::min(sc->max_len, max_len), 1u);
-                max_depth = std::max(std::min(sc->max_depth, max_depth), 1u);
-                steps.clear();
-                cells_step = plan_step(lv, 2, b0, blocks_in, blocks_in * lv.per_block, *lv.octants,
-                                       *lv.cells, lv.refine);
+            sc = run_steps(lv, steps, false, 0, blocks_in > 1);
+            if (!sc) {
+                slice_blocks = blocks_in / 2;
+                continue;
             }
-            steps.push_back(cells_step);
+            octant_keep = sc->octant_used;
+            max_len = std::max(std::min(sc->max_len, max_len), 1u);
+            max_depth = std::max(std::min(sc->max_depth, max_depth), 1u);
+            const uint64_t hf = lv.f / 2;
+            const uint64_t cells_bound = std::min(hf * hf * hf * sc->near_words, room_cap);
+            if (lv.refine) {
+                if (octant_keep + cells_bound > octant_capacity)
+                    resize(octant_pool, octant_capacity, octant_keep + cells_bound, octant_keep);
+            } else if (g.pool_words + cells_bound > capacity) {
+                resize(g.pool, capacity, g.pool_words + cells_bound, g.pool_words);
+            }
+            steps.clear();
+            steps.push_back(plan_step(lv, 2, b0, blocks_in, blocks_in * lv.per_block, *lv.octants,
+                                      *lv.cells, lv.refine));
         } else {
             steps.push_back(plan_step(lv, 0, b0, blocks_in, blocks_in * lv.per_block, *lv.cells,
                                       *lv.cells, lv.refine));
@@ -407,7 +424,6 @@ GpuCounters Pruner::prune_slices(Level& lv, uint64_t& octant_words) {
         c.near_words += sc->near_words;
         c.max_len = std::max(c.max_len, sc->max_len);
         c.max_depth = std::max(c.max_depth, sc->max_depth);
-        octant_words += sc->octant_used;
         ++st.slices;
         if (last) break;
         b0 = b1;
