@@ -3,9 +3,9 @@
 // prune_refine.comp: the finest cells' refinement) each run over all their jobs in teams of
 // lanes that share a parent tape, then expand.comp makes the next level's blocks. Steps with few
 // jobs and long parent tapes (the top levels) run prune_wide.comp instead: a workgroup per
-// parent tape. Each level's tapes go to a pool of their own, sized before the level from the
-// parents' tapes; one that overflows all the same grows and the level is redone. Statistics
-// are read back at the end.
+// parent tape. Each level's tapes go to a pool of their own; before each run (the octants, the
+// cells, the refinement) a pool is made room for what its parents' tapes bound, and one that
+// overflows all the same grows and the run is redone. Statistics are read back at the end.
 //
 // Reading order: Pruner::run (the levels), prune_level (a level: its pools and buffers),
 // prune_slices (its blocks, a slice at a time, and the steps of a slice), run_steps (one
