@@ -133,6 +133,7 @@ void main() {
         vec3 half_size = half_cell;
         float R = radius;
         Cell c0 = Cell(kFarField, 0u, 0.0, 0.0);
+        bool lone = false;  // refinement: nothing to decide again (see below)
         if (has_job && pc.mode == 3u) {
             // Reads `cells`, writes the refined cells to `octants` (binding 5): a step
             // redone after a pool overflow starts again from unchanged cells. Lane 0
@@ -151,8 +152,17 @@ void main() {
                 if (pc.round == 0u && valid) octants[cell] = c0;
             } else {
                 parent = c0.tape;
-                subs = tape_read(parent, 0u) > kRefineMaxTape ? 1u : pc.refine;
+                uint words = tape_read(parent, 0u);
+                subs = words > kRefineMaxTape ? 1u : pc.refine;
                 nbatch = (subs * subs * subs + kTeam - 1u) / kTeam;
+                // A lone primitive in a cell that cannot clear the far field (|value| well
+                // inside the clearance: refine_cell's test, where the CPU returns at once too)
+                // has nothing to decide again: its tape is copied as it is, unevaluated.
+                if (words == 1u) {
+                    float lone_L = nodes[tape_node(tape_read(parent, 2u))].lipschitz;
+                    float clearance = far_field_clearance(pc.csize.w, lone_L, radius);
+                    lone = (pc.flags & 1u) == 0u || !(abs(c0.value) > 0.9 * clearance);
+                }
             }
         } else if (has_job) {
             vec3 box_centre;
@@ -167,7 +177,15 @@ void main() {
         uint pdepth = 0u, depth = 0u, depth_max = 0u, batch = 0u;
         uint far_flags = (pc.flags & 1u) != 0u ? 3u : 0u;
         float value = 0.0, constant = 0.0, lowest = kInfinity, highest = -kInfinity;
-        if (walk && pc.round == 0u) {
+        if (walk && pc.round == 0u && lone) {
+            // Straight to the sweep, on the lane that stores the cell.
+            phase = valid ? kPhaseSweep : kPhaseDone;
+            i = len;
+            if (valid) {
+                uint root_neg = tape_negated(tape_read(parent, 2u + len - 1u)) ? 1u : 0u;
+                scratch[dbase + (len - 1u) * kTeam + lane] = (1u << 2) | (root_neg << 4);
+            }
+        } else if (walk && pc.round == 0u) {
             phase = kPhaseEvaluate;
         } else if (walk) {
             phase = scratch[st];
@@ -190,7 +208,7 @@ void main() {
         }
         uint nsub = subs * subs * subs;
 #ifdef PRUNE_REFINE_WINDOW
-        bool windowed = pc.mode == 3u && len <= kWindow && (pc.flags & 8u) != 0u;
+        bool windowed = pc.mode == 3u && !lone && len <= kWindow && (pc.flags & 8u) != 0u;
 #else
         const bool windowed = false;
 #endif
