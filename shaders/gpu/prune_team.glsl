@@ -96,6 +96,28 @@ uint team_decision(uint at) {
     return differ == 0u ? d0 : kKeepBoth;
 }
 
+// The sweep's view of entry e of a team's tape (`at`: the entry's word of this lane in scratch),
+// windowed (s_meta and the window: windowed refinement) or not: its flags (bits 2-4; from
+// scratch, bits 0-1 hold the lane's decision), its tape word, and setting its flags (a
+// scratch word keeps its decision bits).
+uint sweep_flags(bool windowed, uint win, uint at, uint e) {
+    return windowed ? (s_meta[win + e] >> 8) & 0xffu : scratch[at];
+}
+void set_sweep_flags(bool windowed, uint win, uint at, uint e, uint flags) {
+    if (windowed)
+        s_meta[win + e] = (s_meta[win + e] & ~0xff00u) | (flags << 8);
+    else
+        scratch[at] = (scratch[at] & 3u) | flags;
+}
+uint tape_entry(bool windowed, uint win, uint parent, uint e) {
+    return windowed ? s_word[win + e] : tape_read(parent, 2u + e);
+}
+// Windowed refinement: the team's decision, the one its lanes saw if they saw only one.
+uint window_decision(uint meta) {
+    uint seen = meta & 7u;
+    return bitCount(seen) == 1 ? uint(findLSB(seen)) : kKeepBoth;
+}
+
 void main() {
     counts_begin();
     uint tl = gl_LocalInvocationID.x / kTeam, lane = gl_LocalInvocationID.x % kTeam;
@@ -368,10 +390,7 @@ void main() {
                 } else {
                     uint root_neg = tape_negated(tape_read(parent, 2u + len - 1u)) ? 1u : 0u;
                     uint e = dbase + (len - 1u) * kTeam + lane;
-                    if (windowed)
-                        s_meta[win + len - 1u] |= ((1u << 2) | (root_neg << 4)) << 8;
-                    else
-                        scratch[e] = (scratch[e] & 3u) | (1u << 2) | (root_neg << 4);
+                    set_sweep_flags(windowed, win, e, len - 1u, (1u << 2) | (root_neg << 4));
                     i = len;
                     phase = kPhaseSweep;
                 }
@@ -381,61 +400,37 @@ void main() {
                 // flags are final when the reverse sweep reaches it (parents come later), so
                 // the sweep also counts the kept entries.
                 uint stop = i > kWindow ? i - kWindow : 0u;
-                // Windowed (see s_meta): the same pass over the window, its flags in s_meta.
-                for (; windowed && i > 0u; --i) {
-                    uint e = i - 1u;
-                    uint meta = s_meta[win + e];
-                    uint fl = (meta >> 8) & 0xffu;
-                    if (((fl >> 2) & 3u) != 1u) continue;
-                    uint w = s_word[win + e];
-                    if (is_primitive(tape_node(w))) {
-                        ++out_len;
-                        ++prims;
-                        continue;
-                    }
-                    uint l = meta >> 16, r = e - 1u;
-                    uint seen = meta & 7u;
-                    uint d = bitCount(seen) == 1 ? uint(findLSB(seen)) : kKeepBoth;
-                    if (d == kKeepBoth) {
-                        ++out_len;
-                        uint nl = tape_negated(s_word[win + l]) ? 1u : 0u;
-                        uint nr = tape_negated(s_word[win + r]) ? 1u : 0u;
-                        s_meta[win + l] = (s_meta[win + l] & ~0xff00u) | (((1u << 2) | (nl << 4)) << 8);
-                        s_meta[win + r] = (s_meta[win + r] & ~0xff00u) | (((1u << 2) | (nr << 4)) << 8);
-                        continue;
-                    }
-                    uint wn = d == kLeftWins ? l : r;
-                    uint neg = ((fl >> 4) & 1u) ^ (tape_negated(s_word[win + wn]) ? 1u : 0u);
-                    s_meta[win + e] = (meta & ~0xff00u) | (((2u << 2) | (fl & 16u)) << 8);
-                    s_meta[win + wn] = (s_meta[win + wn] & ~0xff00u) | (((1u << 2) | (neg << 4)) << 8);
-                }
                 for (; i > stop; --i) {
                     uint e = i - 1u;
                     uint fe = dbase + e * kTeam + lane;
-                    uint fl = scratch[fe];
+                    uint fl = sweep_flags(windowed, win, fe, e);
                     if (((fl >> 2) & 3u) != 1u) continue;
-                    uint w = tape_read(parent, 2u + e);
+                    uint w = tape_entry(windowed, win, parent, e);
                     if (is_primitive(tape_node(w))) {
                         ++out_len;
                         ++prims;
                         continue;
                     }
-                    uint l = scratch[lbase + e], r = e - 1u;
-                    uint d = pc.mode == 3u ? team_decision(dbase + e * kTeam) : fl & 3u;
+                    uint l = windowed ? s_meta[win + e] >> 16 : scratch[lbase + e], r = e - 1u;
+                    uint d = windowed        ? window_decision(s_meta[win + e])
+                             : pc.mode == 3u ? team_decision(dbase + e * kTeam)
+                                             : fl & 3u;
                     if (d == kKeepBoth) {
                         ++out_len;
-                        uint nl = tape_negated(tape_read(parent, 2u + l)) ? 1u : 0u;
-                        uint nr = tape_negated(tape_read(parent, 2u + r)) ? 1u : 0u;
-                        uint fl_l = dbase + l * kTeam + lane, fl_r = dbase + r * kTeam + lane;
-                        scratch[fl_l] = (scratch[fl_l] & 3u) | (1u << 2) | (nl << 4);
-                        scratch[fl_r] = (scratch[fl_r] & 3u) | (1u << 2) | (nr << 4);
+                        uint nl = tape_negated(tape_entry(windowed, win, parent, l)) ? 1u : 0u;
+                        uint nr = tape_negated(tape_entry(windowed, win, parent, r)) ? 1u : 0u;
+                        set_sweep_flags(windowed, win, dbase + l * kTeam + lane, l,
+                                        (1u << 2) | (nl << 4));
+                        set_sweep_flags(windowed, win, dbase + r * kTeam + lane, r,
+                                        (1u << 2) | (nr << 4));
                         continue;
                     }
                     uint wn = d == kLeftWins ? l : r;
-                    uint neg = ((fl >> 4) & 1u) ^ (tape_negated(tape_read(parent, 2u + wn)) ? 1u : 0u);
-                    scratch[fe] = (fl & 3u) | (2u << 2) | (fl & 16u);
-                    uint fl_w = dbase + wn * kTeam + lane;
-                    scratch[fl_w] = (scratch[fl_w] & 3u) | (1u << 2) | (neg << 4);
+                    uint neg = ((fl >> 4) & 1u) ^
+                               (tape_negated(tape_entry(windowed, win, parent, wn)) ? 1u : 0u);
+                    set_sweep_flags(windowed, win, fe, e, (2u << 2) | (fl & 16u));
+                    set_sweep_flags(windowed, win, dbase + wn * kTeam + lane, wn,
+                                    (1u << 2) | (neg << 4));
                 }
                 if (i == 0u) {
                     note_len(out_len);
@@ -470,10 +465,9 @@ void main() {
             if (phase == kPhaseWrite) {
                 uint we = min(i + kWindow, len);
                 for (; i < we; ++i) {
-                    uint fl = windowed ? (s_meta[win + i] >> 8) & 0xffu
-                                       : scratch[dbase + i * kTeam + lane];
+                    uint fl = sweep_flags(windowed, win, dbase + i * kTeam + lane, i);
                     if (((fl >> 2) & 3u) != 1u) continue;
-                    uint node = tape_node(windowed ? s_word[win + i] : tape_read(parent, 2u + i));
+                    uint node = tape_node(tape_entry(windowed, win, parent, i));
                     tape_write(top++, tape_word(node, ((fl >> 4) & 1u) != 0u));
                     // Stack depth of the new tape: a primitive pushes, an operator pops two,
                     // pushes one.

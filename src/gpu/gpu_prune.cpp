@@ -72,10 +72,6 @@ struct Step {
     uint64_t job_walk;         // in teams, the tape words a lane reads per job, at most
     uint32_t threads, groups;  // lanes that take jobs, and their workgroups
     bool wide;
-    // In teams, fewer teams than jobs for want of scratch (not because the device runs no
-    // more): then a level's octants run first, so that their shorter tapes size its other
-    // steps.
-    bool scratch_limited;
     GpuStepShape shape;
     uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
 };
@@ -348,10 +344,9 @@ void Pruner::prune_level(uint32_t li) {
 // between them: one slice of all blocks, unless the octants' and (refining) the unrefined
 // cells' tapes would not fit the device's largest buffer at once (a million spheres' finest
 // level); then half as many blocks at a time, and so on. A slice's steps take its blocks'
-// jobs; the next level's blocks are made after the last. Per slice, one submission where the
-// parents' longest tape sizes the cells' steps with a team for every job (or as many as the
-// device runs at once); where scratch would hold the cells' teams back (long tapes), the
-// octants first, so that their own longest tape sizes the rest; and refinement after them.
+// jobs; the next level's blocks are made after the last. Per slice, a submission for the
+// octants, whose longest tape sizes the cells' teams and whose words bound the cells' pool, one
+// for the cells (or the blocks' cells, where the level is not split), and one for refinement.
 // Gives the level's counters: near cells and words summed, longest tapes the longest.
 GpuCounters Pruner::prune_slices(Level& lv) {
     const uint32_t parent_len = max_len, parent_depth = max_depth;
@@ -570,7 +565,6 @@ Step Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uin
                   uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kPruneTeam),
                   std::max<uint64_t>(ctx.resident_threads() / kPruneTeam, 1)});
     s.teams = std::min(unlimited, fit);
-    s.scratch_limited = fit < unlimited;
     s.threads = uint32_t(s.teams * kPruneTeam);
     s.groups = uint32_t(ceil_div(s.threads, kWorkgroupSize));
     // Steps of a job: per batch of sub-boxes an evaluation window by window, the far-field
