@@ -226,7 +226,7 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
         const uint64_t per_block = uint64_t(f) * f * f;
         const uint64_t total = per_block * blocks.size();
         if (total > 0xfffffffeull) throw std::length_error("too many cells in one level");
-        level.cells.resize(total);
+        level.cells.resize(total);  // not written: each chunk writes its own (prune_chunk)
         const LevelGeometry geo = level_geometry(sc, opt, level.res, f, finest, kChunkCells);
         const uint32_t chunks = uint32_t((total + kChunkCells - 1) / kChunkCells);
         std::vector<LevelChunk> outs(chunks);
@@ -270,6 +270,8 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
             const uint64_t begin = k * kChunkCells;
             const uint64_t end = std::min(total, begin + kChunkCells);
             LevelChunk& out = outs[k];
+            // The chunk's cells are first written here, in parallel (UninitializedAllocator).
+            std::fill(level.cells.begin() + begin, level.cells.begin() + end, PrunedCell{});
             prune_level_step(sc, opt, geo, blocks, begin, end,
                              std::span(level.cells).subspan(begin, end - begin), scratch.local(),
                              out);

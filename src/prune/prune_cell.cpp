@@ -4,11 +4,16 @@
 // several boxes at once (sibling cells, a cell's sub-boxes) in vector lanes, compiled for the
 // baseline instruction set and for AVX2, with the same results bit for bit.
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <bit>
 #include <cmath>
 #include <stdexcept>
 #include <utility>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "../core/lanes.hpp"
 #include "sdfprune/prune.hpp"
@@ -33,11 +38,11 @@ void CellScratch::reserve_siblings(size_t n) {
 size_t CellScratch::bytes() const {
     size_t b = 0;
     const auto add = [&b](const auto& v) { b += v.capacity() * sizeof(v[0]); };
-    for (const auto* v :
-         {&value, &lo, &hi, &lane_value, &lane_lo, &lane_hi, &sib_value, &sib_lo, &sib_hi})
+    for (const auto* v : {&value, &lo, &hi, &lane_value, &lane_lo, &lane_hi, &sib_value, &sib_lo,
+                          &sib_hi, &sub_offset[0], &sub_offset[1], &sub_offset[2]})
         add(*v);
-    for (const auto* v : {&left, &right, &decision, &stack, &combined, &refined, &sub_order,
-                          &lane_decision, &sib_decision, &refine_candidates, &refine_needed})
+    for (const auto* v : {&left, &right, &decision, &stack, &lane_decision, &sib_decision,
+                          &refine_candidates, &refine_needed})
         add(*v);
     add(alive);
     add(negate);
@@ -190,15 +195,23 @@ void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLa
                 h[b] = -old_lo;
             }
     };
+    // The primitives first, then the operators in tape order (each after its operands): the
+    // same results, but the primitives' long independent chains (a box: two dependent square
+    // roots) run back to back, where the processor overlaps them, not each behind an operator
+    // that waits for the one before.
+    const auto is_primitive = [&](uint32_t i) { return sc.is_primitive(math::tape_node(tape[i])); };
     if (!only.empty()) {
-        for (const uint32_t i : only) entry(i, s.left[i], s.right[i]);
+        for (const uint32_t i : only)
+            if (is_primitive(i)) entry(i, 0, 0);
+        for (const uint32_t i : only)
+            if (!is_primitive(i)) entry(i, s.left[i], s.right[i]);
         return;
     }
+    for (uint32_t i = 0; i < uint32_t(tape.size()); ++i)
+        if (is_primitive(i)) entry(i, 0, 0);
     uint32_t top = 0;
     for (uint32_t i = 0; i < uint32_t(tape.size()); ++i) {
-        if (sc.is_primitive(math::tape_node(tape[i]))) {
-            entry(i, 0, 0);
-        } else {
+        if (!is_primitive(i)) {
             const uint32_t right = s.stack[--top];
             const uint32_t left = s.stack[--top];
             s.left[i] = left;
@@ -360,30 +373,36 @@ bool sibling_is_near_field(const Scene& sc, std::span<const uint32_t> tape, uint
 
 namespace {
 
-// The S³ sub-boxes of refine_cell in visiting order, each as i | j << 10 | k << 20 (S <= 1024):
-// the 8 corners first, then the middle, then the rest. The order changes nothing but when
-// refine_cell may stop. Its first batch is one block, the corners, where most cells stop: where
-// an operator stays undecided is a band around a surface, near a plane across a small cell, and
-// a band that misses every corner misses their convex hull, the cell; the middle adds less (its
-// operands' values at the centre were tested before, blend_may_decide). Corners before the
-// middle: 1 % fewer instructions in trees' and molecule's pruning (callgrind).
-void sub_box_order(uint32_t S, std::vector<uint32_t>& order) {
+// The S³ sub-boxes of refine_cell in visiting order: the 8 corners first, then the middle, then
+// the rest. The order changes nothing but when refine_cell may stop. Its first batch is one block,
+// the corners, where most cells stop: where an operator stays undecided is a band around a
+// surface, near a plane across a small cell, and a band that misses every corner misses their
+// convex hull, the cell; the middle adds less (its operands' values at the centre were tested
+// before, blend_may_decide). Corners before the middle: 1 % fewer instructions in trees' and
+// molecule's pruning (callgrind). Each sub-box (i, j, k) is stored as its centre's offsets
+// 2i + 1, 2j + 1, 2k + 1 (sub_box_centre's factors), one array per axis, so that a batch's
+// centres are a vector loop; kBlock - 1 copies of the last pad the arrays, the lanes that
+// refine_cell's last batch computes past the sub-boxes (which repeat the last one).
+void sub_box_order(uint32_t S, std::vector<float> (&offset)[3]) {
     const uint32_t mid = S / 2, last = S - 1;
     const auto is_corner = [&](uint32_t i, uint32_t j, uint32_t k) {
         return (i == 0 || i == last) && (j == 0 || j == last) && (k == 0 || k == last);
     };
-    const auto pack = [](uint32_t i, uint32_t j, uint32_t k) { return i | j << 10 | k << 20; };
-    order.clear();
+    std::vector<std::array<uint32_t, 3>> order;
     for (uint32_t c = 0; c < 8; ++c)
-        order.push_back(pack(c & 1 ? last : 0, c & 2 ? last : 0, c & 4 ? last : 0));
-    if (!is_corner(mid, mid, mid)) order.push_back(pack(mid, mid, mid));
+        order.push_back({c & 1 ? last : 0, c & 2 ? last : 0, c & 4 ? last : 0});
+    if (!is_corner(mid, mid, mid)) order.push_back({mid, mid, mid});
     for (uint32_t b = 0; b < S * S * S; ++b) {
         const uint32_t i = b % S, j = b / S % S, k = b / (S * S);
-        if (!is_corner(i, j, k) && !(i == mid && j == mid && k == mid))
-            order.push_back(pack(i, j, k));
+        if (!is_corner(i, j, k) && !(i == mid && j == mid && k == mid)) order.push_back({i, j, k});
     }
     // A corner is listed once however small S is (S = 1: the only box; S = 2: all eight).
     order.erase(std::unique(order.begin(), order.end()), order.end());
+    order.resize(order.size() + kBlock - 1, order.back());
+    for (uint32_t a = 0; a < 3; ++a) {
+        offset[a].clear();
+        for (const auto& at : order) offset[a].push_back(float(2 * at[a] + 1));
+    }
 }
 
 // refine_cell's entries to evaluate: the subtrees of its candidates (operators of `tape`, whose
@@ -425,27 +444,31 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
         std::fill_n(s.decision.begin(), n, math::kKeepBoth);
         return true;
     }
-    s.combined.assign(n, math::kKeepBoth);
-    // The candidates: the operators that may yet be decided alike in every sub-box, and what a
+    // s.decision holds the sub-boxes' common decisions so far.
+    std::fill_n(s.decision.begin(), n, math::kKeepBoth);
+    // The candidates: the operators that may yet be decided alike in every sub-box (none when
+    // `may_decide` says that none is decided in the sub-box holding the centre), and what a
     // batch evaluates: the whole tape at first and while the far-field test is open (it reads
     // the root), else only the candidates' subtrees, often a few words of a long tape. The
     // results are the same: every entry a decision reads is evaluated.
     std::vector<uint32_t>& candidates = s.refine_candidates;
     std::vector<uint32_t>& needed = s.refine_needed;
     candidates.clear();
-    for (uint32_t e = 0; e < n; ++e)
-        if (!sc.is_primitive(math::tape_node(tape[e]))) candidates.push_back(e);
+    if (may_decide)
+        for (uint32_t e = 0; e < n; ++e)
+            if (!sc.is_primitive(math::tape_node(tape[e]))) candidates.push_back(e);
     bool subset = false;
     for (auto* v : {&s.lane_value, &s.lane_lo, &s.lane_hi})
         if (v->size() < size_t(n) * kLanes) v->resize(size_t(n) * kLanes);
     if (s.lane_decision.size() < size_t(n) * kLanes) s.lane_decision.resize(size_t(n) * kLanes);
     const vec3 sub_half = box.half / float(S);
     const float sub_radius = math::length(sub_half);
-    if (s.sub_order_of != S) {
-        sub_box_order(S, s.sub_order);
-        s.sub_order_of = S;
+    if (s.sub_offset_of != S) {
+        sub_box_order(S, s.sub_offset);
+        s.sub_offset_of = S;
     }
-    // The sub-boxes' centres from the cell's corner and the sub-box size, computed once.
+    // The sub-boxes' centres from the cell's corner and the sub-box size, as sub_box_centre
+    // computes them.
     const vec3 corner = box.centre - box.half;
     const uint32_t total = S * S * S;
     bool first = true;
@@ -454,12 +477,13 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
         const uint32_t count = std::min(at == 0 ? kBlock : kLanes, total - at);
         BoxLanes c;
         c.lanes = lanes_for(count);
+        const float* ox = s.sub_offset[0].data() + at;
+        const float* oy = s.sub_offset[1].data() + at;
+        const float* oz = s.sub_offset[2].data() + at;
         for (uint32_t b = 0; b < c.lanes; ++b) {
-            const uint32_t o = s.sub_order[at + std::min(b, count - 1)];
-            const vec3 p = sub_box_centre(corner, sub_half, o & 1023u, o >> 10 & 1023u, o >> 20);
-            c.x[b] = p.x;
-            c.y[b] = p.y;
-            c.z[b] = p.z;
+            c.x[b] = corner.x + ox[b] * sub_half.x;
+            c.y[b] = corner.y + oy[b] * sub_half.y;
+            c.z[b] = corner.z + oz[b] * sub_half.z;
         }
         evaluate_boxes(sc, tape, c, sub_half, sub_radius, bounds,
                        {s.lane_value.data(), s.lane_lo.data(), s.lane_hi.data(),
@@ -472,11 +496,11 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
         size_t kept = 0;
         for (const uint32_t e : candidates) {
             const uint32_t* d = s.lane_decision.data() + size_t(e) * kLanes;
-            const uint32_t common = first ? d[0] : s.combined[e];
+            const uint32_t common = first ? d[0] : s.decision[e];
             uint32_t differ = 0;
             for (uint32_t b = 0; b < c.lanes; ++b) differ |= d[b] ^ common;
-            s.combined[e] = differ == 0 ? common : math::kKeepBoth;
-            if (s.combined[e] != math::kKeepBoth) candidates[kept++] = e;
+            s.decision[e] = differ == 0 ? common : math::kKeepBoth;
+            if (s.decision[e] != math::kKeepBoth) candidates[kept++] = e;
         }
         candidates.resize(kept);
         first = false;
@@ -504,11 +528,35 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
         constant = all_above ? lowest : highest;
         return false;
     }
-    for (uint32_t e = 0; e < n; ++e) s.decision[e] = s.combined[e];
     return true;
 }
 
 namespace {
+
+// The lanes (bit c: lane c) of kL decisions d[0, kL) in which the left operand wins, and those in
+// which the right one does. On x86-64, 8 lanes in two SSE2 compares instead of 16 scalar ones.
+template <uint32_t kL>
+void winner_lanes(const uint32_t* d, uint32_t& left_wins, uint32_t& right_wins) {
+#if defined(__SSE2__)
+    if constexpr (kL == 8) {
+        const __m128i lo = _mm_loadu_si128(reinterpret_cast<const __m128i*>(d));
+        const __m128i hi = _mm_loadu_si128(reinterpret_cast<const __m128i*>(d + 4));
+        const auto lanes_equal = [&](uint32_t value) {
+            const __m128i v = _mm_set1_epi32(int(value));
+            return uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(lo, v)))) |
+                   uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(hi, v)))) << 4;
+        };
+        left_wins = lanes_equal(math::kLeftWins);
+        right_wins = lanes_equal(math::kRightWins);
+        return;
+    }
+#endif
+    left_wins = right_wins = 0;
+    for (uint32_t c = 0; c < kL; ++c) {
+        left_wins |= uint32_t(d[c] == math::kLeftWins) << c;
+        right_wins |= uint32_t(d[c] == math::kRightWins) << c;
+    }
+}
 
 // Stage 3 for up to 8 lanes at once (kL: 1, or kSiblingLanes with the decision of entry e in
 // lane c at decision[e · kL + c]), for the lanes in `lanes` (bit c: lane c). One sweep of the
@@ -537,12 +585,8 @@ void compact_lanes(const Scene& sc, std::span<const uint32_t> tape, const uint32
     for (uint32_t i = n; i-- > 0;) {
         const uint32_t here = alive[i];
         if (here == 0 || sc.is_primitive(math::tape_node(tape[i]))) continue;
-        const uint32_t* d = decision + size_t(i) * kL;
-        uint32_t left_wins = 0, right_wins = 0;
-        for (uint32_t c = 0; c < kL; ++c) {
-            left_wins |= uint32_t(d[c] == math::kLeftWins) << c;
-            right_wins |= uint32_t(d[c] == math::kRightWins) << c;
-        }
+        uint32_t left_wins, right_wins;
+        winner_lanes<kL>(decision + size_t(i) * kL, left_wins, right_wins);
         left_wins &= here;
         right_wins &= here;
         const uint32_t keep = here & ~(left_wins | right_wins);

@@ -147,9 +147,8 @@ class StepPruner {
         out.words.push_back(0);
         if (geo_.finest && opt_.refine > 1 && compacted.size() <= math::kRefineMaxTape) {
             // Decided again over the cell's sub-boxes, from the tape just made.
-            s.refined.assign(compacted.begin(), compacted.end());
             float refined_constant = 0;
-            if (!refine_cell(sc_, s.refined, box, opt_.refine, opt_.bounds, opt_.far_field,
+            if (!refine_cell(sc_, compacted, box, opt_.refine, opt_.bounds, opt_.far_field,
                              opt_.far_field_c, value, may_decide, s, refined_constant)) {
                 out.words.resize(at);
                 cell.tape = PrunedCell::kFarField;
@@ -159,10 +158,10 @@ class StepPruner {
             // Compacted again only where some operator was decided over every sub-box: with
             // none, compaction would give back the tape word for word (most cells).
             const bool decided =
-                std::any_of(s.decision.begin(), s.decision.begin() + s.refined.size(),
+                std::any_of(s.decision.begin(), s.decision.begin() + compacted.size(),
                             [](uint32_t d) { return d != math::kKeepBoth; });
             if (decided)
-                prims = compact_tape(sc_, s.refined, s, out.words);
+                prims = compact_tape(sc_, compacted, s, out.words);
             else
                 out.words.insert(out.words.end(), compacted.begin(), compacted.end());
         } else {

@@ -142,7 +142,7 @@ void GridUpdate::compact(PrunedGrid& g) {
         const bool finest = li + 1 == g.level_count();
         const uint32_t f = level.factor, per_block = f * f * f;
         const uint32_t nf = finest ? 0 : g.levels_[li + 1].factor;
-        std::vector<PrunedCell> cells(size_t(per_block) * blocks.size());
+        CellVector cells(size_t(per_block) * blocks.size());  // every one written below
         std::vector<uint32_t> next;
         for (size_t b = 0; b < blocks.size(); ++b)
             for (uint32_t i = 0; i < per_block; ++i) {
@@ -316,11 +316,11 @@ void GridUpdate::run(PrunedGrid& g, const Scene& sc, const SceneEdit& edit,
             }
         }
         if (!finest) {
-            std::vector<PrunedCell>& below_cells = g.levels_[li + 1].cells;
+            CellVector& below_cells = g.levels_[li + 1].cells;
             if (appended >= PrunedCell::kFarField)
                 throw std::length_error("a level exceeds 2^32 - 1 cells");
             if (appended > below_cells.capacity()) below_cells.reserve(appended + appended / 4);
-            below_cells.resize(appended);
+            below_cells.resize(appended, PrunedCell{});
         }
         jobs.swap(next);
     }
