@@ -177,13 +177,15 @@ void main() {
                 uint words = tape_read(parent, 0u);
                 subs = words > kRefineMaxTape ? 1u : pc.refine;
                 nbatch = (subs * subs * subs + kTeam - 1u) / kTeam;
-                // A lone primitive in a cell that cannot clear the far field (|value| well
-                // inside the clearance: refine_cell's test, where the CPU returns at once too)
+                // A lone primitive in a cell that cannot clear the far field
+                // (refine_far_possible: refine_cell's test, where the CPU returns at once too)
                 // has nothing to decide again: its tape is copied as it is, unevaluated.
                 if (words == 1u) {
-                    float lone_L = nodes[tape_node(tape_read(parent, 2u))].lipschitz;
-                    float clearance = far_field_clearance(pc.csize.w, lone_L, radius);
-                    lone = (pc.flags & 1u) == 0u || !(abs(c0.value) > 0.9 * clearance);
+                    Node lone_node = nodes[tape_node(tape_read(parent, 2u))];
+                    float clearance = far_field_clearance(pc.csize.w, lone_node.lipschitz, radius);
+                    float sigma = extras[lone_node.primitive].bound0.w;
+                    lone = (pc.flags & 1u) == 0u ||
+                           !refine_far_possible(c0.value, clearance, sigma, half_cell);
                 }
             }
         } else if (has_job) {

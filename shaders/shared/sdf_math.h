@@ -313,6 +313,21 @@ SDFPRUNE_FN float far_field_clearance(float far_field_c, float L, float R) {
 SDFPRUNE_FN bool clears_above(float lo, float clearance) { return lo > clearance && lo > 0.0f; }
 SDFPRUNE_FN bool clears_below(float hi, float clearance) { return hi < -clearance && hi < 0.0f; }
 
+// Whether refinement's far-field test (every sub-box of a cell clears the cell's clearance) can
+// pass for a cell whose tape's value at the centre is `value`. It must pass in the sub-box that
+// holds the centre, whose range holds `value` within rounding: so not when |value| lies well
+// inside the clearance (0.9 of it: rounding is far below a tenth). For a tape of one primitive
+// under a similarity map of scale sigma (> 0; a lower bound of it), sigma times an exact signed
+// distance, not either when |value| lies inside the clearance plus sigma·h (h: the cell's
+// smallest half side, `half_size` its half sizes): from the centre towards the nearest surface point
+// |f| falls at rate sigma, so the cell, which holds the ball of radius h about its centre, has a
+// point where |f| <= |value| − sigma·h, in a sub-box whose range reaches as low. `sigma` <= 0:
+// no such primitive.
+SDFPRUNE_FN bool refine_far_possible(float value, float clearance, float sigma, vec3 half_size) {
+    float reach = sigma > 0.0f ? sigma * min(half_size.x, min(half_size.y, half_size.z)) : 0.0f;
+    return abs(value) > 0.9f * (clearance + reach);
+}
+
 // The reach of a far-field cell's centre value over `distance` with Lipschitz bound
 // `lipschitz`, rounding margins included (PrunedGrid::far_field_constant, discretization) ...
 SDFPRUNE_FN float far_field_reach(float lipschitz, float distance) {

@@ -433,20 +433,11 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
     s.reserve(n);
     const float L = sc.lipschitz[math::tape_node(tape[n - 1])];
     const float clearance = math::far_field_clearance(far_field_c, L, box.radius);
-    // The far-field test passes only if every sub-box's range clears the clearance, also the
-    // range of the sub-box that holds the cell's centre, which holds the value there: `value`
-    // within rounding. So |value| well inside the clearance (0.9 of it: rounding is far below a
-    // tenth of it) settles that it fails, before any sub-box is evaluated.
-    // A lone primitive under a similarity map of scale σ (PrimitiveBound::scale, a lower bound
-    // of it) is σ times an exact signed distance (sdf_math.h): from the centre towards the
-    // nearest surface point |f| falls at rate σ, so the cell, which holds the ball of radius h
-    // (its smallest half side) about its centre, has a point where |f| <= |value| − σ·h, whose
-    // sub-box's range reaches that low. It cannot clear unless |value| − σ·h does.
-    float reach = 0;
-    if (n == 1)
-        if (const float sigma = sc.bound[sc.primitive[math::tape_node(tape[0])]].scale; sigma > 0)
-            reach = sigma * std::min(box.half.x, std::min(box.half.y, box.half.z));
-    const bool far_possible = far_field && std::fabs(value) > 0.9f * (clearance + reach);
+    // Whether the far-field test can pass at all (refine_far_possible; sigma: a lone primitive's
+    // similarity scale).
+    const float sigma = n == 1 ? sc.bound[sc.primitive[math::tape_node(tape[0])]].scale : 0.0f;
+    const bool far_possible =
+        far_field && math::refine_far_possible(value, clearance, sigma, box.half);
     bool all_above = far_possible, all_below = far_possible;
     float lowest = INFINITY, highest = -INFINITY;
     if (!may_decide && !far_possible) {
