@@ -8,6 +8,7 @@
 #include <bit>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <numbers>
 #include <vector>
 
@@ -71,6 +72,28 @@ float length3(float4 v) {
     return std::sqrt(sq[0] + sq[1] + sq[2]);
 }
 
+// Whether p lies in the closed box [lo, hi] (x, y, z; the unused lane is ignored). With SSE,
+// the three lanes' verdicts are taken as one mask (movmskps) rather than one by one: 11
+// instructions a test went to 5 (callgrind, character).
+bool in_box(float4 p, float4 lo, float4 hi) {
+    const int4 in = (p >= lo) & (p <= hi);
+#if defined(__SSE__)
+    return (__builtin_ia32_movmskps(float4(in)) & 7) == 7;
+#else
+    return (in[0] & in[1] & in[2]) != 0;
+#endif
+}
+
+// Whether the three lanes (x, y, z) of a and b are equal.
+bool all_equal(int4 a, int4 b) {
+    const int4 eq = a == b;
+#if defined(__SSE__)
+    return (__builtin_ia32_movmskps(float4(eq)) & 7) == 7;
+#else
+    return (eq[0] & eq[1] & eq[2]) != 0;
+#endif
+}
+
 // Ray / box intersection: [t0, t1] inside the box, false if missed.
 bool ray_box(vec3 o, vec3 inv_dir, vec3 lo, vec3 hi, float& t0, float& t1) {
     t0 = 0;
@@ -84,17 +107,25 @@ bool ray_box(vec3 o, vec3 inv_dir, vec3 lo, vec3 hi, float& t0, float& t1) {
     return t0 <= t1;
 }
 
-// eval_tape's value of `tape` at p. A one-word tape (one primitive: most near-field cells'
-// tapes) is eval_tape's own one-word case, taken here without the call, whose saving of
-// registers cost as much as the case itself (callgrind, character: 8 instructions a call).
-// Flattened: eval_primitive inline, so its 96 bytes of parameters are read in place rather
-// than copied for a call.
+// eval_tape's value of `tape` at p. The tapes of most near-field cells are one primitive (one
+// word) or one operator on two primitives (three words: post-order, operands first); these
+// are eval_tape's loop without the loop and without the call, whose saving of registers cost
+// 8 instructions a call (callgrind, character), each primitive's value negated as eval_tape
+// pushes it and the operator applied by the same function. Flattened: eval_primitive inline, so
+// its 96 bytes of parameters are read in place rather than copied for a call.
+float primitive_value(const Scene& sc, uint32_t word, vec3 p) {
+    const uint32_t n = math::tape_node(word);
+    const float v = math::eval_primitive(sc.kind[n], sc.params[sc.primitive[n]], p);
+    return math::tape_negated(word) ? -v : v;
+}
 [[gnu::flatten]] float tape_value(const Scene& sc, std::span<const uint32_t> tape, vec3 p,
                                   float* stack) {
-    if (tape.size() != 1) return eval_tape(sc, tape, p, stack);
-    const uint32_t n = math::tape_node(tape[0]);
-    const float v = math::eval_primitive(sc.kind[n], sc.params[sc.primitive[n]], p);
-    return math::tape_negated(tape[0]) ? -v : v;
+    if (tape.size() == 1) return primitive_value(sc, tape[0], p);
+    if (tape.size() != 3) return eval_tape(sc, tape, p, stack);
+    const float a = primitive_value(sc, tape[0], p), b = primitive_value(sc, tape[1], p);
+    const uint32_t n = math::tape_node(tape[2]);
+    const float v = math::apply_operator(math::operator_s(sc.kind[n]), sc.blend[n], a, b);
+    return math::tape_negated(tape[2]) ? -v : v;
 }
 
 struct Counters {
@@ -130,14 +161,15 @@ struct LevelGeometry {
 struct PrunedField {
     const PrunedGrid& g;
     std::vector<LevelGeometry> levels;
-    // PrunedGrid::cell_index's terms: the grid's corner, 1 / cell size, the last index
-    float4 grid_lo, inv_cell, last_index;
+    // PrunedGrid::cell_index's terms: the grid's corners, 1 / cell size, the last index
+    float4 grid_lo, grid_hi, inv_cell, last_index;
     // Every level's cells hold a power of two finest cells per axis: a cell's coordinates at
     // its level are the finest index >> LevelGeometry::shift.
     bool pow2 = true;
     explicit PrunedField(const PrunedGrid& grid)
         : g(grid),
           grid_lo(load4(grid.aabb().min)),
+          grid_hi(load4(grid.aabb().max)),
           inv_cell(load4(grid.inv_cell_size())),
           last_index(splat(float(grid.resolution() - 1))) {
         const uint32_t n = g.resolution();
@@ -162,28 +194,37 @@ struct PrunedField {
     struct Hint {
         std::span<const uint32_t> tape;
         bool in_grid = false;
-        uint32_t ix = 0, iy = 0, iz = 0;
+        int4 index = {};  // the finest cell (x, y, z, 0), when in_grid
     };
+    // PrunedGrid::cell_index in vector lanes: whether p lies in the grid's closed box (the same
+    // comparisons) and, if so, its finest cell (see finest_index: the same index for p >= the
+    // corner), with 0 in the unused lane.
+    bool finest_cell(vec3 p, int4& index) const {
+        const float4 q = load4(p);
+        if (!in_box(q, grid_lo, grid_hi)) return false;
+        index = finest_index(q);
+        index[3] = 0;
+        return true;
+    }
+    // Sets `tape` to finest cell i's tape, if it is near-field.
+    void near_tape(int4 i, std::span<const uint32_t>& tape) const {
+        PrunedGrid::Located at;
+        g.locate_cell(uint32_t(i[0]), uint32_t(i[1]), uint32_t(i[2]), at);
+        if (!at.far_field()) tape = g.tape_at(at.cell->tape);
+    }
     Hint hint_at(vec3 p) const {
         Hint h{g.scene().full_tape};
-        if (!g.cell_index(p, h.ix, h.iy, h.iz)) return h;
+        if (!finest_cell(p, h.index)) return h;
         h.in_grid = true;
-        PrunedGrid::Located at;
-        g.locate_cell(h.ix, h.iy, h.iz, at);
-        if (!at.far_field()) h.tape = g.tape_at(at.cell->tape);
+        near_tape(h.index, h.tape);
         return h;
     }
     // The pruned field at p: its cell's tape, or the hint's where p's cell is far-field (that
     // cell holds a bound, not a value) or is the hit's.
     float value(vec3 p, const Hint& hint, float* stack, Counters& c) const {
         std::span<const uint32_t> tape = hint.tape;
-        uint32_t ix, iy, iz;
-        if (g.cell_index(p, ix, iy, iz) &&
-            !(hint.in_grid && ix == hint.ix && iy == hint.iy && iz == hint.iz)) {
-            PrunedGrid::Located at;
-            g.locate_cell(ix, iy, iz, at);
-            if (!at.far_field()) tape = g.tape_at(at.cell->tape);
-        }
+        int4 i;
+        if (finest_cell(p, i) && !(hint.in_grid && all_equal(i, hint.index))) near_tape(i, tape);
         c.evals += tape.size();
         return tape_value(g.scene(), tape, p, stack);
     }
@@ -225,6 +266,7 @@ struct Lane {
     float t = 0;
     uint32_t step = 0;
     Next next = Next::kEval;
+    bool inf_inverse = false;  // some lane of inv_dir (x, y, z) is ±inf (far_field_advance)
     float4 p;
     std::span<const uint32_t> tape;
     PrunedGrid::Walk walk;  // kWalk: the lookup of p's cell
@@ -235,18 +277,6 @@ struct Lane {
     float4 near_lo = splat(INFINITY), near_hi = splat(-INFINITY);
     uint64_t evals = 0;  // node evaluations, added to the ray's counters when it is done
 };
-
-// Whether p lies in the closed box [lo, hi] (x, y, z; the unused lane is ignored). With SSE,
-// the three lanes' verdicts are taken as one mask (movmskps) rather than one by one: 11
-// instructions a test went to 5 (callgrind, character).
-bool in_box(float4 p, float4 lo, float4 hi) {
-    const int4 in = (p >= lo) & (p <= hi);
-#if defined(__SSE__)
-    return (__builtin_ia32_movmskps(float4(in)) & 7) == 7;
-#else
-    return (in[0] & in[1] & in[2]) != 0;
-#endif
-}
 
 // The next t of lane l at p in far-field cell c (corner lo, level geometry geo): no surface
 // is in the cell nor in the box of cells its clearance in the ray's octant gives, so continue
@@ -261,8 +291,10 @@ float far_field_advance(const Lane& l, float4 p, float4 lo, const LevelGeometry&
     const float4 exit = lo + geo.size * (splat(r) * l.exit_sign + l.exit_up);
     float4 t_axis = (exit - l.o) * l.inv_dir;
     // NaN (0·inf): the ray runs in the face's plane, which it never leaves. Which of equal
-    // candidates wins (+0 or -0) does not matter: only t_exit + tiny is used.
-    t_axis = t_axis == t_axis ? t_axis : splat(INFINITY);
+    // candidates wins (+0 or -0) does not matter: only t_exit + tiny is used. exit - o is
+    // finite, so only an infinite 1 / dir (dir ±0, or so small that its inverse overflows) can
+    // make a NaN: other rays skip the select (8 instructions a far-field step).
+    if (l.inf_inverse) t_axis = t_axis == t_axis ? t_axis : splat(INFINITY);
     const float t_exit = std::min(std::min(t_axis[0], t_axis[1]), t_axis[2]);
     // |f(p)| >= |f(centre)| - L·|p - centre|: often far beyond the cell.
     const float from_centre = std::fabs(c.value) * inv_lipschitz - length3(p - (lo + geo.half));
@@ -322,11 +354,20 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
         l.max_steps = r.max_steps;
         l.o = load4(r.o);
         l.dir = load4(r.dir);
-        l.inv_dir = load4(vec3(1.0f / r.dir.x, 1.0f / r.dir.y, 1.0f / r.dir.z));
+        // (1 / dir in one vector division, the same quotients; the unused lane's is not used)
+        l.inv_dir = splat(1.0f) / float4{r.dir.x, r.dir.y, r.dir.z, 1};
         l.up = l.dir > 0;
         l.exit_sign = l.up ? splat(1.0f) : splat(-1.0f);
         l.exit_up = l.up ? splat(1.0f) : splat(0.0f);
+        const float4 abs_inv = l.inv_dir < 0 ? -l.inv_dir : l.inv_dir;
+        const int4 inf = abs_inv == splat(INFINITY);
+#if defined(__SSE__)
+        l.octant = __builtin_ia32_movmskps(float4(l.up)) & 7;
+        l.inf_inverse = (__builtin_ia32_movmskps(float4(inf)) & 7) != 0;
+#else
         l.octant = (l.up[0] & 1) | (l.up[1] & 2) | (l.up[2] & 4);
+        l.inf_inverse = (inf[0] | inf[1] | inf[2]) != 0;
+#endif
         l.t = r.t0;
         l.step = 0;
         l.near_lo = splat(INFINITY);
@@ -416,8 +457,11 @@ struct BoxFromOrigin {
     float4 lo, hi;  // box corners - origin
     BoxFromOrigin(vec3 origin, vec3 box_lo, vec3 box_hi)
         : lo(load4(box_lo) - load4(origin)), hi(load4(box_hi) - load4(origin)) {}
-    bool hit(vec3 dir, float& t0, float& t1) const {
-        const float4 inv = float4{1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z, 0};
+    // dir: (x, y, z, any)
+    bool hit(float4 dir, float& t0, float& t1) const {
+        // (one division in vector lanes: the same quotients as three scalar ones; the unused
+        // lane is never read)
+        const float4 inv = splat(1.0f) / dir;
         const float4 ta = lo * inv, tb = hi * inv;
         // ray_box's swap when ta > tb (not when either is NaN)
         const int4 swap = ta > tb;
@@ -496,7 +540,6 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
         Counters counters[kTile * kTile];
         Ray rays[kTile * kTile], shadow_rays[kTile * kTile];
         uint32_t ray_pixel[kTile * kTile];
-        vec3 out[kTile * kTile];
         Hit hits[kTile * kTile];
     };
     // One chunk per tile.
@@ -513,14 +556,15 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
         const uint32_t x0 = tile % tiles_x * kTile, y0 = tile / tiles_x * kTile;
         const uint32_t w = std::min(W, x0 + kTile) - x0, h = std::min(H, y0 + kTile) - y0;
         // Per-thread scratch for the tile's rays (a few tens of KB: not on the stack, and not
-        // cleared per tile, except the counters).
+        // cleared per tile; a pixel's counters are cleared when it gets a ray, and only pixels
+        // with a ray count anything).
         thread_local TileScratch scratch;
         Counters* counters = scratch.counters;
-        std::fill_n(counters, h * w, Counters{});
         Ray* rays = scratch.rays;
         uint32_t* ray_pixel = scratch.ray_pixel;
-        vec3* out = scratch.out;
         uint32_t n_rays = 0;
+        // The tile's pixel j = row · w + i lies at byte 3 · (tile_first + row · W + i).
+        const size_t tile_first = size_t(y0) * W + x0;
         // pixel_direction's sum split at its order of operations: (forward + right·u) per
         // column, + up·v per row; the rays are pixel_direction's bit for bit.
         vec3 column[kTile];
@@ -528,12 +572,23 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
             column[i] = frame.forward + frame.right * pixel_u(frame, W, x0 + i);
         for (uint32_t row = 0, j = 0; row < h; ++row) {
             const float v = pixel_v(frame, H, y0 + row);
-            const vec3 background_color = background(v / tan_half), up_v = frame.up * v;
+            const vec3 up_v = frame.up * v;
+            // Most pixels show the background (nine in ten on the small kinds): its bytes are
+            // worked out once per row and copied; a hit's pixel is written over at the end.
+            if (!heatmap) {
+                uint8_t bytes[3];
+                store_rgb8(curve, background(v / tan_half), bytes);
+                uint8_t* dst = &img.rgb[3 * (tile_first + size_t(row) * W)];
+                for (uint32_t i = 0; i < w; ++i) std::memcpy(dst + 3 * i, bytes, 3);
+            }
             for (uint32_t i = 0; i < w; ++i, ++j) {
-                out[j] = background_color;
-                const vec3 dir = normalize(column[i] + up_v);
+                // normalize's quotients, in one vector division
+                const vec3 c = column[i] + up_v;
+                const float4 d = load4(c) / splat(math::length(c));
                 float t0, t1;
-                if (!box_from_eye.hit(dir, t0, t1)) continue;
+                if (!box_from_eye.hit(d, t0, t1)) continue;
+                const vec3 dir(d[0], d[1], d[2]);
+                counters[j] = {};
                 rays[n_rays] = {cam.eye, dir, t0, t1, 1024, -1, &counters[j]};
                 ray_pixel[n_rays++] = j;
             }
@@ -589,22 +644,21 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
                     : hit.albedo * (0.22f + 0.78f * hit.lit) +
                           vec3(0.06f) * std::pow(std::max(0.0f, math::dot(hit.n, -hit.dir)), 8.0f);
             if (hit.highlight) o = o * 0.45f + vec3(1.0f, 0.5f, 0.08f) * 0.55f;
-            out[hit.pixel] = o;
+            if (!heatmap) {
+                const uint32_t row = hit.pixel / w, i = hit.pixel % w;
+                store_rgb8(curve, o, &img.rgb[3 * (tile_first + size_t(row) * W + i)]);
+            }
         }
         Counters sum;
         uint32_t tile_max = 0;
-        for (uint32_t row = 0, j = 0; row < h; ++row) {
-            const size_t first = size_t(y0 + row) * W + x0;
-            for (uint32_t i = 0; i < w; ++i, ++j) {
-                const uint32_t e = uint32_t(std::min<uint64_t>(counters[j].evals, 0xffffffffu));
-                if (heatmap)
-                    evals[first + i] = e;
-                else
-                    store_rgb8(curve, out[j], &img.rgb[3 * (first + i)]);
-                tile_max = std::max(tile_max, e);
-                sum.steps += counters[j].steps;
-                sum.evals += counters[j].evals;
-            }
+        // (the other pixels count nothing: their heatmap counts stay 0)
+        for (uint32_t r = 0; r < n_rays; ++r) {
+            const uint32_t j = ray_pixel[r];
+            const uint32_t e = uint32_t(std::min<uint64_t>(counters[j].evals, 0xffffffffu));
+            if (heatmap) evals[tile_first + size_t(j / w) * W + j % w] = e;
+            tile_max = std::max(tile_max, e);
+            sum.steps += counters[j].steps;
+            sum.evals += counters[j].evals;
         }
         uint32_t seen = max_evals.load();
         while (seen < tile_max && !max_evals.compare_exchange_weak(seen, tile_max)) {
