@@ -112,6 +112,12 @@ void set_sweep_flags(bool windowed, uint win, uint at, uint e, uint flags) {
 uint tape_entry(bool windowed, uint win, uint parent, uint e) {
     return windowed ? s_word[win + e] : tape_read(parent, 2u + e);
 }
+// The sweep's flags of a tape's root (its last entry, `len` words at `parent`): alive, with its
+// own sign.
+uint root_sweep_flags(uint parent, uint len) {
+    uint root_neg = tape_negated(tape_read(parent, 2u + len - 1u)) ? 1u : 0u;
+    return (1u << 2) | (root_neg << 4);
+}
 // Windowed refinement: the team's decision, the one its lanes saw if they saw only one.
 uint window_decision(uint meta) {
     uint seen = meta & 7u;
@@ -205,10 +211,10 @@ void main() {
             // Straight to the sweep, on the lane that stores the cell.
             phase = valid ? kPhaseSweep : kPhaseDone;
             i = len;
-            if (valid) {
-                uint root_neg = tape_negated(tape_read(parent, 2u + len - 1u)) ? 1u : 0u;
-                scratch[dbase + (len - 1u) * kTeam + lane] = (1u << 2) | (root_neg << 4);
-            }
+            // (its one entry is a primitive: no decision bits to keep)
+            if (valid)
+                set_sweep_flags(false, 0u, dbase + (len - 1u) * kTeam + lane, len - 1u,
+                                root_sweep_flags(parent, len));
         } else if (walk && pc.round == 0u) {
             phase = kPhaseEvaluate;
         } else if (walk) {
@@ -390,9 +396,8 @@ void main() {
                 } else if (!valid) {
                     phase = kPhaseDone;  // a lane past the boxes, or a sub-box's helper
                 } else {
-                    uint root_neg = tape_negated(tape_read(parent, 2u + len - 1u)) ? 1u : 0u;
-                    uint e = dbase + (len - 1u) * kTeam + lane;
-                    set_sweep_flags(windowed, win, e, len - 1u, (1u << 2) | (root_neg << 4));
+                    set_sweep_flags(windowed, win, dbase + (len - 1u) * kTeam + lane, len - 1u,
+                                    root_sweep_flags(parent, len));
                     i = len;
                     phase = kPhaseSweep;
                 }

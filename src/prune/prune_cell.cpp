@@ -440,12 +440,9 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
         far_field && math::refine_far_possible(value, clearance, sigma, box.half);
     bool all_above = far_possible, all_below = far_possible;
     float lowest = INFINITY, highest = -INFINITY;
-    if (!may_decide && !far_possible) {
-        std::fill_n(s.decision.begin(), n, math::kKeepBoth);
-        return true;
-    }
-    // s.decision holds the sub-boxes' common decisions so far.
+    // s.decision holds the sub-boxes' common decisions so far: none yet.
     std::fill_n(s.decision.begin(), n, math::kKeepBoth);
+    if (!may_decide && !far_possible) return true;
     // The candidates: the operators that may yet be decided alike in every sub-box (none when
     // `may_decide` says that none is decided in the sub-box holding the centre), and what a
     // batch evaluates: the whole tape at first and while the far-field test is open (it reads
