@@ -86,11 +86,14 @@ BoxLanes box_lanes(const vec3* centres, uint32_t count) {
 }
 
 // Where evaluate_boxes writes: per tape entry e and box b, index e · stride + b
-// (stride >= the lanes computed).
+// (stride >= the lanes computed). Without `operator_values` (interval bounds only), operators'
+// values are not computed and their rows of `value` hold nothing of use: an operator's range is
+// then its range over its operands' ranges alone (see decide_boxes).
 struct LaneArrays {
     float *value, *lo, *hi;
     uint32_t* decision;
     uint32_t stride;
+    bool operator_values = true;
 };
 
 // A primitive's range over each box: the Lipschitz range around its value, tightened by the
@@ -121,7 +124,12 @@ void primitive_ranges(const PrimitiveBound pb, const BoxLanes& c, vec3 half, flo
 // value, and the range (a skipped operator's range is its winner's; else the tighter of the
 // Lipschitz range and, with interval bounds, the operator's range over its operands' ranges).
 // Computed for every box and then selected, without branches, so the loop vectorizes.
-template <uint32_t W, bool kInterval>
+// Without kValue (interval bounds only) the value is not computed, nor the Lipschitz range
+// around it, which the operator's range already holds: every operator is 1-Lipschitz in the
+// max-norm of its operands and shift-invariant (op(a − t, b − t) = op(a, b) − t), and each
+// operand's range holds its own Lipschitz range, so op(a_lo, b_lo) >= op(a, b) − max(L_a, L_b)·R
+// (the operator's L is that max), and alike above; the two differ by float rounding only.
+template <uint32_t W, bool kInterval, bool kValue = true>
 void decide_boxes(uint32_t lanes, float sgn, float k, float spread, const float* __restrict va,
                   const float* __restrict la, const float* __restrict ha,
                   const float* __restrict vb, const float* __restrict lb,
@@ -130,17 +138,26 @@ void decide_boxes(uint32_t lanes, float sgn, float k, float spread, const float*
     for (uint32_t b = 0; b < lanes_of<W>(lanes); ++b) {
         const float a_lo = la[b], a_hi = ha[b], b_lo = lb[b], b_hi = hb[b];
         const uint32_t dec = math::prune_decision(sgn, k, a_lo, a_hi, b_lo, b_hi);
-        const float val = math::apply_operator(sgn, k, va[b], vb[b]);
-        float lo = val - spread, hi = val + spread;
-        if constexpr (kInterval) {
+        float lo, hi;
+        if constexpr (kValue) {
+            const float val = math::apply_operator(sgn, k, va[b], vb[b]);
+            v[b] = val;
+            lo = val - spread;
+            hi = val + spread;
+            if constexpr (kInterval) {
+                const vec2 r2 = math::operator_range(sgn, k, a_lo, a_hi, b_lo, b_hi);
+                lo = std::max(lo, r2.x);
+                hi = std::min(hi, r2.y);
+            }
+        } else {
+            static_assert(kInterval, "an operator's range without its value needs intervals");
             const vec2 r2 = math::operator_range(sgn, k, a_lo, a_hi, b_lo, b_hi);
-            lo = std::max(lo, r2.x);
-            hi = std::min(hi, r2.y);
+            lo = r2.x;
+            hi = r2.y;
         }
         const bool left_wins = dec == math::kLeftWins;
         const bool right_wins = dec == math::kRightWins;
         d[b] = dec;
-        v[b] = val;
         l[b] = left_wins ? a_lo : right_wins ? b_lo : lo;
         h[b] = left_wins ? a_hi : right_wins ? b_hi : hi;
     }
@@ -182,7 +199,10 @@ void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLa
             const float* __restrict lb = out.lo + ib;
             const float* __restrict hb = out.hi + ib;
             uint32_t* __restrict d = out.decision + at;
-            if (interval)
+            if (interval && !out.operator_values)
+                decide_boxes<W, true, false>(lanes, sgn, k, spread, va, la, ha, vb, lb, hb, d, v, l,
+                                             h);
+            else if (interval)
                 decide_boxes<W, true>(lanes, sgn, k, spread, va, la, ha, vb, lb, hb, d, v, l, h);
             else
                 decide_boxes<W, false>(lanes, sgn, k, spread, va, la, ha, vb, lb, hb, d, v, l, h);
@@ -482,10 +502,13 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
             c.y[b] = corner.y + oy[b] * sub_half.y;
             c.z[b] = corner.z + oz[b] * sub_half.z;
         }
-        evaluate_boxes(sc, tape, c, sub_half, sub_radius, bounds,
-                       {s.lane_value.data(), s.lane_lo.data(), s.lane_hi.data(),
-                        s.lane_decision.data(), kLanes},
-                       s, subset ? std::span<const uint32_t>(needed) : std::span<const uint32_t>());
+        // The far-field test reads the root's value (its rounding margin), which needs every
+        // operator's; the decisions need none (interval bounds: refinement's only ones).
+        evaluate_boxes(
+            sc, tape, c, sub_half, sub_radius, bounds,
+            {s.lane_value.data(), s.lane_lo.data(), s.lane_hi.data(), s.lane_decision.data(),
+             kLanes, all_above || all_below || bounds != CellBounds::kInterval},
+            s, subset ? std::span<const uint32_t>(needed) : std::span<const uint32_t>());
         at += count;
         // Whether each candidate is still decided the same way in every sub-box so far. The
         // lanes past the batch repeat its last sub-box, so they may be folded in too (here and
