@@ -582,6 +582,10 @@ struct CellScratch {
     // evaluate_siblings: the same per tape entry for up to kSiblingLanes sibling cells
     std::vector<float> sib_value, sib_lo, sib_hi;
     std::vector<uint32_t> sib_decision;
+    // refine_corners: the same for the corner sub-boxes of groups of cells, group after group
+    // (cleared by its caller)
+    std::vector<float> corner_value, corner_lo, corner_hi;
+    std::vector<uint32_t> corner_decision;
     // Per octant of a split block, and per sibling cell: its compacted tape (prune_level.cpp).
     std::vector<uint32_t> octants[8];
     std::vector<uint32_t> cell_tapes[8];
@@ -592,8 +596,11 @@ struct CellScratch {
 
 // Stage 1: evaluates `tape` at the cell centre, bounds every entry over the cell and decides
 // every operator (math::kKeepBoth / kLeftWins / kRightWins). Returns the root's value.
+// `sub_box`: bound it as refine_cell bounds a sub-box (with interval bounds, an undecided
+// operator's range is its range over its operands' ranges alone, not also intersected with
+// the Lipschitz range around its value, which it holds up to rounding).
 float evaluate_cell(const Scene& scene, std::span<const uint32_t> tape, const CellBox& box,
-                    CellBounds bounds, CellScratch& s);
+                    CellBounds bounds, CellScratch& s, bool sub_box = false);
 
 // Stage 2: whether the surface may be in the cell (false = far-field), and if not, the
 // far-field constant (sign of f, |c| <= |f| over the cell).
@@ -641,9 +648,38 @@ void compact_siblings(const Scene& scene, std::span<const uint32_t> tape, uint32
 // the tape could be decided in the sub-box holding the centre (blend_may_decide). Neither
 // changes the results, only the work: with neither an operator to try nor a far-field test that
 // could pass, nothing is evaluated.
+// With `corners`, its first batch, the 8 corner sub-boxes, was evaluated by refine_corners.
+struct RefineCorners;
 bool refine_cell(const Scene& scene, std::span<const uint32_t> tape, const CellBox& box,
                  uint32_t subdivisions, CellBounds bounds, bool far_field, float far_field_c,
-                 float value, bool may_decide, CellScratch& s, float& constant);
+                 float value, bool may_decide, CellScratch& s, float& constant,
+                 const RefineCorners* corners = nullptr);
+
+// Whether refine_cell evaluates anything for a cell (`any`; else it returns at once and keeps
+// every operator), and whether its far-field test may pass (`far`: refine_far_possible), which
+// reads values, where decisions read ranges only.
+struct RefineNeed {
+    bool any = false, far = false;
+};
+RefineNeed refine_need(const Scene& scene, std::span<const uint32_t> tape, const CellBox& box,
+                       bool far_field, float far_field_c, float value, bool may_decide);
+
+// refine_cell's first batch for `count` <= kSiblingLanes cells of one level that share one
+// `tape`, in one pass over it: the 8 corner sub-boxes of each (of an S³ split), the same
+// results bit for bit, kBlock lanes per cell, with the values where `values` (some cell's
+// far-field test may pass). Appended to s.corner_*; returns their offset there, from which
+// cell j's RefineCorners is {offset, 8 · count, 8 · j} (8: kCornerSubBoxes). On a sibling group's
+// cells, which share their compacted tape more often than not (trees: 3 of 4 near cells), a tape
+// entry's fixed costs are paid once for the group, not once per cell.
+uint32_t refine_corners(const Scene& scene, std::span<const uint32_t> tape, const CellBox* boxes,
+                        uint32_t count, uint32_t subdivisions, CellBounds bounds, bool values,
+                        CellScratch& s);
+constexpr uint32_t kCornerSubBoxes = 8;
+struct RefineCorners {
+    uint32_t offset = 0;  // of the group's results in s.corner_*
+    uint32_t stride = 0;  // lanes per tape entry: 8 per cell of the group
+    uint32_t lane = 0;    // the cell's first lane
+};
 
 // Whether an operator of blend radius k whose operands are worth a and b (signs applied) at a
 // cell's centre might be decided in every sub-box of the cell (refine_cell). It must then be

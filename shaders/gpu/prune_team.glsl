@@ -321,9 +321,13 @@ void main() {
                             lo = rlo;
                             hi = rhi;
                         } else if (interval) {
+                            // Refinement: the operator's range alone (refine_cell's
+                            // OperatorMode::kRefine, prune_cell.cpp), which holds the
+                            // Lipschitz range up to rounding.
                             vec2 r2 = operator_range(sgn, k, llo, lhi, rlo, rhi);
-                            lo = max(v - spread, r2.x);
-                            hi = min(v + spread, r2.y);
+                            bool refining = pc.mode == 3u;
+                            lo = refining ? r2.x : max(v - spread, r2.x);
+                            hi = refining ? r2.y : min(v + spread, r2.y);
                         } else {
                             lo = v - spread;
                             hi = v + spread;

@@ -38,11 +38,12 @@ void CellScratch::reserve_siblings(size_t n) {
 size_t CellScratch::bytes() const {
     size_t b = 0;
     const auto add = [&b](const auto& v) { b += v.capacity() * sizeof(v[0]); };
-    for (const auto* v : {&value, &lo, &hi, &lane_value, &lane_lo, &lane_hi, &sib_value, &sib_lo,
-                          &sib_hi, &sub_offset[0], &sub_offset[1], &sub_offset[2]})
+    for (const auto* v :
+         {&value, &lo, &hi, &lane_value, &lane_lo, &lane_hi, &sib_value, &sib_lo, &sib_hi,
+          &corner_value, &corner_lo, &corner_hi, &sub_offset[0], &sub_offset[1], &sub_offset[2]})
         add(*v);
     for (const auto* v : {&left, &right, &decision, &stack, &lane_decision, &sib_decision,
-                          &refine_candidates, &refine_needed})
+                          &corner_decision, &refine_candidates, &refine_needed})
         add(*v);
     add(alive);
     add(negate);
@@ -55,8 +56,10 @@ size_t CellScratch::bytes() const {
 
 namespace {
 
-// Sub-boxes evaluated together by refine_cell.
+// Sub-boxes evaluated together by refine_cell, and by refine_corners (the 8 corners of each of
+// up to kSiblingLanes cells).
 constexpr uint32_t kLanes = 32;
+constexpr uint32_t kCornerLanes = kCornerSubBoxes * kSiblingLanes;
 
 // Boxes are evaluated in blocks of lanes::kBlock lanes (lanes.hpp): every loop over boxes runs
 // over structure-of-arrays data to a multiple of the block, with the same results bit for bit as
@@ -64,12 +67,13 @@ constexpr uint32_t kLanes = 32;
 using lanes::kBlock;
 using lanes::lanes_for;
 using lanes::lanes_of;
+static_assert(kBlock == kCornerSubBoxes, "refine_corners gives each cell one block: its corners");
 
-// The centres of up to kLanes boxes, coordinate by coordinate, and the lanes to compute.
+// The centres of up to kCornerLanes boxes, coordinate by coordinate, and the lanes to compute.
 struct BoxLanes {
-    alignas(32) float x[kLanes];
-    alignas(32) float y[kLanes];
-    alignas(32) float z[kLanes];
+    alignas(32) float x[kCornerLanes];
+    alignas(32) float y[kCornerLanes];
+    alignas(32) float z[kCornerLanes];
     uint32_t lanes = 0;  // 1 for a single box, else the boxes rounded up to whole blocks
 };
 
@@ -85,15 +89,24 @@ BoxLanes box_lanes(const vec3* centres, uint32_t count) {
     return c;
 }
 
+// What an undecided operator's range is, and whether its value is computed (decide_boxes):
+//   kSiblings:     the value, and the tighter of its Lipschitz range and (interval bounds) its
+//                  range over its operands' ranges;
+//   kRefine:       refinement's sub-boxes (interval bounds): the value, and its range over its
+//                  operands' ranges alone, which holds the Lipschitz range up to rounding;
+//   kRefineRanges: the same ranges without the values (their rows of `value` hold nothing of
+//                  use): refinement's decisions read none, only its far-field test (the root's).
+// Refinement's ranges do not depend on whether values are computed, so neither do its results.
+// With Lipschitz bounds every mode is kSiblings.
+enum class OperatorMode { kSiblings, kRefine, kRefineRanges };
+
 // Where evaluate_boxes writes: per tape entry e and box b, index e · stride + b
-// (stride >= the lanes computed). Without `operator_values` (interval bounds only), operators'
-// values are not computed and their rows of `value` hold nothing of use: an operator's range is
-// then its range over its operands' ranges alone (see decide_boxes).
+// (stride >= the lanes computed).
 struct LaneArrays {
     float *value, *lo, *hi;
     uint32_t* decision;
     uint32_t stride;
-    bool operator_values = true;
+    OperatorMode mode = OperatorMode::kSiblings;
 };
 
 // A primitive's range over each box: the Lipschitz range around its value, tightened by the
@@ -121,15 +134,15 @@ void primitive_ranges(const PrimitiveBound pb, const BoxLanes& c, vec3 half, flo
 }
 
 // One operator over `count` boxes, from its operands' values and ranges: the decision, the
-// value, and the range (a skipped operator's range is its winner's; else the tighter of the
-// Lipschitz range and, with interval bounds, the operator's range over its operands' ranges).
+// value (kValue), and the range (a skipped operator's range is its winner's; else, with
+// kLipschitz, the Lipschitz range around the value, tightened with interval bounds by the
+// operator's range over its operands' ranges; without, that range alone: OperatorMode). The
+// operator's range holds the Lipschitz range: every operator is 1-Lipschitz in the max-norm of
+// its operands and shift-invariant (op(a − t, b − t) = op(a, b) − t), and each operand's range
+// holds its own Lipschitz range, so op(a_lo, b_lo) >= op(a, b) − max(L_a, L_b)·R (the
+// operator's L is that max), and alike above; the two differ by float rounding only.
 // Computed for every box and then selected, without branches, so the loop vectorizes.
-// Without kValue (interval bounds only) the value is not computed, nor the Lipschitz range
-// around it, which the operator's range already holds: every operator is 1-Lipschitz in the
-// max-norm of its operands and shift-invariant (op(a − t, b − t) = op(a, b) − t), and each
-// operand's range holds its own Lipschitz range, so op(a_lo, b_lo) >= op(a, b) − max(L_a, L_b)·R
-// (the operator's L is that max), and alike above; the two differ by float rounding only.
-template <uint32_t W, bool kInterval, bool kValue = true>
+template <uint32_t W, bool kInterval, bool kValue, bool kLipschitz>
 void decide_boxes(uint32_t lanes, float sgn, float k, float spread, const float* __restrict va,
                   const float* __restrict la, const float* __restrict ha,
                   const float* __restrict vb, const float* __restrict lb,
@@ -138,22 +151,20 @@ void decide_boxes(uint32_t lanes, float sgn, float k, float spread, const float*
     for (uint32_t b = 0; b < lanes_of<W>(lanes); ++b) {
         const float a_lo = la[b], a_hi = ha[b], b_lo = lb[b], b_hi = hb[b];
         const uint32_t dec = math::prune_decision(sgn, k, a_lo, a_hi, b_lo, b_hi);
-        float lo, hi;
+        static_assert(kInterval || (kValue && kLipschitz), "Lipschitz bounds need the value");
+        float val = 0, lo = 0, hi = 0;
         if constexpr (kValue) {
-            const float val = math::apply_operator(sgn, k, va[b], vb[b]);
+            val = math::apply_operator(sgn, k, va[b], vb[b]);
             v[b] = val;
+        }
+        if constexpr (kLipschitz) {
             lo = val - spread;
             hi = val + spread;
-            if constexpr (kInterval) {
-                const vec2 r2 = math::operator_range(sgn, k, a_lo, a_hi, b_lo, b_hi);
-                lo = std::max(lo, r2.x);
-                hi = std::min(hi, r2.y);
-            }
-        } else {
-            static_assert(kInterval, "an operator's range without its value needs intervals");
+        }
+        if constexpr (kInterval) {
             const vec2 r2 = math::operator_range(sgn, k, a_lo, a_hi, b_lo, b_hi);
-            lo = r2.x;
-            hi = r2.y;
+            lo = kLipschitz ? std::max(lo, r2.x) : r2.x;
+            hi = kLipschitz ? std::min(hi, r2.y) : r2.y;
         }
         const bool left_wins = dec == math::kLeftWins;
         const bool right_wins = dec == math::kRightWins;
@@ -199,13 +210,18 @@ void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLa
             const float* __restrict lb = out.lo + ib;
             const float* __restrict hb = out.hi + ib;
             uint32_t* __restrict d = out.decision + at;
-            if (interval && !out.operator_values)
-                decide_boxes<W, true, false>(lanes, sgn, k, spread, va, la, ha, vb, lb, hb, d, v, l,
-                                             h);
-            else if (interval)
-                decide_boxes<W, true>(lanes, sgn, k, spread, va, la, ha, vb, lb, hb, d, v, l, h);
+            const auto decide = [&]<bool kI, bool kV, bool kL>() {
+                decide_boxes<W, kI, kV, kL>(lanes, sgn, k, spread, va, la, ha, vb, lb, hb, d, v, l,
+                                            h);
+            };
+            if (!interval)
+                decide.template operator()<false, true, true>();
+            else if (out.mode == OperatorMode::kSiblings)
+                decide.template operator()<true, true, true>();
+            else if (out.mode == OperatorMode::kRefine)
+                decide.template operator()<true, true, false>();
             else
-                decide_boxes<W, false>(lanes, sgn, k, spread, va, la, ha, vb, lb, hb, d, v, l, h);
+                decide.template operator()<true, false, false>();
         }
         if (math::tape_negated(w))
             for (uint32_t b = 0; b < lanes_of<W>(lanes); ++b) {
@@ -334,10 +350,12 @@ void set_lane_isa(LaneIsa isa) {
 }
 
 float evaluate_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box,
-                    CellBounds bounds, CellScratch& s) {
+                    CellBounds bounds, CellScratch& s, bool sub_box) {
     s.reserve(tape.size());
     evaluate_boxes(sc, tape, box_lanes(&box.centre, 1), box.half, box.radius, bounds,
-                   {s.value.data(), s.lo.data(), s.hi.data(), s.decision.data(), 1}, s);
+                   {s.value.data(), s.lo.data(), s.hi.data(), s.decision.data(), 1,
+                    sub_box ? OperatorMode::kRefine : OperatorMode::kSiblings},
+                   s);
     return s.value[tape.size() - 1];
 }
 
@@ -444,25 +462,80 @@ void candidates_subtrees(const Scene& sc, std::span<const uint32_t> tape, CellSc
         if (mark[i] != 0) needed.push_back(i);
 }
 
+// Links each operator entry of `tape` to its operands (s.left, s.right), as a full
+// evaluate_lanes does.
+void link_tape(const Scene& sc, std::span<const uint32_t> tape, CellScratch& s) {
+    uint32_t top = 0;
+    for (uint32_t i = 0; i < uint32_t(tape.size()); ++i) {
+        if (!sc.is_primitive(math::tape_node(tape[i]))) {
+            s.right[i] = s.stack[--top];
+            s.left[i] = s.stack[--top];
+        }
+        s.stack[top++] = i;
+    }
+}
+
 }  // namespace
+
+RefineNeed refine_need(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box,
+                       bool far_field, float far_field_c, float value, bool may_decide) {
+    const uint32_t n = uint32_t(tape.size());
+    const float L = sc.lipschitz[math::tape_node(tape[n - 1])];
+    const float clearance = math::far_field_clearance(far_field_c, L, box.radius);
+    // sigma: a lone primitive's similarity scale (refine_far_possible).
+    const float sigma = n == 1 ? sc.bound[sc.primitive[math::tape_node(tape[0])]].scale : 0.0f;
+    RefineNeed need;
+    need.far = far_field && math::refine_far_possible(value, clearance, sigma, box.half);
+    need.any = may_decide || need.far;
+    return need;
+}
+
+uint32_t refine_corners(const Scene& sc, std::span<const uint32_t> tape, const CellBox* boxes,
+                        uint32_t count, uint32_t S, CellBounds bounds, bool values,
+                        CellScratch& s) {
+    const uint32_t n = uint32_t(tape.size()), stride = kCornerSubBoxes * count;
+    const uint32_t offset = uint32_t(s.corner_value.size());
+    const size_t size = offset + size_t(n) * stride;
+    for (auto* v : {&s.corner_value, &s.corner_lo, &s.corner_hi}) v->resize(size);
+    s.corner_decision.resize(size);
+    s.reserve(n);
+    if (s.sub_offset_of != S) {
+        sub_box_order(S, s.sub_offset);
+        s.sub_offset_of = S;
+    }
+    // Each cell's corners as refine_cell's first batch computes them.
+    const vec3 sub_half = boxes[0].half / float(S);
+    BoxLanes c;
+    c.lanes = stride;
+    for (uint32_t j = 0; j < count; ++j) {
+        const vec3 corner = boxes[j].centre - boxes[j].half;
+        for (uint32_t b = 0; b < kBlock; ++b) {
+            c.x[kBlock * j + b] = corner.x + s.sub_offset[0][b] * sub_half.x;
+            c.y[kBlock * j + b] = corner.y + s.sub_offset[1][b] * sub_half.y;
+            c.z[kBlock * j + b] = corner.z + s.sub_offset[2][b] * sub_half.z;
+        }
+    }
+    evaluate_boxes(sc, tape, c, sub_half, math::length(sub_half), bounds,
+                   {s.corner_value.data() + offset, s.corner_lo.data() + offset,
+                    s.corner_hi.data() + offset, s.corner_decision.data() + offset, stride,
+                    values ? OperatorMode::kRefine : OperatorMode::kRefineRanges},
+                   s);
+    return offset;
+}
 
 bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box, uint32_t S,
                  CellBounds bounds, bool far_field, float far_field_c, float value, bool may_decide,
-                 CellScratch& s, float& constant) {
+                 CellScratch& s, float& constant, const RefineCorners* corners) {
     const uint32_t n = uint32_t(tape.size());
     s.reserve(n);
     const float L = sc.lipschitz[math::tape_node(tape[n - 1])];
     const float clearance = math::far_field_clearance(far_field_c, L, box.radius);
-    // Whether the far-field test can pass at all (refine_far_possible; sigma: a lone primitive's
-    // similarity scale).
-    const float sigma = n == 1 ? sc.bound[sc.primitive[math::tape_node(tape[0])]].scale : 0.0f;
-    const bool far_possible =
-        far_field && math::refine_far_possible(value, clearance, sigma, box.half);
-    bool all_above = far_possible, all_below = far_possible;
+    const RefineNeed need = refine_need(sc, tape, box, far_field, far_field_c, value, may_decide);
+    bool all_above = need.far, all_below = need.far;
     float lowest = INFINITY, highest = -INFINITY;
     // s.decision holds the sub-boxes' common decisions so far: none yet.
     std::fill_n(s.decision.begin(), n, math::kKeepBoth);
-    if (!may_decide && !far_possible) return true;
+    if (!need.any) return true;
     // The candidates: the operators that may yet be decided alike in every sub-box (none when
     // `may_decide` says that none is decided in the sub-box holding the centre), and what a
     // batch evaluates: the whole tape at first and while the far-field test is open (it reads
@@ -490,35 +563,52 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
     const uint32_t total = S * S * S;
     bool first = true;
     for (uint32_t at = 0; at < total;) {
-        // The first batch is one block, the others kLanes (sub_box_order).
+        // The first batch is one block, the others kLanes (sub_box_order). Where the batch's
+        // results are: per entry e and lane b, at e · stride + b.
         const uint32_t count = std::min(at == 0 ? kBlock : kLanes, total - at);
-        BoxLanes c;
-        c.lanes = lanes_for(count);
-        const float* ox = s.sub_offset[0].data() + at;
-        const float* oy = s.sub_offset[1].data() + at;
-        const float* oz = s.sub_offset[2].data() + at;
-        for (uint32_t b = 0; b < c.lanes; ++b) {
-            c.x[b] = corner.x + ox[b] * sub_half.x;
-            c.y[b] = corner.y + oy[b] * sub_half.y;
-            c.z[b] = corner.z + oz[b] * sub_half.z;
+        uint32_t lanes = lanes_for(count), stride = kLanes;
+        const float *value_at = s.lane_value.data(), *lo_at = s.lane_lo.data(),
+                    *hi_at = s.lane_hi.data();
+        const uint32_t* decision_at = s.lane_decision.data();
+        if (first && corners) {
+            // Evaluated already, with other cells of the same tape (refine_corners).
+            const size_t base = corners->offset + corners->lane;
+            value_at = s.corner_value.data() + base;
+            lo_at = s.corner_lo.data() + base;
+            hi_at = s.corner_hi.data() + base;
+            decision_at = s.corner_decision.data() + base;
+            stride = corners->stride;
+            link_tape(sc, tape, s);
+        } else {
+            BoxLanes c;
+            c.lanes = lanes;
+            const float* ox = s.sub_offset[0].data() + at;
+            const float* oy = s.sub_offset[1].data() + at;
+            const float* oz = s.sub_offset[2].data() + at;
+            for (uint32_t b = 0; b < c.lanes; ++b) {
+                c.x[b] = corner.x + ox[b] * sub_half.x;
+                c.y[b] = corner.y + oy[b] * sub_half.y;
+                c.z[b] = corner.z + oz[b] * sub_half.z;
+            }
+            // The far-field test reads the root's value (its rounding margin), which needs
+            // every operator's; the decisions need none.
+            evaluate_boxes(
+                sc, tape, c, sub_half, sub_radius, bounds,
+                {s.lane_value.data(), s.lane_lo.data(), s.lane_hi.data(), s.lane_decision.data(),
+                 kLanes,
+                 all_above || all_below ? OperatorMode::kRefine : OperatorMode::kRefineRanges},
+                s, subset ? std::span<const uint32_t>(needed) : std::span<const uint32_t>());
         }
-        // The far-field test reads the root's value (its rounding margin), which needs every
-        // operator's; the decisions need none (interval bounds: refinement's only ones).
-        evaluate_boxes(
-            sc, tape, c, sub_half, sub_radius, bounds,
-            {s.lane_value.data(), s.lane_lo.data(), s.lane_hi.data(), s.lane_decision.data(),
-             kLanes, all_above || all_below || bounds != CellBounds::kInterval},
-            s, subset ? std::span<const uint32_t>(needed) : std::span<const uint32_t>());
         at += count;
         // Whether each candidate is still decided the same way in every sub-box so far. The
         // lanes past the batch repeat its last sub-box, so they may be folded in too (here and
         // below), and an operator kept in some sub-box stays kept.
         size_t kept = 0;
         for (const uint32_t e : candidates) {
-            const uint32_t* d = s.lane_decision.data() + size_t(e) * kLanes;
+            const uint32_t* d = decision_at + size_t(e) * stride;
             const uint32_t common = first ? d[0] : s.decision[e];
             uint32_t differ = 0;
-            for (uint32_t b = 0; b < c.lanes; ++b) differ |= d[b] ^ common;
+            for (uint32_t b = 0; b < lanes; ++b) differ |= d[b] ^ common;
             s.decision[e] = differ == 0 ? common : math::kKeepBoth;
             if (s.decision[e] != math::kKeepBoth) candidates[kept++] = e;
         }
@@ -527,11 +617,10 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
         // The far-field test of is_near_field on each sub-box's root range, against the whole
         // cell's clearance, while every sub-box so far has cleared it.
         if (all_above || all_below) {
-            const size_t root = size_t(n - 1) * kLanes;
-            for (uint32_t b = 0; b < c.lanes; ++b) {
-                const vec2 range =
-                    math::far_field_range(s.lane_value[root + b], s.lane_lo[root + b],
-                                          s.lane_hi[root + b], L, sub_radius);
+            const size_t root = size_t(n - 1) * stride;
+            for (uint32_t b = 0; b < lanes; ++b) {
+                const vec2 range = math::far_field_range(value_at[root + b], lo_at[root + b],
+                                                         hi_at[root + b], L, sub_radius);
                 all_above = all_above && math::clears_above(range.x, clearance);
                 all_below = all_below && math::clears_below(range.y, clearance);
                 lowest = std::min(lowest, range.x);

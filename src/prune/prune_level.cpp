@@ -121,9 +121,56 @@ class StepPruner {
         uint32_t decidable = ~0u;
         compact_siblings(sc_, parent, near, s, s.cell_tapes, prims,
                          geo_.finest && opt_.refine > 1 ? &decidable : nullptr);
+        RefineCorners corners[kSiblingLanes];
+        if (geo_.finest && opt_.refine > 1)
+            refine_corners_of(parent, boxes, count, near, decidable, corners);
         for (uint32_t c = 0; c < count; ++c)
             store_cell(*cells[c], boxes[c], parent.size(), sibling_value(s, parent, c), far[c],
-                       constant[c], s.cell_tapes[c], prims[c], (decidable >> c & 1) != 0);
+                       constant[c], s.cell_tapes[c], prims[c], (decidable >> c & 1) != 0,
+                       corners[c].stride != 0 ? &corners[c] : nullptr);
+    }
+
+    // The first batches of the near cells (bits of `near`) that store_cell refines, evaluated
+    // together by tape (refine_corners) where two or more share one; the others keep
+    // corners[c].stride = 0 and are evaluated alone.
+    void refine_corners_of(std::span<const uint32_t> parent, const CellBox* boxes, uint32_t count,
+                           uint32_t near, uint32_t decidable, RefineCorners* corners) {
+        CellScratch& s = s_;
+        s.corner_value.clear();
+        s.corner_lo.clear();
+        s.corner_hi.clear();
+        s.corner_decision.clear();
+        uint32_t open = 0;  // cells whose refinement evaluates something, not yet grouped
+        bool far[kSiblingLanes] = {};
+        for (uint32_t c = 0; c < count; ++c) {
+            const std::vector<uint32_t>& tape = s.cell_tapes[c];
+            if ((near >> c & 1) == 0 || tape.empty() || tape.size() > math::kRefineMaxTape)
+                continue;
+            const RefineNeed need =
+                refine_need(sc_, tape, boxes[c], opt_.far_field, opt_.far_field_c,
+                            sibling_value(s, parent, c), (decidable >> c & 1) != 0);
+            far[c] = need.far;
+            open |= need.any ? 1u << c : 0u;
+        }
+        while (open != 0) {
+            const uint32_t lead = uint32_t(std::countr_zero(open));
+            uint32_t group[kSiblingLanes], m = 0;
+            CellBox gboxes[kSiblingLanes];
+            bool values = false;
+            for (uint32_t rest = open; rest != 0; rest &= rest - 1) {
+                const uint32_t c = uint32_t(std::countr_zero(rest));
+                if (c != lead && s.cell_tapes[c] != s.cell_tapes[lead]) continue;
+                group[m] = c;
+                gboxes[m++] = boxes[c];
+                values = values || far[c];
+                open &= ~(1u << c);
+            }
+            if (m < 2) continue;
+            const uint32_t offset = refine_corners(sc_, s.cell_tapes[lead], gboxes, m, opt_.refine,
+                                                   opt_.bounds, values, s);
+            for (uint32_t j = 0; j < m; ++j)
+                corners[group[j]] = {offset, kCornerSubBoxes * m, kCornerSubBoxes * j};
+        }
     }
 
     // Stores a cell pruned from a parent tape of `parent_size` words: its centre value, its
@@ -131,7 +178,7 @@ class StepPruner {
     // `may_decide`: refine_cell's hint, whether some operator of the tape might be decided.
     void store_cell(PrunedCell& cell, const CellBox& box, size_t parent_size, float value, bool far,
                     float constant, std::span<const uint32_t> compacted, uint32_t prims,
-                    bool may_decide) {
+                    bool may_decide, const RefineCorners* corners = nullptr) {
         CellScratch& s = s_;
         LevelChunk& out = out_;
         cell.value = value;
@@ -149,7 +196,7 @@ class StepPruner {
             // Decided again over the cell's sub-boxes, from the tape just made.
             float refined_constant = 0;
             if (!refine_cell(sc_, compacted, box, opt_.refine, opt_.bounds, opt_.far_field,
-                             opt_.far_field_c, value, may_decide, s, refined_constant)) {
+                             opt_.far_field_c, value, may_decide, s, refined_constant, corners)) {
                 out.words.resize(at);
                 cell.tape = PrunedCell::kFarField;
                 cell.bound = refined_constant;
