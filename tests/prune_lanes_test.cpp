@@ -315,10 +315,7 @@ TEST(PruneLanes, RefineCornersOfAGroupEqualEachCellAlone) {
                 need_values = need_values ||
                               refine_need(sc, tape, boxes[c], far_field, 2.0f, values[c], true).far;
             }
-            grouped.corner_value.clear();
-            grouped.corner_lo.clear();
-            grouped.corner_hi.clear();
-            grouped.corner_decision.clear();
+            grouped.corner_used = 0;
             // A group evaluated before this one: offsets past zero.
             const uint32_t before =
                 refine_corners(sc, tape, boxes, 2, S, bounds, need_values, grouped);

@@ -582,10 +582,11 @@ struct CellScratch {
     // evaluate_siblings: the same per tape entry for up to kSiblingLanes sibling cells
     std::vector<float> sib_value, sib_lo, sib_hi;
     std::vector<uint32_t> sib_decision;
-    // refine_corners: the same for the corner sub-boxes of groups of cells, group after group
-    // (cleared by its caller)
+    // refine_corners: the same for the corner sub-boxes of groups of cells, group after group,
+    // of which corner_used words are taken (reset by its caller)
     std::vector<float> corner_value, corner_lo, corner_hi;
     std::vector<uint32_t> corner_decision;
+    uint32_t corner_used = 0;
     // Per octant of a split block, and per sibling cell: its compacted tape (prune_level.cpp).
     std::vector<uint32_t> octants[8];
     std::vector<uint32_t> cell_tapes[8];

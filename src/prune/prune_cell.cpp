@@ -494,10 +494,13 @@ uint32_t refine_corners(const Scene& sc, std::span<const uint32_t> tape, const C
                         uint32_t count, uint32_t S, CellBounds bounds, bool values,
                         CellScratch& s) {
     const uint32_t n = uint32_t(tape.size()), stride = kCornerSubBoxes * count;
-    const uint32_t offset = uint32_t(s.corner_value.size());
+    const uint32_t offset = s.corner_used;
     const size_t size = offset + size_t(n) * stride;
-    for (auto* v : {&s.corner_value, &s.corner_lo, &s.corner_hi}) v->resize(size);
-    s.corner_decision.resize(size);
+    s.corner_used = uint32_t(size);
+    if (s.corner_value.size() < size) {
+        for (auto* v : {&s.corner_value, &s.corner_lo, &s.corner_hi}) v->resize(size);
+        s.corner_decision.resize(size);
+    }
     s.reserve(n);
     if (s.sub_offset_of != S) {
         sub_box_order(S, s.sub_offset);

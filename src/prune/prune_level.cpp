@@ -136,10 +136,7 @@ class StepPruner {
     void refine_corners_of(std::span<const uint32_t> parent, const CellBox* boxes, uint32_t count,
                            uint32_t near, uint32_t decidable, RefineCorners* corners) {
         CellScratch& s = s_;
-        s.corner_value.clear();
-        s.corner_lo.clear();
-        s.corner_hi.clear();
-        s.corner_decision.clear();
+        s.corner_used = 0;
         uint32_t open = 0;  // cells whose refinement evaluates something, not yet grouped
         bool far[kSiblingLanes] = {};
         for (uint32_t c = 0; c < count; ++c) {
