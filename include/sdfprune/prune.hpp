@@ -579,9 +579,16 @@ struct CellScratch {
     // refine_cell: per tape entry, the values, ranges and decisions of a batch of sub-boxes
     std::vector<float> lane_value, lane_lo, lane_hi;
     std::vector<uint32_t> lane_decision;
-    // evaluate_siblings: the same per tape entry for up to kSiblingLanes sibling cells
+    // evaluate_siblings: the same per tape entry for sibling cells; where the lanes that
+    // sibling_value, sibling_is_near_field and compact_siblings read lie (entry e of lane c at
+    // offset + e · stride + first + c: SiblingLanes), and the words that groups of them hold,
+    // where evaluate_siblings writes next (sib_used; prune_level.cpp's octant groups)
     std::vector<float> sib_value, sib_lo, sib_hi;
     std::vector<uint32_t> sib_decision;
+    struct SiblingLanes {
+        uint32_t offset = 0, stride = 8, first = 0;
+    } sib_at;
+    uint32_t sib_used = 0;
     // refine_corners: the same for the corner sub-boxes of groups of cells, group after group,
     // of which corner_used words are taken (reset by its caller)
     std::vector<float> corner_value, corner_lo, corner_hi;
@@ -591,7 +598,7 @@ struct CellScratch {
     std::vector<uint32_t> octants[8];
     std::vector<uint32_t> cell_tapes[8];
     void reserve(size_t n);
-    void reserve_siblings(size_t n);
+    void reserve_siblings(size_t words);  // of each sib_* array
     size_t bytes() const;  // memory held (capacities), for PruneStats::prune_peak_bytes
 };
 
@@ -617,16 +624,27 @@ constexpr uint32_t kSiblingLanes = 8;
 // a time instead: the sibling arrays cost 128 bytes per tape word and thread (256 MB per thread
 // for a 1,000,000-sphere scene's full tape), the one-cell ones 30. Same results either way.
 constexpr uint32_t kSiblingMaxTape = 1u << 16;
+// Octants with tapes up to this long are evaluated together where they share one (8 lanes and
+// 128 bytes per word and octant: up to 4 MB per thread).
+constexpr uint32_t kSiblingGroupMaxTape = 1u << 12;
 
-// Stage 1 for the boxes centred at centres[0, count) with half sizes `half`.
+// Stage 1 for the boxes centred at centres[0, count) with half sizes `half`, count <=
+// kSiblingGroupLanes: written at s.sib_used, with a stride of the lanes rounded up to 8, and
+// s.sib_at set to them (lane c: box c).
 // `radius` is the boxes' half-diagonal as the caller computes it (the Lipschitz spread).
+constexpr uint32_t kSiblingGroupLanes = 64;
 void evaluate_siblings(const Scene& scene, std::span<const uint32_t> tape, const vec3* centres,
                        uint32_t count, vec3 half, float radius, CellBounds bounds, CellScratch& s);
 
 // The root's value at lane `lane`'s centre, after evaluate_siblings.
 inline float sibling_value(const CellScratch& s, std::span<const uint32_t> tape, uint32_t lane) {
-    return s.sib_value[(tape.size() - 1) * kSiblingLanes + lane];
+    return s
+        .sib_value[s.sib_at.offset + (tape.size() - 1) * s.sib_at.stride + s.sib_at.first + lane];
 }
+
+// Links each operator entry of `tape` to its operands (s.left, s.right), as evaluating the tape
+// does: for compact_siblings on lanes evaluated before another tape was.
+void link_tape(const Scene& scene, std::span<const uint32_t> tape, CellScratch& s);
 
 // Stage 2 for lane `lane` (boxes of half-diagonal `radius`).
 bool sibling_is_near_field(const Scene& scene, std::span<const uint32_t> tape, uint32_t lane,

@@ -28,8 +28,7 @@ void CellScratch::reserve(size_t n) {
     negate.resize(n);
 }
 
-void CellScratch::reserve_siblings(size_t n) {
-    const size_t want = n * kSiblingLanes;
+void CellScratch::reserve_siblings(size_t want) {
     if (sib_value.size() >= want) return;
     for (auto* v : {&sib_value, &sib_lo, &sib_hi}) v->resize(want);
     sib_decision.resize(want);
@@ -393,17 +392,22 @@ bool is_near_field(const Scene& sc, std::span<const uint32_t> tape, const CellBo
 
 void evaluate_siblings(const Scene& sc, std::span<const uint32_t> tape, const vec3* centres,
                        uint32_t count, vec3 half, float radius, CellBounds bounds, CellScratch& s) {
+    if (count > kSiblingGroupLanes) throw std::invalid_argument("evaluate_siblings: too many");
+    const BoxLanes c = box_lanes(centres, count);
+    const uint32_t stride = std::max(kSiblingLanes, c.lanes), offset = s.sib_used;
     s.reserve(tape.size());
-    s.reserve_siblings(tape.size());
-    evaluate_boxes(sc, tape, box_lanes(centres, count), half, radius, bounds,
-                   {s.sib_value.data(), s.sib_lo.data(), s.sib_hi.data(), s.sib_decision.data(),
-                    kSiblingLanes},
+    s.reserve_siblings(offset + tape.size() * stride);
+    s.sib_at = {offset, stride, 0};
+    evaluate_boxes(sc, tape, c, half, radius, bounds,
+                   {s.sib_value.data() + offset, s.sib_lo.data() + offset, s.sib_hi.data() + offset,
+                    s.sib_decision.data() + offset, stride},
                    s);
 }
 
 bool sibling_is_near_field(const Scene& sc, std::span<const uint32_t> tape, uint32_t lane,
                            float radius, float far_field_c, const CellScratch& s, float& constant) {
-    const size_t root = (tape.size() - 1) * kSiblingLanes + lane;
+    const size_t root =
+        s.sib_at.offset + (tape.size() - 1) * s.sib_at.stride + s.sib_at.first + lane;
     return root_is_near_field(s.sib_value[root], s.sib_lo[root], s.sib_hi[root],
                               sc.lipschitz[math::tape_node(tape.back())], radius, far_field_c,
                               constant);
@@ -462,8 +466,8 @@ void candidates_subtrees(const Scene& sc, std::span<const uint32_t> tape, CellSc
         if (mark[i] != 0) needed.push_back(i);
 }
 
-// Links each operator entry of `tape` to its operands (s.left, s.right), as a full
-// evaluate_lanes does.
+}  // namespace
+
 void link_tape(const Scene& sc, std::span<const uint32_t> tape, CellScratch& s) {
     uint32_t top = 0;
     for (uint32_t i = 0; i < uint32_t(tape.size()); ++i) {
@@ -474,8 +478,6 @@ void link_tape(const Scene& sc, std::span<const uint32_t> tape, CellScratch& s) 
         s.stack[top++] = i;
     }
 }
-
-}  // namespace
 
 RefineNeed refine_need(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box,
                        bool far_field, float far_field_c, float value, bool may_decide) {
@@ -671,7 +673,7 @@ void winner_lanes(const uint32_t* d, uint32_t& left_wins, uint32_t& right_wins) 
 }
 
 // Stage 3 for up to 8 lanes at once (kL: 1, or kSiblingLanes with the decision of entry e in
-// lane c at decision[e · kL + c]), for the lanes in `lanes` (bit c: lane c). One sweep of the
+// lane c at decision[e · stride + c]), for the lanes in `lanes` (bit c: lane c). One sweep of the
 // tape serves them all: per entry, a byte says in which lanes it is alive (s.alive) and one in
 // which its word is negated (s.negate). Each entry has one parent, which decides it first
 // (parents come after their children: a reverse sweep), so its bytes are set once:
@@ -684,8 +686,8 @@ void winner_lanes(const uint32_t* d, uint32_t& left_wins, uint32_t& right_wins) 
 // the lanes where refine_cell might decide some operator of their tapes (blend_may_decide).
 template <uint32_t kL>
 void compact_lanes(const Scene& sc, std::span<const uint32_t> tape, const uint32_t* decision,
-                   uint32_t lanes, CellScratch& s, std::vector<uint32_t>* out, uint32_t* prims,
-                   const float* values = nullptr, uint32_t* decidable = nullptr) {
+                   size_t stride, uint32_t lanes, CellScratch& s, std::vector<uint32_t>* out,
+                   uint32_t* prims, const float* values = nullptr, uint32_t* decidable = nullptr) {
     uint32_t may_decide = 0;
     const uint32_t n = uint32_t(tape.size());
     uint8_t* __restrict alive = s.alive.data();
@@ -698,7 +700,7 @@ void compact_lanes(const Scene& sc, std::span<const uint32_t> tape, const uint32
         const uint32_t here = alive[i];
         if (here == 0 || sc.is_primitive(math::tape_node(tape[i]))) continue;
         uint32_t left_wins, right_wins;
-        winner_lanes<kL>(decision + size_t(i) * kL, left_wins, right_wins);
+        winner_lanes<kL>(decision + size_t(i) * stride, left_wins, right_wins);
         left_wins &= here;
         right_wins &= here;
         const uint32_t keep = here & ~(left_wins | right_wins);
@@ -713,8 +715,8 @@ void compact_lanes(const Scene& sc, std::span<const uint32_t> tape, const uint32
         if (const uint32_t open = keep & ~may_decide; values && open != 0) {
             const float k = sc.blend[math::tape_node(tape[i])];
             for (uint32_t c = 0; c < kL; ++c)
-                if ((open >> c & 1) != 0 &&
-                    blend_may_decide(values[size_t(l) * kL + c], values[size_t(r) * kL + c], k))
+                if ((open >> c & 1) != 0 && blend_may_decide(values[size_t(l) * stride + c],
+                                                             values[size_t(r) * stride + c], k))
                     may_decide |= 1u << c;
         }
     }
@@ -738,15 +740,17 @@ void compact_lanes(const Scene& sc, std::span<const uint32_t> tape, const uint32
 uint32_t compact_tape(const Scene& sc, std::span<const uint32_t> tape, CellScratch& s,
                       std::vector<uint32_t>& out) {
     uint32_t prims = 0;
-    compact_lanes<1>(sc, tape, s.decision.data(), 1, s, &out, &prims);
+    compact_lanes<1>(sc, tape, s.decision.data(), 1, 1, s, &out, &prims);
     return prims;
 }
 
 void compact_siblings(const Scene& sc, std::span<const uint32_t> tape, uint32_t lanes,
                       CellScratch& s, std::vector<uint32_t>* out, uint32_t* prims,
                       uint32_t* decidable) {
-    compact_lanes<kSiblingLanes>(sc, tape, s.sib_decision.data(), lanes, s, out, prims,
-                                 decidable ? s.sib_value.data() : nullptr, decidable);
+    const size_t at = s.sib_at.offset + s.sib_at.first;
+    compact_lanes<kSiblingLanes>(sc, tape, s.sib_decision.data() + at, s.sib_at.stride, lanes, s,
+                                 out, prims, decidable ? s.sib_value.data() + at : nullptr,
+                                 decidable);
 }
 
 }  // namespace sdfprune

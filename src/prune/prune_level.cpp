@@ -95,17 +95,25 @@ class StepPruner {
     }
 
     // Prunes `count` <= kSiblingLanes cells of this level from one `parent` in one pass over
-    // it: the same results as prune_cell on each, in the same order.
+    // it: the same results as prune_cell on each, in the same order. With `evaluated`, stage 1
+    // was done already, with other cells of the same parent tape (prune_split_block).
     void prune_siblings(PrunedCell* const* cells, const CellBox* boxes, uint32_t count,
-                        std::span<const uint32_t> parent) {
+                        std::span<const uint32_t> parent,
+                        const CellScratch::SiblingLanes* evaluated = nullptr) {
         CellScratch& s = s_;
         if (parent.size() > kSiblingMaxTape) {
             for (uint32_t c = 0; c < count; ++c) prune_cell(*cells[c], parent, boxes[c]);
             return;
         }
-        vec3 centres[kSiblingLanes];
-        for (uint32_t c = 0; c < count; ++c) centres[c] = boxes[c].centre;
-        evaluate_siblings(sc_, parent, centres, count, proto_.half, proto_.radius, opt_.bounds, s);
+        if (evaluated) {
+            s.sib_at = *evaluated;
+            link_tape(sc_, parent, s);
+        } else {
+            vec3 centres[kSiblingLanes];
+            for (uint32_t c = 0; c < count; ++c) centres[c] = boxes[c].centre;
+            evaluate_siblings(sc_, parent, centres, count, proto_.half, proto_.radius, opt_.bounds,
+                              s);
+        }
         float constant[kSiblingLanes];
         bool far[kSiblingLanes];
         uint32_t prims[kSiblingLanes];
@@ -272,11 +280,54 @@ class StepPruner {
             }
             compact_siblings(sc_, parent, onear, s, s.octants, oprims);
         }
+        const auto octant_tape = [&](uint32_t o) {
+            return s.octants[o].size() < parent.size() ? std::span<const uint32_t>(s.octants[o])
+                                                       : parent;
+        };
+        const auto octant_cell = [&](uint32_t o, uint32_t c) {
+            const uint32_t ox = (o & 1) * hf, oy = ((o >> 1) & 1) * hf, oz = ((o >> 2) & 1) * hf;
+            return cell_box(b.origin.x + ox + c % hf, b.origin.y + oy + c / hf % hf,
+                            b.origin.z + oz + c / (hf * hf));
+        };
+        // Octants of one cell each way (8 cells) whose tapes are equal: their cells' stage 1 in
+        // one pass over the tape, 8 lanes per octant, before the octants are finished one by
+        // one in order. The same results: each lane is computed alone.
+        CellScratch::SiblingLanes evaluated[8];
+        bool grouped[8] = {};
+        s.sib_used = 0;
+        uint32_t open = 0;
+        for (uint32_t o = 0; o < 8 && hf == 2; ++o)
+            if (!ofar[o] && octant_tape(o).size() <= kSiblingGroupMaxTape) open |= 1u << o;
+        while (open != 0) {
+            const uint32_t lead = uint32_t(std::countr_zero(open));
+            const std::span<const uint32_t> tape = octant_tape(lead);
+            uint32_t members[8], m = 0;
+            for (uint32_t rest = open; rest != 0; rest &= rest - 1) {
+                const uint32_t o = uint32_t(std::countr_zero(rest));
+                const std::span<const uint32_t> t = octant_tape(o);
+                if (o != lead && !std::equal(t.begin(), t.end(), tape.begin(), tape.end()))
+                    continue;
+                members[m++] = o;
+                open &= ~(1u << o);
+            }
+            if (m < 2) continue;
+            vec3 centres[kSiblingGroupLanes];
+            for (uint32_t j = 0; j < m; ++j)
+                for (uint32_t c = 0; c < kSiblingLanes; ++c)
+                    centres[j * kSiblingLanes + c] = octant_cell(members[j], c).centre;
+            evaluate_siblings(sc_, tape, centres, m * kSiblingLanes, proto_.half, proto_.radius,
+                              opt_.bounds, s);
+            s.sib_used = s.sib_at.offset + uint32_t(tape.size()) * s.sib_at.stride;
+            for (uint32_t j = 0; j < m; ++j) {
+                evaluated[members[j]] = s.sib_at;
+                evaluated[members[j]].first = j * kSiblingLanes;
+                grouped[members[j]] = true;
+            }
+        }
         for (uint32_t o = 0; o < 8; ++o) {
             const uint32_t ox = (o & 1) * hf, oy = ((o >> 1) & 1) * hf, oz = ((o >> 2) & 1) * hf;
-            const std::span<const uint32_t> otape = s.octants[o].size() < parent.size()
-                                                        ? std::span<const uint32_t>(s.octants[o])
-                                                        : parent;
+            const std::span<const uint32_t> otape = octant_tape(o);
+            const CellScratch::SiblingLanes* pre = grouped[o] ? &evaluated[o] : nullptr;
             PrunedCell* group[kSiblingLanes];
             CellBox boxes[kSiblingLanes];
             uint32_t count = 0;
@@ -290,7 +341,7 @@ class StepPruner {
                             group[count] = &cell;
                             boxes[count] = box;
                             if (++count == kSiblingLanes) {
-                                prune_siblings(group, boxes, count, otape);
+                                prune_siblings(group, boxes, count, otape, pre);
                                 count = 0;
                             }
                             continue;
@@ -304,8 +355,9 @@ class StepPruner {
                         cell.value = ov[o] > 0 ? std::max(ov[o] - reach, oconst[o])
                                                : std::min(ov[o] + reach, oconst[o]);
                     }
-            if (count > 0) prune_siblings(group, boxes, count, otape);
+            if (count > 0) prune_siblings(group, boxes, count, otape, pre);
         }
+        s.sib_used = 0;
     }
 
   private:
