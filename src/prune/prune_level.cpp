@@ -289,9 +289,9 @@ class StepPruner {
             return cell_box(b.origin.x + ox + c % hf, b.origin.y + oy + c / hf % hf,
                             b.origin.z + oz + c / (hf * hf));
         };
-        // Octants of one cell each way (8 cells) whose tapes are equal: their cells' stage 1 in
-        // one pass over the tape, 8 lanes per octant, before the octants are finished one by
-        // one in order. The same results: each lane is computed alone.
+        // Octants of 2×2×2 cells (factor 4) whose tapes are equal: their cells' stage 1 in one
+        // pass over the tape, 8 lanes per octant, before the octants are finished one by one in
+        // order. The same results: each lane is computed alone.
         CellScratch::SiblingLanes evaluated[8];
         bool grouped[8] = {};
         s.sib_used = 0;
