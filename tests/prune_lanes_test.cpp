@@ -36,6 +36,13 @@ std::vector<LaneIsa> wide_isas() {
     return isas;
 }
 
+// The baseline and the wide instruction sets.
+std::vector<LaneIsa> every_isa() {
+    std::vector<LaneIsa> isas = wide_isas();
+    isas.insert(isas.begin(), LaneIsa::kBaseline);
+    return isas;
+}
+
 // The same scene pruned on every instruction set gives the same cells.
 void expect_isas_agree(const Scene& sc, const PruneOptions& o, const std::string& what) {
     LaneIsaScope scope;
@@ -193,8 +200,7 @@ TEST(PruneLanes, WideIsasEqualBaselineOnReferenceScenes) {
 // S = 2-4, both bounds, with and without the far field.
 TEST(PruneLanes, RefineCellEqualsEverySubBoxAlone) {
     LaneIsaScope scope;
-    std::vector<LaneIsa> isas = wide_isas();
-    isas.insert(isas.begin(), LaneIsa::kBaseline);
+    const std::vector<LaneIsa> isas = every_isa();
     uint32_t far = 0, decided = 0, undecided = 0;
     for (uint32_t i = 0; i < 24; ++i) {
         const test::RandomSceneSpec spec = test::varied_spec(i, 3 + i * 2);
@@ -284,8 +290,7 @@ TEST(PruneLanes, RefineCellEqualsEverySubBoxAlone) {
 // decisions, for groups of 2 to 8 cells of a block, on every instruction set.
 TEST(PruneLanes, RefineCornersOfAGroupEqualEachCellAlone) {
     LaneIsaScope scope;
-    std::vector<LaneIsa> isas = wide_isas();
-    isas.insert(isas.begin(), LaneIsa::kBaseline);
+    const std::vector<LaneIsa> isas = every_isa();
     uint32_t far = 0, decided = 0, undecided = 0;
     for (uint32_t i = 0; i < 20; ++i) {
         const test::RandomSceneSpec spec = test::varied_spec(i, 3 + i * 2);
