@@ -676,9 +676,10 @@ bool refine_cell(const Scene& scene, std::span<const uint32_t> tape, const CellB
 
 // Whether refine_cell evaluates anything for a cell (`any`; else it returns at once and keeps
 // every operator), and whether its far-field test may pass (`far`: refine_far_possible), which
-// reads values, where decisions read ranges only.
+// reads values, where decisions read ranges only; and the cell's far-field clearance.
 struct RefineNeed {
     bool any = false, far = false;
+    float clearance = 0;
 };
 RefineNeed refine_need(const Scene& scene, std::span<const uint32_t> tape, const CellBox& box,
                        bool far_field, float far_field_c, float value, bool may_decide);

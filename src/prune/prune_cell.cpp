@@ -466,6 +466,25 @@ void candidates_subtrees(const Scene& sc, std::span<const uint32_t> tape, CellSc
         if (mark[i] != 0) needed.push_back(i);
 }
 
+// Lanes [to, to + count) of `c`: the centres of sub-boxes [at, at + count) in visiting order of
+// the box with min corner `corner` split into sub-boxes of half sizes `sub_half`, as
+// sub_box_centre computes them (from s.sub_offset, made for S here if it was not).
+void sub_box_centres(CellScratch& s, uint32_t S, vec3 corner, vec3 sub_half, uint32_t at,
+                     uint32_t count, uint32_t to, BoxLanes& c) {
+    if (s.sub_offset_of != S) {
+        sub_box_order(S, s.sub_offset);
+        s.sub_offset_of = S;
+    }
+    const float* ox = s.sub_offset[0].data() + at;
+    const float* oy = s.sub_offset[1].data() + at;
+    const float* oz = s.sub_offset[2].data() + at;
+    for (uint32_t b = 0; b < count; ++b) {
+        c.x[to + b] = corner.x + ox[b] * sub_half.x;
+        c.y[to + b] = corner.y + oy[b] * sub_half.y;
+        c.z[to + b] = corner.z + oz[b] * sub_half.z;
+    }
+}
+
 }  // namespace
 
 void link_tape(const Scene& sc, std::span<const uint32_t> tape, CellScratch& s) {
@@ -483,11 +502,11 @@ RefineNeed refine_need(const Scene& sc, std::span<const uint32_t> tape, const Ce
                        bool far_field, float far_field_c, float value, bool may_decide) {
     const uint32_t n = uint32_t(tape.size());
     const float L = sc.lipschitz[math::tape_node(tape[n - 1])];
-    const float clearance = math::far_field_clearance(far_field_c, L, box.radius);
+    RefineNeed need;
+    need.clearance = math::far_field_clearance(far_field_c, L, box.radius);
     // sigma: a lone primitive's similarity scale (refine_far_possible).
     const float sigma = n == 1 ? sc.bound[sc.primitive[math::tape_node(tape[0])]].scale : 0.0f;
-    RefineNeed need;
-    need.far = far_field && math::refine_far_possible(value, clearance, sigma, box.half);
+    need.far = far_field && math::refine_far_possible(value, need.clearance, sigma, box.half);
     need.any = may_decide || need.far;
     return need;
 }
@@ -504,22 +523,12 @@ uint32_t refine_corners(const Scene& sc, std::span<const uint32_t> tape, const C
         s.corner_decision.resize(size);
     }
     s.reserve(n);
-    if (s.sub_offset_of != S) {
-        sub_box_order(S, s.sub_offset);
-        s.sub_offset_of = S;
-    }
     // Each cell's corners as refine_cell's first batch computes them.
     const vec3 sub_half = boxes[0].half / float(S);
     BoxLanes c;
     c.lanes = stride;
-    for (uint32_t j = 0; j < count; ++j) {
-        const vec3 corner = boxes[j].centre - boxes[j].half;
-        for (uint32_t b = 0; b < kBlock; ++b) {
-            c.x[kBlock * j + b] = corner.x + s.sub_offset[0][b] * sub_half.x;
-            c.y[kBlock * j + b] = corner.y + s.sub_offset[1][b] * sub_half.y;
-            c.z[kBlock * j + b] = corner.z + s.sub_offset[2][b] * sub_half.z;
-        }
-    }
+    for (uint32_t j = 0; j < count; ++j)
+        sub_box_centres(s, S, boxes[j].centre - boxes[j].half, sub_half, 0, kBlock, kBlock * j, c);
     evaluate_boxes(sc, tape, c, sub_half, math::length(sub_half), bounds,
                    {s.corner_value.data() + offset, s.corner_lo.data() + offset,
                     s.corner_hi.data() + offset, s.corner_decision.data() + offset, stride,
@@ -534,8 +543,8 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
     const uint32_t n = uint32_t(tape.size());
     s.reserve(n);
     const float L = sc.lipschitz[math::tape_node(tape[n - 1])];
-    const float clearance = math::far_field_clearance(far_field_c, L, box.radius);
     const RefineNeed need = refine_need(sc, tape, box, far_field, far_field_c, value, may_decide);
+    const float clearance = need.clearance;
     bool all_above = need.far, all_below = need.far;
     float lowest = INFINITY, highest = -INFINITY;
     // s.decision holds the sub-boxes' common decisions so far: none yet.
@@ -558,12 +567,6 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
     if (s.lane_decision.size() < size_t(n) * kLanes) s.lane_decision.resize(size_t(n) * kLanes);
     const vec3 sub_half = box.half / float(S);
     const float sub_radius = math::length(sub_half);
-    if (s.sub_offset_of != S) {
-        sub_box_order(S, s.sub_offset);
-        s.sub_offset_of = S;
-    }
-    // The sub-boxes' centres from the cell's corner and the sub-box size, as sub_box_centre
-    // computes them.
     const vec3 corner = box.centre - box.half;
     const uint32_t total = S * S * S;
     bool first = true;
@@ -587,14 +590,7 @@ bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox&
         } else {
             BoxLanes c;
             c.lanes = lanes;
-            const float* ox = s.sub_offset[0].data() + at;
-            const float* oy = s.sub_offset[1].data() + at;
-            const float* oz = s.sub_offset[2].data() + at;
-            for (uint32_t b = 0; b < c.lanes; ++b) {
-                c.x[b] = corner.x + ox[b] * sub_half.x;
-                c.y[b] = corner.y + oy[b] * sub_half.y;
-                c.z[b] = corner.z + oz[b] * sub_half.z;
-            }
+            sub_box_centres(s, S, corner, sub_half, at, lanes, 0, c);
             // The far-field test reads the root's value (its rounding margin), which needs
             // every operator's; the decisions need none.
             evaluate_boxes(

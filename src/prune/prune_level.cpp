@@ -5,6 +5,7 @@
 #include "prune_level.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <stdexcept>
 #include <vector>
 
@@ -57,6 +58,22 @@ class StoredTapes {
 };
 
 // One call's state: the cells of a range pruned into one LevelChunk.
+// Takes from `open` (bit i: item i) its lowest item and every other whose tape (tape_of(i)) is
+// equal to that one's; writes them to `taken` in order and returns how many.
+template <class TapeOf>
+uint32_t take_equal_tapes(uint32_t& open, const TapeOf& tape_of, uint32_t* taken) {
+    const std::span<const uint32_t> lead = tape_of(uint32_t(std::countr_zero(open)));
+    uint32_t m = 0;
+    for (uint32_t rest = open; rest != 0; rest &= rest - 1) {
+        const uint32_t i = uint32_t(std::countr_zero(rest));
+        const std::span<const uint32_t> t = tape_of(i);
+        if (m > 0 && !std::equal(t.begin(), t.end(), lead.begin(), lead.end())) continue;
+        taken[m++] = i;
+        open &= ~(1u << i);
+    }
+    return m;
+}
+
 class StepPruner {
   public:
     StepPruner(const Scene& sc, const PruneOptions& opt, const LevelGeometry& geo, CellScratch& s,
@@ -158,21 +175,19 @@ class StepPruner {
             open |= need.any ? 1u << c : 0u;
         }
         while (open != 0) {
-            const uint32_t lead = uint32_t(std::countr_zero(open));
-            uint32_t group[kSiblingLanes], m = 0;
+            uint32_t group[kSiblingLanes];
+            const uint32_t m = take_equal_tapes(
+                open, [&](uint32_t c) -> std::span<const uint32_t> { return s.cell_tapes[c]; },
+                group);
+            if (m < 2) continue;
             CellBox gboxes[kSiblingLanes];
             bool values = false;
-            for (uint32_t rest = open; rest != 0; rest &= rest - 1) {
-                const uint32_t c = uint32_t(std::countr_zero(rest));
-                if (c != lead && s.cell_tapes[c] != s.cell_tapes[lead]) continue;
-                group[m] = c;
-                gboxes[m++] = boxes[c];
-                values = values || far[c];
-                open &= ~(1u << c);
+            for (uint32_t j = 0; j < m; ++j) {
+                gboxes[j] = boxes[group[j]];
+                values = values || far[group[j]];
             }
-            if (m < 2) continue;
-            const uint32_t offset = refine_corners(sc_, s.cell_tapes[lead], gboxes, m, opt_.refine,
-                                                   opt_.bounds, values, s);
+            const uint32_t offset = refine_corners(sc_, s.cell_tapes[group[0]], gboxes, m,
+                                                   opt_.refine, opt_.bounds, values, s);
             for (uint32_t j = 0; j < m; ++j)
                 corners[group[j]] = {offset, kCornerSubBoxes * m, kCornerSubBoxes * j};
         }
@@ -296,21 +311,14 @@ class StepPruner {
         bool grouped[8] = {};
         s.sib_used = 0;
         uint32_t open = 0;
-        for (uint32_t o = 0; o < 8 && hf == 2; ++o)
-            if (!ofar[o] && octant_tape(o).size() <= kSiblingGroupMaxTape) open |= 1u << o;
+        if (hf == 2)
+            for (uint32_t o = 0; o < 8; ++o)
+                if (!ofar[o] && octant_tape(o).size() <= kSiblingGroupMaxTape) open |= 1u << o;
         while (open != 0) {
-            const uint32_t lead = uint32_t(std::countr_zero(open));
-            const std::span<const uint32_t> tape = octant_tape(lead);
-            uint32_t members[8], m = 0;
-            for (uint32_t rest = open; rest != 0; rest &= rest - 1) {
-                const uint32_t o = uint32_t(std::countr_zero(rest));
-                const std::span<const uint32_t> t = octant_tape(o);
-                if (o != lead && !std::equal(t.begin(), t.end(), tape.begin(), tape.end()))
-                    continue;
-                members[m++] = o;
-                open &= ~(1u << o);
-            }
+            uint32_t members[8];
+            const uint32_t m = take_equal_tapes(open, octant_tape, members);
             if (m < 2) continue;
+            const std::span<const uint32_t> tape = octant_tape(members[0]);
             vec3 centres[kSiblingGroupLanes];
             for (uint32_t j = 0; j < m; ++j)
                 for (uint32_t c = 0; c < kSiblingLanes; ++c)
