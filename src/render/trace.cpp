@@ -268,12 +268,13 @@ struct Lane {
     Next next = Next::kEval;
     bool inf_inverse = false;  // some lane of inv_dir (x, y, z) is ±inf (far_field_advance)
     float4 p;
-    std::span<const uint32_t> tape;
     PrunedGrid::Walk walk;  // kWalk: the lookup of p's cell
     int4 index;             // kWalk: p's finest cell
-    // The last near-field cell and its tape: consecutive steps near the surface often stay in
-    // one cell, and then need no lookup.
-    std::span<const uint32_t> near_tape;
+    // The tape kEval evaluates: the last near-field cell's (the full tree's, on the naive
+    // field). Consecutive steps near the surface often stay in one cell, and then need no
+    // lookup. (One copy only: a second, copied from it per step, cost a store-forwarding stall
+    // that perf put at 9 % of march's time on console.)
+    std::span<const uint32_t> tape;
     float4 near_lo = splat(INFINITY), near_hi = splat(-INFINITY);
     uint64_t evals = 0;  // node evaluations, added to the ray's counters when it is done
 };
@@ -333,17 +334,15 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
         l.p = min4(max4(l.o + l.dir * l.t, aabb_lo), aabb_hi);
         l.next = Lane::Next::kEval;
         if constexpr (kPruned) {
-            if (in_box(l.p, l.near_lo, l.near_hi)) {
-                l.tape = l.near_tape;
-                return true;
-            }
+            if (in_box(l.p, l.near_lo, l.near_hi)) return true;
             // p lies in the grid's box: every lookup finds a cell.
             const int4 i = l.index = field.finest_index(l.p);
             l.walk = field.g.walk_begin(uint32_t(i[0]), uint32_t(i[1]), uint32_t(i[2]));
+            // The walk's first word (the shortcut's entry: a small table, mostly in cache) is
+            // read at once; what it names is prefetched for the next turn.
+            field.g.walk_step(l.walk);
             __builtin_prefetch(l.walk.next());
             l.next = Lane::Next::kWalk;
-        } else {
-            l.tape = ctx.sc.full_tape;
         }
         return true;
     };
@@ -372,6 +371,7 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
         l.step = 0;
         l.near_lo = splat(INFINITY);
         l.near_hi = splat(-INFINITY);
+        if constexpr (!kPruned) l.tape = ctx.sc.full_tape;
         l.evals = 0;
         r.t = -1;
         return begin_step(l);
@@ -401,7 +401,6 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
                     return begin_step(l);
                 }
                 l.tape = field.g.tape_at(cell.tape);
-                l.near_tape = l.tape;
                 l.near_lo = lo;
                 l.near_hi = lo + geo.size;
                 // The tape is likely not in cache: evaluate it at the next turn.
