@@ -228,6 +228,11 @@ class PrunedGrid {
   public:
     const Scene& scene() const { return *scene_; }
     const Aabb& aabb() const { return scene_->aabb; }
+    // A box within aabb() that holds every near-field cell, hence the whole surface (f = 0 lies
+    // in no far-field cell): the bounds of the near-field cells of the level above the finest
+    // (the finest, on a one-level grid), one finest cell wider. Empty (min > max) when there is
+    // no near-field cell. Tracers march rays within it only.
+    const Aabb& near_box() const { return near_box_; }
     uint32_t resolution() const { return levels_.back().res; }
     vec3 cell_size() const { return cell_size_; }
     vec3 inv_cell_size() const { return inv_cell_size_; }  // what cell_index multiplies by
@@ -436,6 +441,8 @@ class PrunedGrid {
     std::vector<uint32_t> shortcut_;
     uint32_t shortcut_level_ = 0, shortcut_shift_ = 0, shortcut_res_ = 0;
     void build_shortcut();
+    Aabb near_box_;
+    void find_near_box();  // sets near_box_ (prune(), and update() after an edit)
     // The shortcut's entry of shortcut-level cell (x, y, z) (build_shortcut, and update()
     // where cells above it or the cell itself changed between near-field and far-field).
     uint32_t shortcut_entry(uint32_t x, uint32_t y, uint32_t z) const;

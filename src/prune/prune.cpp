@@ -345,6 +345,7 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     g.pool_.shrink_to_fit();
 
     g.build_shortcut();
+    g.find_near_box();
     if (opt.clearance) g.build_clearance();
 
     // Until here active_avg, active_std and tape_avg held the near-field cells' sums.

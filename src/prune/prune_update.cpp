@@ -325,6 +325,7 @@ void GridUpdate::run(PrunedGrid& g, const Scene& sc, const SceneEdit& edit,
         jobs.swap(next);
     }
     for (const auto& [l, at] : flipped) refresh_shortcut(g, l, at);
+    if (!flipped.empty()) g.find_near_box();
     // Clearances change only within reach of the cells that turned near-field or far-field
     // (under them, blocks appeared or went).
     CellRange changed{{N, N, N}, {0, 0, 0}};

@@ -73,6 +73,37 @@ void PrunedGrid::build_shortcut() {
     });
 }
 
+void PrunedGrid::find_near_box() {
+    const uint32_t k = levels_.size() >= 2 ? uint32_t(levels_.size() - 2) : 0;
+    const uint32_t f = levels_[k].factor, scale = resolution() / levels_[k].res;
+    uint32_t lo[3] = {UINT32_MAX, UINT32_MAX, UINT32_MAX}, hi[3] = {0, 0, 0};
+    for_each_block([&](const Block& b) {
+        if (b.level != k) return;
+        for (uint32_t local = 0; local < f * f * f; ++local) {
+            if (levels_[k].cells[b.first + local].tape == PrunedCell::kFarField) continue;
+            const CellCoord c = block_cell(b.origin, f, local);
+            const uint32_t at[3] = {c.x, c.y, c.z};
+            for (int a = 0; a < 3; ++a) {
+                lo[a] = std::min(lo[a], at[a]);
+                hi[a] = std::max(hi[a], at[a] + 1);
+            }
+        }
+    });
+    const Aabb& box = aabb();
+    if (lo[0] > hi[0]) {
+        near_box_ = {box.max, box.min};
+        return;
+    }
+    // In finest cells, one wider on each side (the corners' rounding), within the grid.
+    const uint32_t N = resolution();
+    for (int a = 0; a < 3; ++a) {
+        near_box_.min[a] = box.min[a] + float(std::max(lo[a] * scale, 1u) - 1) * cell_size_[a];
+        // (the last cell of a level whose resolution does not divide N's reaches N)
+        const uint32_t top = hi[a] == levels_[k].res ? N : std::min(hi[a] * scale + 1, N);
+        near_box_.max[a] = std::min(box.max[a], box.min[a] + float(top) * cell_size_[a]);
+    }
+}
+
 uint32_t PrunedGrid::shortcut_entry(uint32_t x, uint32_t y, uint32_t z) const {
     const uint32_t scale = resolution() / shortcut_res_;
     const CellRef at = descend(x * scale, y * scale, z * scale, shortcut_level_);

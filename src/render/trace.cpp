@@ -1,8 +1,9 @@
 // trace.cpp — sphere tracing on the pruned grid or on the full tree (DESIGN.md §6): one
 // primary and one shadow ray per pixel. On the pruned grid, a ray in a far-field cell (of any
 // level) jumps to the cell's exit — no surface can be inside it — or by the cell's constant if
-// that is longer; in a near-field cell it steps by the value of the cell's tape. Both fields
-// run the same loop, so their time ratio is the pruning's alone.
+// that is longer; in a near-field cell it steps by the value of the cell's tape. Rays are
+// marched within the near-field cells' box only (PrunedGrid::near_box). Both fields run the same
+// loop, so their time ratio is the pruning's alone.
 #include <algorithm>
 #include <atomic>
 #include <bit>
@@ -141,6 +142,8 @@ struct NaiveField {
         std::span<const uint32_t> tape;
     };
     Hint hint_at(vec3) const { return {sc.full_tape}; }
+    // The box rays are marched in: the scene's.
+    Aabb march_box() const { return sc.aabb; }
     // The exact value at p; `hint` is unused.
     float value(vec3 p, const Hint&, float* stack, Counters& c) const {
         c.evals += sc.size();
@@ -212,6 +215,10 @@ struct PrunedField {
         g.locate_cell(uint32_t(i[0]), uint32_t(i[1]), uint32_t(i[2]), at);
         if (!at.far_field()) tape = g.tape_at(at.cell->tape);
     }
+    // The box rays are marched in: the near-field cells' (PrunedGrid::near_box), which holds
+    // the surface. A ray starts at its entry, past the empty margin of the scene's box, and one
+    // that misses it is not marched.
+    const Aabb& march_box() const { return g.near_box(); }
     Hint hint_at(vec3 p) const {
         Hint h{g.scene().full_tape};
         if (!finest_cell(p, h.index)) return h;
@@ -519,7 +526,8 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
     const CameraFrame frame = camera_frame(sc, opt);
     const vec3 light = frame.light;
     const float tan_half = frame.tan_half, normal_h = frame.normal_h;
-    const BoxFromOrigin box_from_eye(cam.eye, ctx.aabb_lo, ctx.aabb_hi);
+    const Aabb march_box = field.march_box();
+    const BoxFromOrigin box_from_eye(cam.eye, march_box.min, march_box.max);
 
     std::atomic<uint64_t> total_steps{0}, total_evals{0}, hits{0};
     // Square tiles rather than rows: neighbouring rays visit the same cells and tapes.
@@ -627,7 +635,7 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
                 const vec3 so = p + n * (4.0f * normal_h);
                 const vec3 sinv(1.0f / light.x, 1.0f / light.y, 1.0f / light.z);
                 float s0, s1;
-                if (ray_box(so, sinv, ctx.aabb_lo, ctx.aabb_hi, s0, s1)) {
+                if (ray_box(so, sinv, march_box.min, march_box.max, s0, s1)) {
                     hit.shadow_ray = int32_t(n_shadow);
                     shadow_rays[n_shadow++] = {so, light, s0 + normal_h, s1, 512, -1, &c};
                 }
@@ -732,8 +740,8 @@ PickResult pick(const PrunedGrid& grid, const RenderOptions& opt, uint32_t x, ui
     PickResult r;
     float t0, t1;
     Counters c;
-    if (!ray_box(eye, inv, ctx.aabb_lo, ctx.aabb_hi, t0, t1)) return r;
     const PrunedField field(grid);
+    if (!ray_box(eye, inv, field.march_box().min, field.march_box().max, t0, t1)) return r;
     Ray ray{eye, dir, t0, t1, 1024, -1, &c};
     march(field, ctx, std::span(&ray, 1), stack.data());
     const float t = ray.t;
