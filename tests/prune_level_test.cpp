@@ -4,11 +4,16 @@
 // (locate_cell, the staged walk) find descend's.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <cstring>
 #include <memory>
 #include <vector>
 
 #include "prune_check.hpp"
+#include "sdfprune/builtin.hpp"
+#include "sdfprune/eval.hpp"
 #include "sdfprune/io.hpp"
+#include "sdfprune/render.hpp"
 #include "src/prune/prune_level.hpp"
 #include "test_util.hpp"
 
@@ -192,6 +197,107 @@ TEST(PrunedGridWalk, DescendAndBlocksMatchTheLinks) {
         EXPECT_EQ(blocks, blocks_by_hand + 1);  // level 0's block and one per near-field parent
         EXPECT_EQ(finest_covered, uint64_t(N) * N * N);
     }
+}
+
+// PrunedGrid::near_box, the box the tracer marches rays in: it holds every near-field finest
+// cell and every sign change of the field between neighbouring samples (the surface), and it
+// is tight: each face lies within one finest cell of the span of a near-field cell of the level
+// above the finest. A one-level grid's is the scene's box; a grid without near-field cells' is
+// empty.
+TEST(PrunedGridNearBox, HoldsTheSurfaceAndIsTight) {
+    std::vector<PrunedGrid> grids = walk_test_grids(3002);
+    test::RandomSceneSpec spec;
+    spec.primitives = 12;
+    spec.placement = test::Placement::kMixed;
+    const auto small = std::make_shared<const Scene>(test::random_scene(3003, spec));
+    PruneOptions o;
+    o.resolution = 32;
+    o.factor = 2;
+    grids.push_back(prune(small, o));
+    uint64_t changes = 0;
+    for (const PrunedGrid& g : grids) {
+        const Aabb& box = g.near_box();
+        const uint32_t N = g.resolution(), last = g.level_count() - 1;
+        const vec3 lo = g.aabb().min, cs = g.cell_size();
+        ASSERT_LE(box.min.x, box.max.x);
+        // Every near-field finest cell lies in it.
+        for (uint32_t z = 0; z < N; ++z)
+            for (uint32_t y = 0; y < N; ++y)
+                for (uint32_t x = 0; x < N; ++x) {
+                    PrunedGrid::Located at;
+                    g.locate_cell(x, y, z, at);
+                    if (at.far_field()) continue;
+                    const uint32_t i[3] = {x, y, z};
+                    for (int a = 0; a < 3; ++a) {
+                        ASSERT_LE(box.min[a], lo[a] + float(i[a]) * cs[a]) << "axis " << a;
+                        ASSERT_GE(box.max[a], lo[a] + float(i[a] + 1) * cs[a]) << "axis " << a;
+                    }
+                }
+        // Each face within a finest cell of a near-field cell of the level above the finest.
+        const uint32_t f = g.level_factor(last - 1), span = N / g.level_resolution(last - 1);
+        float reach[6] = {INFINITY, INFINITY, INFINITY, INFINITY, INFINITY, INFINITY};
+        g.for_each_block([&](const PrunedGrid::Block& b) {
+            if (b.level != last - 1) return;
+            for (uint32_t local = 0; local < f * f * f; ++local) {
+                if (g.level_cells(b.level)[b.first + local].tape == PrunedCell::kFarField) continue;
+                const CellCoord c = block_cell(b.origin, f, local);
+                const uint32_t i[3] = {c.x, c.y, c.z};
+                for (int a = 0; a < 3; ++a) {
+                    reach[2 * a] =
+                        std::min(reach[2 * a], lo[a] + float(i[a] * span) * cs[a] - box.min[a]);
+                    reach[2 * a + 1] = std::min(
+                        reach[2 * a + 1], box.max[a] - (lo[a] + float((i[a] + 1) * span) * cs[a]));
+                }
+            }
+        });
+        for (int face = 0; face < 6; ++face) {
+            EXPECT_GE(reach[face], -1e-4f * cs[face / 2]) << "face " << face;
+            EXPECT_LE(reach[face], 1.001f * cs[face / 2]) << "face " << face;
+        }
+        // The field's sign changes between neighbouring samples of a finer lattice lie in it.
+        const Scene& sc = g.scene();
+        const uint32_t n = 2 * N;
+        const vec3 step = (g.aabb().max - lo) / float(n);
+        std::vector<float> row(size_t(n + 1) * (n + 1) * (n + 1));
+        for (uint32_t z = 0; z <= n; ++z)
+            for (uint32_t y = 0; y <= n; ++y)
+                for (uint32_t x = 0; x <= n; ++x)
+                    row[(size_t(z) * (n + 1) + y) * (n + 1) + x] = eval_point(
+                        sc, lo + vec3(float(x) * step.x, float(y) * step.y, float(z) * step.z));
+        const auto in_box = [&](uint32_t x, uint32_t y, uint32_t z) {
+            const vec3 p = lo + vec3(float(x) * step.x, float(y) * step.y, float(z) * step.z);
+            return p.x >= box.min.x && p.y >= box.min.y && p.z >= box.min.z && p.x <= box.max.x &&
+                   p.y <= box.max.y && p.z <= box.max.z;
+        };
+        for (uint32_t z = 0; z <= n; ++z)
+            for (uint32_t y = 0; y <= n; ++y)
+                for (uint32_t x = 0; x < n; ++x) {
+                    const size_t k = (size_t(z) * (n + 1) + y) * (n + 1) + x;
+                    if ((row[k] < 0) == (row[k + 1] < 0)) continue;
+                    ++changes;
+                    ASSERT_TRUE(in_box(x, y, z) && in_box(x + 1, y, z));
+                }
+    }
+    EXPECT_GT(changes, 0u);
+    // One level: the scene's box.
+    o.hierarchy = false;
+    const PrunedGrid one = prune(small, o);
+    ASSERT_EQ(one.level_count(), 1u);
+    EXPECT_EQ(std::memcmp(&one.near_box(), &one.aabb(), sizeof(Aabb)), 0);
+    // No near-field cell (a sphere far outside the grid's box): empty, and no ray is marched.
+    Scene away = builtin_scene("sphere");
+    away.aabb.min = away.aabb.min + vec3(100.0f);
+    away.aabb.max = away.aabb.max + vec3(100.0f);
+    const PrunedGrid empty = prune(away, {});
+    EXPECT_GT(empty.near_box().min.x, empty.near_box().max.x);
+    RenderOptions ro;
+    ro.width = 32;
+    ro.height = 24;
+    ro.camera = orbit_camera(away.aabb, 30, 20, 0, 40);
+    RenderStats rs;
+    render(empty, ro, &rs);
+    EXPECT_EQ(rs.steps_avg, 0.0);
+    EXPECT_EQ(rs.hit_fraction, 0.0);
 }
 
 // locate_cell (through the lookup shortcut on pow2 grids) and the staged walk a tracer uses

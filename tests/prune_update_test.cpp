@@ -52,6 +52,7 @@ void expect_same_grid(const PrunedGrid& a, const PrunedGrid& b, const std::strin
     EXPECT_EQ(ba.size(), bb.size());
     EXPECT_EQ(differing, 0u);
     EXPECT_TRUE(same_cells(a, b));
+    EXPECT_EQ(std::memcmp(&a.near_box(), &b.near_box(), sizeof(Aabb)), 0) << "near_box";
     test::expect_same_prune_stats(a.stats(), b.stats(), what);
 }
 

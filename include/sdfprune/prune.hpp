@@ -229,9 +229,9 @@ class PrunedGrid {
     const Scene& scene() const { return *scene_; }
     const Aabb& aabb() const { return scene_->aabb; }
     // A box within aabb() that holds every near-field cell, hence the whole surface (f = 0 lies
-    // in no far-field cell): the bounds of the near-field cells of the level above the finest
-    // (the finest, on a one-level grid), one finest cell wider. Empty (min > max) when there is
-    // no near-field cell. Tracers march rays within it only.
+    // in no far-field cell): the bounds of the near-field cells of the level above the finest,
+    // one finest cell wider (finest_cells_box); aabb() on a one-level grid. Empty (min > max)
+    // when there is no near-field cell. Tracers march rays within it only.
     const Aabb& near_box() const { return near_box_; }
     uint32_t resolution() const { return levels_.back().res; }
     vec3 cell_size() const { return cell_size_; }
@@ -546,6 +546,12 @@ class PrunedGrid {
 [[gnu::always_inline]] inline PrunedGrid::Located PrunedGrid::walk_located(const Walk& w) const {
     return located_at(w.level, w.cell, w.ix, w.iy, w.iz);
 }
+
+// The box of the finest cells [lo, hi) (per axis) of an N³ grid over `box` with cells of
+// `cell_size`, one cell wider on each side (the corners' rounding), within `box`; empty
+// (min > max) where lo > hi. PrunedGrid::near_box, and the GPU backend's the same way.
+Aabb finest_cells_box(const Aabb& box, vec3 cell_size, uint32_t N, const uint32_t lo[3],
+                      const uint32_t hi[3]);
 
 PrunedGrid prune(const Scene& scene, const PruneOptions& options = {});
 // The same, sharing ownership of an immutable scene: the grid (and its copies) keep it alive,

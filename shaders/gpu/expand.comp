@@ -1,6 +1,8 @@
 #version 450
 // expand.comp — the next level's blocks: one per near-field cell of this level, allocated with
 // an atomic counter (block order does not matter: each cell records where its block went).
+// Into the finest level, it also bounds the blocks it makes (counters[11..16]: GpuCounters's
+// near_lo, near_hi, in finest cells): PrunedGrid::near_box, the box the tracer marches in.
 #extension GL_GOOGLE_include_directive : require
 #include "cells.glsl"
 
@@ -15,9 +17,21 @@ layout(push_constant) uniform Push {
     uint factor;       // f: cells per axis of this level's blocks
     uint cells_count;  // cells of this level
     uint next_factor;  // cells per axis of the next level's blocks
+    uint next_finest;  // 1: the next level is the finest (bound its blocks)
 } pc;
 
+const uint kNearLo = 11u, kNearHi = 14u;
+shared uint group_lo[3], group_hi[3];
+
 void main() {
+    if (gl_LocalInvocationIndex == 0u) {
+        for (int a = 0; a < 3; ++a) {
+            group_lo[a] = 0xffffffffu;
+            group_hi[a] = 0u;
+        }
+    }
+    barrier();
+    uvec3 lo = uvec3(0xffffffffu), hi = uvec3(0u);
     uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     for (uint i = gl_GlobalInvocationID.x; i < pc.cells_count; i += stride) {
     Cell c = cells[i];
@@ -33,5 +47,20 @@ void main() {
     n.z = (b.z + local / (f * f)) * nf;
     n.tape = c.tape;
     next[idx] = n;
+    lo = min(lo, uvec3(n.x, n.y, n.z));
+    hi = max(hi, uvec3(n.x, n.y, n.z) + nf);
+    }
+    if (pc.next_finest == 0u) return;
+    // The workgroup's bounds in shared memory, then one global atomic per axis and side.
+    for (int a = 0; a < 3; ++a) {
+        atomicMin(group_lo[a], lo[a]);
+        atomicMax(group_hi[a], hi[a]);
+    }
+    barrier();
+    if (gl_LocalInvocationIndex == 0u && group_lo[0] <= group_hi[0]) {
+        for (int a = 0; a < 3; ++a) {
+            atomicMin(counters[kNearLo + uint(a)], group_lo[a]);
+            atomicMax(counters[kNearHi + uint(a)], group_hi[a]);
+        }
     }
 }

@@ -22,6 +22,8 @@ layout(std430, binding = 7) buffer Counters {
     uint near_words;  // words of the near-field cells' tapes with their headers (modes 0 and 2;
                       // mode 1: the octants' tapes, shared ones too)
     uint refine_cells;  // entries of refine_list
+    uint near_lo[3];    // expand.comp's (GpuCounters)
+    uint near_hi[3];
 };
 // The kernel's scratch (its layout is the kernel's own). Coherent: lanes read what other lanes
 // of their workgroup wrote at earlier steps (a barrier between).

@@ -15,6 +15,8 @@ layout(local_size_x = 64) in;
 
 struct TraceParams {
     GridParams grid;
+    vec4 march_min;  // the box rays are marched in (PrunedGrid::near_box)
+    vec4 march_max;
     vec4 eye;      // w: tan(fov / 2)
     vec4 forward;  // w: aspect
     vec4 right;    // w: normal step h
@@ -147,7 +149,10 @@ void main() {
     vec3 inv = vec3(1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z);
     float t0, t1;
     vec4 out_color = vec4(0.0);
-    if (ray_box(eye, inv, g.aabb_min.xyz, g.aabb_max.xyz, t0, t1)) {
+    // (an empty box, no near-field cell: no ray; the slab test alone would take it for the box
+    // between its corners)
+    bool nothing = any(greaterThan(prm.march_min.xyz, prm.march_max.xyz));
+    if (!nothing && ray_box(eye, inv, prm.march_min.xyz, prm.march_max.xyz, t0, t1)) {
         float t = march(eye, dir, t0, t1, 1024u);
         if (g_deferred) {
             defer_item(index);
@@ -175,7 +180,7 @@ void main() {
                 precise vec3 so = p + n * (4.0 * h);
                 vec3 sinv = vec3(1.0 / light.x, 1.0 / light.y, 1.0 / light.z);
                 float s0, s1;
-                if (ray_box(so, sinv, g.aabb_min.xyz, g.aabb_max.xyz, s0, s1) &&
+                if (ray_box(so, sinv, prm.march_min.xyz, prm.march_max.xyz, s0, s1) &&
                     march(so, light, s0 + h, s1, 512u) >= 0.0)
                     lit = 0.0;
                 if (g_deferred) {

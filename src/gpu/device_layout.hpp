@@ -35,9 +35,11 @@ struct GpuGridParams {  // GridParams
 
 // prune.comp: Counters (expand.comp sees the same buffer as uint[]: [5] is next_blocks).
 // refine_cells: the entries of the refinement's list (prune_common.glsl: RefineList).
+// near_lo, near_hi: expand.comp's bounds of the finest blocks it made (finest cells, [lo, hi)).
 struct GpuCounters {
     uint32_t pool_used, pool_capacity, overflow, max_len, near_jobs, next_blocks, max_depth;
-    uint32_t octant_used, octant_capacity, near_words, refine_cells, pad;
+    uint32_t octant_used, octant_capacity, near_words, refine_cells;
+    uint32_t near_lo[3], near_hi[3], pad[3];
 };
 // prune.comp: kStateWords, the words of a lane's job state in its team's scratch; kTeam, the
 // lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step
@@ -59,7 +61,7 @@ struct PrunePush {  // prune.comp and prune_wide.comp: Push
     uint32_t round, budget, refine, octant_start;
 };
 struct ExpandPush {  // expand.comp: Push
-    uint32_t factor, cells_count, next_factor;
+    uint32_t factor, cells_count, next_factor, next_finest;
 };
 struct CellInfoPush {  // cell_info.comp: Push
     uint32_t cells_count;
@@ -68,6 +70,7 @@ struct CellInfoPush {  // cell_info.comp: Push
 // trace.comp
 struct TraceParams {
     GpuGridParams grid;
+    vec4 march_min, march_max;  // the box rays are marched in (PrunedGrid::near_box)
     vec4 eye, forward, right, up, light;
     uint32_t width, height, shading, shadows;
 };
@@ -93,9 +96,9 @@ static_assert(sizeof(GpuNode) == 16 && sizeof(GpuPrimitiveExtra) == 48);
 static_assert(sizeof(math::PrimitiveParams) == 96 && offsetof(math::PrimitiveParams, a) == 48);
 static_assert(sizeof(PrunedCell) == 16 && offsetof(PrunedCell, value) == 8);
 static_assert(sizeof(GpuBlock) == 16 && sizeof(GpuLevel) == 16 && sizeof(GpuGridParams) == 64);
-static_assert(sizeof(GpuCounters) == 48);
+static_assert(sizeof(GpuCounters) == 80 && offsetof(GpuCounters, near_lo) == 44);
 static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) <= 128);
-static_assert(sizeof(TraceParams) == 160 && sizeof(DiscretizeParams) == 96);
+static_assert(sizeof(TraceParams) == 192 && sizeof(DiscretizeParams) == 96);
 static_assert(sizeof(GpuPixel) == 32 && sizeof(SlicePush) == 32);
 
 }  // namespace sdfprune::gpu

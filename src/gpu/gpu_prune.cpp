@@ -239,6 +239,9 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
 }
 
 void Pruner::run() {
+    // (set by the expansion into the finest level; the scene's box on a one-level grid, empty
+    // where no level reaches the finest: PrunedGrid::near_box)
+    g.near_box = res.size() < 2 ? sc.aabb : Aabb{sc.aabb.max, sc.aabb.min};
     for (uint32_t li = 0; li < res.size(); ++li) prune_level(li);
     ctx.destroy(blocks);
     ctx.destroy(scratch);
@@ -432,6 +435,7 @@ GpuCounters Pruner::prune_slices(Level& lv) {
 // `may_slice`: the caller then takes fewer blocks at a time.
 std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps, bool expand,
                                              uint64_t octant_keep, bool may_slice) {
+    const uint32_t next_finest = lv.index + 2 == res.size() ? 1u : 0u;
     for (;;) {
         GpuCounters start{};
         start.pool_used = g.pool_words;
@@ -439,6 +443,10 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
         start.octant_used = uint32_t(octant_keep);
         start.octant_capacity = uint32_t(octant_capacity);
         start.refine_cells = lv.listed_cells;
+        for (int a = 0; a < 3; ++a) {
+            start.near_lo[a] = std::numeric_limits<uint32_t>::max();
+            start.near_hi[a] = 0;
+        }
         *counter = start;
         ctx.begin();
         for (Step& s : steps) {
@@ -461,7 +469,7 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
             record_step(s);
         }
         if (expand) {
-            const ExpandPush push{lv.f, uint32_t(lv.total), lv.nf};
+            const ExpandPush push{lv.f, uint32_t(lv.total), lv.nf, next_finest};
             ctx.dispatch(KernelId::kExpand, {&blocks, lv.cells, lv.next, &counters}, &push,
                          sizeof(push), ctx.groups_for(lv.total));
         }
@@ -485,6 +493,10 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
                  octant_keep);
     }
     g.pool_words = counter->pool_used;
+    // The finest blocks' bounds, from their parents' expansion: PrunedGrid::near_box.
+    if (expand && next_finest)
+        g.near_box = finest_cells_box(sc.aabb, extent / float(res.back()), res.back(),
+                                      counter->near_lo, counter->near_hi);
     for (Step& s : steps) {
         if (s.push.mode == 3) {
             // Refinement's jobs, the listed cells (its dispatches were recorded for all, those

@@ -164,6 +164,8 @@ Image render(Device& device, const Grid& grid, const RenderOptions& opt, RenderS
     const CameraFrame frame = camera_frame(sc, opt);
     TraceParams prm;
     prm.grid = g.grid_params();
+    prm.march_min = v4(g.near_box.min, 0);
+    prm.march_max = v4(g.near_box.max, 0);
     prm.eye = v4(opt.camera.eye, frame.tan_half);
     prm.forward = v4(frame.forward, frame.aspect);
     prm.right = v4(frame.right, frame.normal_h);

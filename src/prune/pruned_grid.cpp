@@ -74,7 +74,11 @@ void PrunedGrid::build_shortcut() {
 }
 
 void PrunedGrid::find_near_box() {
-    const uint32_t k = levels_.size() >= 2 ? uint32_t(levels_.size() - 2) : 0;
+    if (levels_.size() < 2) {  // (one level: no level above the finest to take it from)
+        near_box_ = aabb();
+        return;
+    }
+    const uint32_t k = uint32_t(levels_.size() - 2);
     const uint32_t f = levels_[k].factor, scale = resolution() / levels_[k].res;
     uint32_t lo[3] = {UINT32_MAX, UINT32_MAX, UINT32_MAX}, hi[3] = {0, 0, 0};
     for_each_block([&](const Block& b) {
@@ -89,19 +93,23 @@ void PrunedGrid::find_near_box() {
             }
         }
     });
-    const Aabb& box = aabb();
-    if (lo[0] > hi[0]) {
-        near_box_ = {box.max, box.min};
-        return;
-    }
-    // In finest cells, one wider on each side (the corners' rounding), within the grid.
-    const uint32_t N = resolution();
     for (int a = 0; a < 3; ++a) {
-        near_box_.min[a] = box.min[a] + float(std::max(lo[a] * scale, 1u) - 1) * cell_size_[a];
-        // (the last cell of a level whose resolution does not divide N's reaches N)
-        const uint32_t top = hi[a] == levels_[k].res ? N : std::min(hi[a] * scale + 1, N);
-        near_box_.max[a] = std::min(box.max[a], box.min[a] + float(top) * cell_size_[a]);
+        lo[a] = lo[a] * scale;
+        hi[a] = hi[a] * scale;
     }
+    near_box_ = finest_cells_box(aabb(), cell_size_, resolution(), lo, hi);
+}
+
+Aabb finest_cells_box(const Aabb& box, vec3 cell_size, uint32_t N, const uint32_t lo[3],
+                      const uint32_t hi[3]) {
+    if (lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2]) return {box.max, box.min};
+    Aabb out;
+    for (int a = 0; a < 3; ++a) {
+        out.min[a] = box.min[a] + float(std::max(lo[a], 1u) - 1) * cell_size[a];
+        out.max[a] =
+            std::min(box.max[a], box.min[a] + float(std::min(hi[a] + 1, N)) * cell_size[a]);
+    }
+    return out;
 }
 
 uint32_t PrunedGrid::shortcut_entry(uint32_t x, uint32_t y, uint32_t z) const {

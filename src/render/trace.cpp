@@ -528,6 +528,11 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
     const float tan_half = frame.tan_half, normal_h = frame.normal_h;
     const Aabb march_box = field.march_box();
     const BoxFromOrigin box_from_eye(cam.eye, march_box.min, march_box.max);
+    // (an empty box, no near-field cell: no ray; the slab test alone would take it for the
+    // box between its corners)
+    const bool nothing =
+        !(march_box.min.x <= march_box.max.x && march_box.min.y <= march_box.max.y &&
+          march_box.min.z <= march_box.max.z);
 
     std::atomic<uint64_t> total_steps{0}, total_evals{0}, hits{0};
     // Square tiles rather than rows: neighbouring rays visit the same cells and tapes.
@@ -593,7 +598,7 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
                 const vec3 c = column[i] + up_v;
                 const float4 d = load4(c) / splat(math::length(c));
                 float t0, t1;
-                if (!box_from_eye.hit(d, t0, t1)) continue;
+                if (nothing || !box_from_eye.hit(d, t0, t1)) continue;
                 const vec3 dir(d[0], d[1], d[2]);
                 counters[j] = {};
                 rays[n_rays] = {cam.eye, dir, t0, t1, 1024, -1, &counters[j]};
@@ -741,7 +746,10 @@ PickResult pick(const PrunedGrid& grid, const RenderOptions& opt, uint32_t x, ui
     float t0, t1;
     Counters c;
     const PrunedField field(grid);
-    if (!ray_box(eye, inv, field.march_box().min, field.march_box().max, t0, t1)) return r;
+    const Aabb& box = field.march_box();
+    if (!(box.min.x <= box.max.x && box.min.y <= box.max.y && box.min.z <= box.max.z) ||
+        !ray_box(eye, inv, box.min, box.max, t0, t1))
+        return r;
     Ray ray{eye, dir, t0, t1, 1024, -1, &c};
     march(field, ctx, std::span(&ray, 1), stack.data());
     const float t = ray.t;
