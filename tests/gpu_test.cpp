@@ -758,6 +758,37 @@ TEST(Gpu, RenderMatchesCpu) {
         }
 }
 
+// The box rays are marched in (PrunedGrid::near_box; the GPU's from expand.comp's bounds) on
+// grids of factor 3 and of one level (the scene's box): the same steps and hits as the CPU's.
+TEST(Gpu, RenderMarchesTheCpusBox) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    RandomSceneSpec spec;
+    spec.primitives = 16;
+    spec.placement = Placement::kMixed;
+    spec.union_share = 1.0f;  // a union of solids: something to hit
+    const Scene sc = random_scene(79, spec);
+    for (const bool hierarchy : {true, false}) {
+        PruneOptions o;
+        o.resolution = hierarchy ? 54 : 32;
+        o.factor = 3;
+        o.hierarchy = hierarchy;
+        const PrunedGrid cpu = prune(sc, o);
+        const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+        RenderOptions ro;
+        ro.width = 96;
+        ro.height = 64;
+        ro.camera = orbit_camera(sc.aabb, 35, 20, 0, 40);
+        RenderStats cs, gs;
+        const Image a = render(cpu, ro, &cs);
+        const Image b = gpu::render(*dev, gpu, ro, &gs);
+        const std::string what = hierarchy ? "factor 3" : "one level";
+        expect_similar(a, b, what);
+        EXPECT_NEAR(cs.hit_fraction, gs.hit_fraction, 1e-3) << what;
+        EXPECT_NEAR(cs.steps_avg, gs.steps_avg, 0.01 * cs.steps_avg) << what;
+        EXPECT_GT(cs.hit_fraction, 0.0) << what;
+    }
+}
+
 // Samples of an n³ discretization on which the backends differ beyond float rounding.
 size_t discretize_mismatches(const PrunedGrid& cpu, gpu::Device& dev, const gpu::Grid& gpu,
                              uint32_t n) {
