@@ -284,7 +284,7 @@ const std::vector<Mirror>& mirrors() {
         mirror<ExpandPush>(
             "Push", {"expand"},
             {SDFPRUNE_MEMBER(ExpandPush, factor), SDFPRUNE_MEMBER(ExpandPush, cells_count),
-             SDFPRUNE_MEMBER(ExpandPush, next_factor), SDFPRUNE_MEMBER(ExpandPush, next_finest)},
+             SDFPRUNE_MEMBER(ExpandPush, next_factor), SDFPRUNE_MEMBER(ExpandPush, bound_only)},
             Scope::kPush),
         mirror<CellInfoPush>("Push", {"cell_info"}, {SDFPRUNE_MEMBER(CellInfoPush, cells_count)},
                              Scope::kPush),

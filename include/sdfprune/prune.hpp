@@ -229,9 +229,9 @@ class PrunedGrid {
     const Scene& scene() const { return *scene_; }
     const Aabb& aabb() const { return scene_->aabb; }
     // A box within aabb() that holds every near-field cell, hence the whole surface (f = 0 lies
-    // in no far-field cell): the bounds of the near-field cells of the level above the finest,
-    // one finest cell wider (finest_cells_box); aabb() on a one-level grid. Empty (min > max)
-    // when there is no near-field cell. Tracers march rays within it only.
+    // in no far-field cell): the bounds of the near-field finest cells, one finest cell wider
+    // (finest_cells_box); aabb() on a one-level grid. Empty (min > max) when there is no
+    // near-field finest cell. Tracers march rays within it only.
     const Aabb& near_box() const { return near_box_; }
     uint32_t resolution() const { return levels_.back().res; }
     vec3 cell_size() const { return cell_size_; }

@@ -1,8 +1,9 @@
 #version 450
 // expand.comp — the next level's blocks: one per near-field cell of this level, allocated with
 // an atomic counter (block order does not matter: each cell records where its block went).
-// Into the finest level, it also bounds the blocks it makes (counters[11..16]: GpuCounters's
-// near_lo, near_hi, in finest cells): PrunedGrid::near_box, the box the tracer marches in.
+// With bound_only, on the finest level's final cells instead: the bounds of its near-field
+// cells (counters[11..16]: GpuCounters's near_lo, near_hi, in finest cells, [lo, hi)), from
+// which the host makes PrunedGrid::near_box, the box the tracer marches in.
 #extension GL_GOOGLE_include_directive : require
 #include "cells.glsl"
 
@@ -17,13 +18,13 @@ layout(push_constant) uniform Push {
     uint factor;       // f: cells per axis of this level's blocks
     uint cells_count;  // cells of this level
     uint next_factor;  // cells per axis of the next level's blocks
-    uint next_finest;  // 1: the next level is the finest (bound its blocks)
+    uint bound_only;   // 1: bound this level's near-field cells, make no blocks
 } pc;
 
 const uint kNearLo = 11u, kNearHi = 14u;
 shared uint group_lo[3], group_hi[3];
 
-void main() {
+void bound_near_cells() {
     if (gl_LocalInvocationIndex == 0u) {
         for (int a = 0; a < 3; ++a) {
             group_lo[a] = 0xffffffffu;
@@ -32,6 +33,35 @@ void main() {
     }
     barrier();
     uvec3 lo = uvec3(0xffffffffu), hi = uvec3(0u);
+    uint f = pc.factor, per_block = f * f * f;
+    uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+    for (uint i = gl_GlobalInvocationID.x; i < pc.cells_count; i += stride) {
+        if (cells[i].tape == kFarField) continue;
+        Block b = blocks[i / per_block];
+        uint local = i % per_block;
+        uvec3 at = uvec3(b.x + local % f, b.y + (local / f) % f, b.z + local / (f * f));
+        lo = min(lo, at);
+        hi = max(hi, at + 1u);
+    }
+    // The workgroup's bounds in shared memory, then one global atomic per axis and side.
+    for (int a = 0; a < 3; ++a) {
+        atomicMin(group_lo[a], lo[a]);
+        atomicMax(group_hi[a], hi[a]);
+    }
+    barrier();
+    if (gl_LocalInvocationIndex == 0u && group_lo[0] <= group_hi[0]) {
+        for (int a = 0; a < 3; ++a) {
+            atomicMin(counters[kNearLo + uint(a)], group_lo[a]);
+            atomicMax(counters[kNearHi + uint(a)], group_hi[a]);
+        }
+    }
+}
+
+void main() {
+    if (pc.bound_only != 0u) {
+        bound_near_cells();
+        return;
+    }
     uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     for (uint i = gl_GlobalInvocationID.x; i < pc.cells_count; i += stride) {
     Cell c = cells[i];
@@ -47,20 +77,5 @@ void main() {
     n.z = (b.z + local / (f * f)) * nf;
     n.tape = c.tape;
     next[idx] = n;
-    lo = min(lo, uvec3(n.x, n.y, n.z));
-    hi = max(hi, uvec3(n.x, n.y, n.z) + nf);
-    }
-    if (pc.next_finest == 0u) return;
-    // The workgroup's bounds in shared memory, then one global atomic per axis and side.
-    for (int a = 0; a < 3; ++a) {
-        atomicMin(group_lo[a], lo[a]);
-        atomicMax(group_hi[a], hi[a]);
-    }
-    barrier();
-    if (gl_LocalInvocationIndex == 0u && group_lo[0] <= group_hi[0]) {
-        for (int a = 0; a < 3; ++a) {
-            atomicMin(counters[kNearLo + uint(a)], group_lo[a]);
-            atomicMax(counters[kNearHi + uint(a)], group_hi[a]);
-        }
     }
 }

@@ -29,8 +29,8 @@ class DeviceGrid {
     // pruning steps' own figure for the finest level after refinement (GpuCounters::max_depth:
     // each tape written or shared adds its depth as the steps walk it).
     uint32_t finest_stack_depth = 1;
-    // PrunedGrid::near_box, from the finest blocks expand.comp made (the scene's box on a
-    // one-level grid).
+    // PrunedGrid::near_box, from the bounds of the finest level's near-field cells (expand.comp,
+    // bound_only; the scene's box on a one-level grid).
     Aabb near_box;
     GpuGridParams grid_params() const;
 };

@@ -35,7 +35,7 @@ struct GpuGridParams {  // GridParams
 
 // prune.comp: Counters (expand.comp sees the same buffer as uint[]: [5] is next_blocks).
 // refine_cells: the entries of the refinement's list (prune_common.glsl: RefineList).
-// near_lo, near_hi: expand.comp's bounds of the finest blocks it made (finest cells, [lo, hi)).
+// near_lo, near_hi: expand.comp's bounds of the finest level's near-field cells ([lo, hi)).
 struct GpuCounters {
     uint32_t pool_used, pool_capacity, overflow, max_len, near_jobs, next_blocks, max_depth;
     uint32_t octant_used, octant_capacity, near_words, refine_cells;
@@ -61,7 +61,7 @@ struct PrunePush {  // prune.comp and prune_wide.comp: Push
     uint32_t round, budget, refine, octant_start;
 };
 struct ExpandPush {  // expand.comp: Push
-    uint32_t factor, cells_count, next_factor, next_finest;
+    uint32_t factor, cells_count, next_factor, bound_only;
 };
 struct CellInfoPush {  // cell_info.comp: Push
     uint32_t cells_count;

@@ -101,8 +101,10 @@ class Pruner {
   private:
     void prune_level(uint32_t li);
     GpuCounters prune_slices(Level& lv);
+    // (bound: the finest level's final cells, whose near-field cells' bounds give near_box)
     std::optional<GpuCounters> run_steps(Level& lv, std::vector<Step>& steps, bool expand,
-                                         uint64_t octant_keep, bool may_slice);
+                                         uint64_t octant_keep, bool may_slice,
+                                         Buffer* bound = nullptr);
     void add_shape(const Level& lv, const GpuStepShape& shape);
     Step plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
                    uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient);
@@ -239,8 +241,8 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
 }
 
 void Pruner::run() {
-    // (set by the expansion into the finest level; the scene's box on a one-level grid, empty
-    // where no level reaches the finest: PrunedGrid::near_box)
+    // (set from the finest level's final cells; the scene's box on a one-level grid: as
+    // PrunedGrid::near_box)
     g.near_box = res.size() < 2 ? sc.aabb : Aabb{sc.aabb.max, sc.aabb.min};
     for (uint32_t li = 0; li < res.size(); ++li) prune_level(li);
     ctx.destroy(blocks);
@@ -396,7 +398,11 @@ GpuCounters Pruner::prune_slices(Level& lv) {
                                       *lv.cells, lv.refine));
         }
         lv.listed_cells = 0;
-        sc = run_steps(lv, steps, !lv.finest && last, octant_keep, blocks_in > 1);
+        // (the finest level's final cells, after its last slice: bounded, for near_box; on a
+        // one-level grid near_box is the scene's box)
+        const bool bound = lv.finest && last && res.size() > 1;
+        sc = run_steps(lv, steps, !lv.finest && last, octant_keep, blocks_in > 1,
+                       bound && !lv.refine ? lv.cells : nullptr);
         if (!sc) {
             slice_blocks = blocks_in / 2;
             continue;
@@ -415,7 +421,8 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             max_depth = std::max(sc->max_depth, 1u);
             std::vector<Step> refinement{plan_step(lv, 3, b0, blocks_in, blocks_in * lv.per_block,
                                                    *lv.refined, *lv.cells, false)};
-            const GpuCounters rc = *run_steps(lv, refinement, false, sc->octant_used, false);
+            const GpuCounters rc = *run_steps(lv, refinement, false, sc->octant_used, false,
+                                              bound ? lv.refined : nullptr);
             sc->max_depth = rc.max_depth;
         }
         c.near_jobs += sc->near_jobs;
@@ -434,8 +441,7 @@ GpuCounters Pruner::prune_slices(Level& lv) {
 // nothing where the octant pool would have to outgrow the device's largest buffer and
 // `may_slice`: the caller then takes fewer blocks at a time.
 std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps, bool expand,
-                                             uint64_t octant_keep, bool may_slice) {
-    const uint32_t next_finest = lv.index + 2 == res.size() ? 1u : 0u;
+                                             uint64_t octant_keep, bool may_slice, Buffer* bound) {
     for (;;) {
         GpuCounters start{};
         start.pool_used = g.pool_words;
@@ -469,8 +475,13 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
             record_step(s);
         }
         if (expand) {
-            const ExpandPush push{lv.f, uint32_t(lv.total), lv.nf, next_finest};
+            const ExpandPush push{lv.f, uint32_t(lv.total), lv.nf, 0};
             ctx.dispatch(KernelId::kExpand, {&blocks, lv.cells, lv.next, &counters}, &push,
+                         sizeof(push), ctx.groups_for(lv.total));
+        }
+        if (bound) {
+            const ExpandPush push{lv.f, uint32_t(lv.total), 0, 1};
+            ctx.dispatch(KernelId::kExpand, {&blocks, bound, lv.next, &counters}, &push,
                          sizeof(push), ctx.groups_for(lv.total));
         }
         gpu_ms += ctx.submit();
@@ -493,8 +504,8 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
                  octant_keep);
     }
     g.pool_words = counter->pool_used;
-    // The finest blocks' bounds, from their parents' expansion: PrunedGrid::near_box.
-    if (expand && next_finest)
+    // The finest level's near-field cells' bounds: PrunedGrid::near_box.
+    if (bound)
         g.near_box = finest_cells_box(sc.aabb, extent / float(res.back()), res.back(),
                                       counter->near_lo, counter->near_hi);
     for (Step& s : steps) {

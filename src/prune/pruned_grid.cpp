@@ -73,8 +73,10 @@ void PrunedGrid::build_shortcut() {
     });
 }
 
+// The bounds of the near-field cells of the level above the finest (level k), then of the
+// near-field finest cells, from the faces of the first inwards.
 void PrunedGrid::find_near_box() {
-    if (levels_.size() < 2) {  // (one level: no level above the finest to take it from)
+    if (levels_.size() < 2) {  // (one level: the scene's box, sparing a scan of every cell)
         near_box_ = aabb();
         return;
     }
@@ -93,11 +95,38 @@ void PrunedGrid::find_near_box() {
             }
         }
     });
-    for (int a = 0; a < 3; ++a) {
-        lo[a] = lo[a] * scale;
-        hi[a] = hi[a] * scale;
+    // Each face then moves in to the near-field finest cells: the layers of level-k cells from
+    // the face inwards are searched (their near-field cells' blocks of finest cells, of side
+    // `scale`) until one holds a near-field finest cell, mostly the first.
+    uint32_t finest_lo[3] = {UINT32_MAX, UINT32_MAX, UINT32_MAX}, finest_hi[3] = {0, 0, 0};
+    const Level& finest = levels_.back();
+    for (int a = 0; a < 3 && lo[0] < hi[0]; ++a) {
+        const int b = (a + 1) % 3, c = (a + 2) % 3;
+        for (const bool upper : {false, true}) {
+            bool found = false;
+            for (uint32_t step = 0; !found && step < hi[a] - lo[a]; ++step) {
+                uint32_t at[3];
+                at[a] = upper ? hi[a] - 1 - step : lo[a] + step;
+                for (at[b] = lo[b]; at[b] < hi[b]; ++at[b])
+                    for (at[c] = lo[c]; at[c] < hi[c]; ++at[c]) {
+                        const CellRef r = descend(at[0] * scale, at[1] * scale, at[2] * scale, k);
+                        const PrunedCell& parent = levels_[r.level].cells[r.index];
+                        if (r.level != k || parent.tape == PrunedCell::kFarField) continue;
+                        for (uint32_t local = 0; local < scale * scale * scale; ++local) {
+                            if (finest.cells[parent.children + local].tape == PrunedCell::kFarField)
+                                continue;
+                            const uint32_t d[3] = {local % scale, local / scale % scale,
+                                                   local / (scale * scale)};
+                            const uint32_t x = at[a] * scale + d[a];
+                            finest_lo[a] = std::min(finest_lo[a], x);
+                            finest_hi[a] = std::max(finest_hi[a], x + 1);
+                            found = true;
+                        }
+                    }
+            }
+        }
     }
-    near_box_ = finest_cells_box(aabb(), cell_size_, resolution(), lo, hi);
+    near_box_ = finest_cells_box(aabb(), cell_size_, resolution(), finest_lo, finest_hi);
 }
 
 Aabb finest_cells_box(const Aabb& box, vec3 cell_size, uint32_t N, const uint32_t lo[3],
