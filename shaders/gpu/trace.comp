@@ -35,9 +35,13 @@ layout(std430, binding = 6) readonly buffer TraceParamBlock { TraceParams prm; }
 layout(std430, binding = 7) writeonly buffer Pixels { Pixel pixels[]; };  // from index base
 
 
+// Ray / box intersection (trace.cpp's ray_box): false if missed, always if the box is empty
+// (some min > max: PrunedGrid::near_box without a near-field cell), which the slab tests alone
+// would take for the box between its corners.
 bool ray_box(vec3 o, vec3 inv_dir, vec3 lo, vec3 hi, out float t0, out float t1) {
     t0 = 0.0;
     t1 = kInfinity;
+    if (!all(lessThanEqual(lo, hi))) return false;
     for (int a = 0; a < 3; ++a) {
         float ta = (lo[a] - o[a]) * inv_dir[a], tb = (hi[a] - o[a]) * inv_dir[a];
         if (ta > tb) {
@@ -149,10 +153,7 @@ void main() {
     vec3 inv = vec3(1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z);
     float t0, t1;
     vec4 out_color = vec4(0.0);
-    // (an empty box, no near-field cell: no ray; the slab test alone would take it for the box
-    // between its corners)
-    bool nothing = any(greaterThan(prm.march_min.xyz, prm.march_max.xyz));
-    if (!nothing && ray_box(eye, inv, prm.march_min.xyz, prm.march_max.xyz, t0, t1)) {
+    if (ray_box(eye, inv, prm.march_min.xyz, prm.march_max.xyz, t0, t1)) {
         float t = march(eye, dir, t0, t1, 1024u);
         if (g_deferred) {
             defer_item(index);

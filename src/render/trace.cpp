@@ -95,10 +95,17 @@ bool all_equal(int4 a, int4 b) {
 #endif
 }
 
-// Ray / box intersection: [t0, t1] inside the box, false if missed.
+// Whether the box [lo, hi] holds no point (some min > max: PrunedGrid::near_box without a
+// near-field cell). The slab tests below would take it for the box between its corners.
+bool empty_box(vec3 lo, vec3 hi) {
+    return !(lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z);
+}
+
+// Ray / box intersection: [t0, t1] inside the box, false if missed (always, if it is empty).
 bool ray_box(vec3 o, vec3 inv_dir, vec3 lo, vec3 hi, float& t0, float& t1) {
     t0 = 0;
     t1 = INFINITY;
+    if (empty_box(lo, hi)) return false;
     for (int a = 0; a < 3; ++a) {
         float ta = (lo[a] - o[a]) * inv_dir[a], tb = (hi[a] - o[a]) * inv_dir[a];
         if (ta > tb) std::swap(ta, tb);
@@ -461,10 +468,14 @@ float pixel_v(const CameraFrame& f, uint32_t H, uint32_t y) {
 // The same operations in the same order as ray_box, so the same t0, t1 bit for bit.
 struct BoxFromOrigin {
     float4 lo, hi;  // box corners - origin
+    bool empty;     // empty_box: no ray hits it
     BoxFromOrigin(vec3 origin, vec3 box_lo, vec3 box_hi)
-        : lo(load4(box_lo) - load4(origin)), hi(load4(box_hi) - load4(origin)) {}
+        : lo(load4(box_lo) - load4(origin)),
+          hi(load4(box_hi) - load4(origin)),
+          empty(empty_box(box_lo, box_hi)) {}
     // dir: (x, y, z, any)
     bool hit(float4 dir, float& t0, float& t1) const {
+        if (empty) return false;
         // (one division in vector lanes: the same quotients as three scalar ones; the unused
         // lane is never read)
         const float4 inv = splat(1.0f) / dir;
@@ -528,11 +539,6 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
     const float tan_half = frame.tan_half, normal_h = frame.normal_h;
     const Aabb march_box = field.march_box();
     const BoxFromOrigin box_from_eye(cam.eye, march_box.min, march_box.max);
-    // (an empty box, no near-field cell: no ray; the slab test alone would take it for the
-    // box between its corners)
-    const bool nothing =
-        !(march_box.min.x <= march_box.max.x && march_box.min.y <= march_box.max.y &&
-          march_box.min.z <= march_box.max.z);
 
     std::atomic<uint64_t> total_steps{0}, total_evals{0}, hits{0};
     // Square tiles rather than rows: neighbouring rays visit the same cells and tapes.
@@ -598,7 +604,7 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
                 const vec3 c = column[i] + up_v;
                 const float4 d = load4(c) / splat(math::length(c));
                 float t0, t1;
-                if (nothing || !box_from_eye.hit(d, t0, t1)) continue;
+                if (!box_from_eye.hit(d, t0, t1)) continue;
                 const vec3 dir(d[0], d[1], d[2]);
                 counters[j] = {};
                 rays[n_rays] = {cam.eye, dir, t0, t1, 1024, -1, &counters[j]};
@@ -746,10 +752,7 @@ PickResult pick(const PrunedGrid& grid, const RenderOptions& opt, uint32_t x, ui
     float t0, t1;
     Counters c;
     const PrunedField field(grid);
-    const Aabb& box = field.march_box();
-    if (!(box.min.x <= box.max.x && box.min.y <= box.max.y && box.min.z <= box.max.z) ||
-        !ray_box(eye, inv, box.min, box.max, t0, t1))
-        return r;
+    if (!ray_box(eye, inv, field.march_box().min, field.march_box().max, t0, t1)) return r;
     Ray ray{eye, dir, t0, t1, 1024, -1, &c};
     march(field, ctx, std::span(&ray, 1), stack.data());
     const float t = ray.t;
