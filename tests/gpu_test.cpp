@@ -239,7 +239,8 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
 
 // The steps' work shapes (GpuStepShape) follow the hierarchy: per level the octants then the
 // cells from them, then the refinement; jobs are the CPU's cells and octants, lanes come in
-// teams that share a parent tape (one lane per cell or octant, in refinement per sub-box), and
+// teams that share a parent tape (one lane per cell or octant; in refinement a squad per cell,
+// a lane per sub-box), and
 // the busiest lane walks at least one parent tape; their GPU times add up to at most the
 // pruning's. (Teams only: SDFPRUNE_VULKAN_WIDE=0.)
 TEST(Gpu, StepShapesFollowTheLevels) {
@@ -262,9 +263,10 @@ TEST(Gpu, StepShapesFollowTheLevels) {
         EXPECT_GE(st.dispatches, 1u);
         EXPECT_GE(st.workgroups, st.dispatches);
         EXPECT_GT(st.lanes, 0u);
-        EXPECT_EQ(st.lanes_per_tape, 8u);
+        // Teams of 8 lanes; refinement a squad of 32 lanes (its sub-boxes) per cell.
+        EXPECT_EQ(st.lanes_per_tape, st.mode == 3 ? 32u : 8u);
         EXPECT_EQ(st.lanes % st.lanes_per_tape, 0u);
-        // One lane per cell or octant; refinement has a team per cell.
+        // One lane per cell or octant; refinement has a squad per cell.
         EXPECT_LE(st.lanes, st.mode == 3 ? st.lanes_per_tape * st.jobs : st.jobs);
         EXPECT_GT(st.longest_walk_words, 0u);
         if (st.mode == 2) jobs += st.jobs;

@@ -47,6 +47,7 @@ struct GpuCounters {
 // one window.
 inline constexpr uint64_t kPruneStateWords = 16;
 inline constexpr uint64_t kPruneTeam = 8;
+inline constexpr uint64_t kRefineSquad = 32;  // prune_refine.comp: lanes per cell
 inline constexpr uint64_t kPruneWindow = 64;
 inline constexpr uint64_t kPruneBatchesPerStep = 4;
 // prune_wide.comp: kWide, the lanes of a workgroup that takes one team job (kPruneTeam boxes of

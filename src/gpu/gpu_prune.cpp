@@ -108,6 +108,7 @@ class Pruner {
     void add_shape(const Level& lv, const GpuStepShape& shape);
     Step plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
                    uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient);
+    void plan_refine(const Level& lv, Step& s);
     void plan_wide(Step& s, uint64_t& scratch_bytes);
     void record_step(Step& s);
     void resize(Buffer& pool, uint64_t& cap, uint64_t words, uint64_t keep);
@@ -514,7 +515,7 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
             // past the list's end returning at once).
             const uint64_t jobs = counter->refine_cells;
             s.shape.jobs = jobs;
-            s.shape.lanes = std::min(jobs, s.teams) * kPruneTeam;
+            s.shape.lanes = std::min(jobs, s.teams) * s.shape.lanes_per_tape;
             s.shape.longest_walk_words = ceil_div(jobs, s.teams) * s.job_walk;
         }
         s.shape.gpu_ms = ctx.stamp_ms(s.last_stamp) - ctx.stamp_ms(s.first_stamp);
@@ -566,6 +567,10 @@ Step Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uin
     }
     if (s.first_team_job + s.team_jobs > 0xfffffffeull)
         throw std::length_error("too many cells in one level");
+    if (mode == 3) {
+        plan_refine(lv, s);
+        return s;
+    }
     // A team's scratch: its lanes' state, per parent-tape entry a left operand and a word per
     // lane (decision and sweep flags), per stack slot and lane 4 words.
     const uint64_t team_bytes =
@@ -647,6 +652,54 @@ Step Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uin
         scratch = ctx.create_buffer(scratch_bytes);
     }
     return s;
+}
+
+// Refinement (prune_refine.comp): a squad of kRefineSquad lanes a listed cell, its sub-boxes a
+// lane each, as many squads as the device runs at once, in a grid-stride loop over the list.
+// Its jobs' count is the device's (refine_cells): the dispatches are recorded for all the
+// slice's cells. A lane's loops per job: staging the tape, one walk per batch of kRefineSquad
+// sub-boxes over at most kRefineMaxTape words, the far-field test over the squad, the sweep and
+// the write (one lane), or a chunk of a copied tape and the chunks' depths.
+void Pruner::plan_refine(const Level& lv, Step& s) {
+    const uint64_t len = max_len, walked = std::min<uint64_t>(len, math::kRefineMaxTape);
+    const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
+    const uint64_t batches = ceil_div(subs, kRefineSquad);
+    const uint64_t per_job =
+        2 * ceil_div(len, kRefineSquad) + batches * walked + 2 * walked + 2 * kRefineSquad + 8;
+    const uint64_t squads =
+        std::min({std::max<uint64_t>(s.team_jobs, 1),
+                  uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kRefineSquad),
+                  std::max<uint64_t>(ctx.resident_threads() / kRefineSquad, 1)});
+    s.teams = squads;
+    s.threads = uint32_t(squads * kRefineSquad);
+    s.groups = uint32_t(ceil_div(s.threads, kWorkgroupSize));
+    s.rounds = 1;
+    s.per_dispatch = ctx.loop_limited()
+                         ? squads * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / per_job)
+                         : std::max<uint64_t>(s.team_jobs, 1);
+    s.push = PrunePush{vec4(origin.x, origin.y, origin.z, L),
+                       vec4(lv.csize.x, lv.csize.y, lv.csize.z, opt.far_field_c),
+                       3,
+                       lv.f,
+                       0,
+                       s.threads,
+                       max_len,
+                       max_depth,
+                       flags,
+                       0,
+                       0,
+                       0,
+                       0,
+                       opt.refine,
+                       0};
+    s.job_walk = batches * walked;
+    s.wide = false;
+    s.shape.level = lv.index;
+    s.shape.mode = 3;
+    s.shape.jobs = s.team_jobs;  // until the device's count is read back
+    s.shape.lanes_per_tape = uint32_t(kRefineSquad);
+    s.shape.lanes = std::min<uint64_t>(s.team_jobs, squads) * kRefineSquad;
+    s.shape.longest_walk_words = ceil_div(s.team_jobs, squads) * s.job_walk;
 }
 
 // The wide kernel instead of teams, where it fits and its modelled cost wins (kWideRoundCost).
