@@ -1,7 +1,8 @@
-// prune_common.glsl — what the two pruning kernels share: prune.comp (a team of kTeam lanes
-// walks one parent tape, one lane per child box) and prune_wide.comp (a whole workgroup takes
-// one parent tape, its nodes spread over the lanes): the step's buffers (bindings 4–10) and push
-// constants, the tape pools, the boxes of a job (modes 0–2) and the store of a box's result.
+// prune_common.glsl — what the pruning kernels share: prune.comp (a team of kTeam lanes walks
+// one parent tape, one lane per child box), prune_wide.comp (a whole workgroup takes one parent
+// tape, its nodes spread over the lanes) and prune_refine.comp (a squad of lanes a finest cell,
+// a lane per sub-box): the step's buffers (bindings 4–11) and push constants, the tape pools,
+// the boxes of a job (modes 0–2) and the store of a box's result.
 // Include after scene.glsl and cells.glsl.
 
 const uint kTeam = 8u;  // boxes per job: lanes per team (gpu_prune.cpp: kPruneTeam)
@@ -53,8 +54,7 @@ layout(push_constant) uniform Push {
     uint max_len;    // longest parent tape (scratch per team or workgroup)
     uint max_stack;  // prune.comp: deepest evaluation stack of the parent tapes;
                      // prune_wide.comp: the highest node's height (scene_height)
-    uint flags;      // 1: far field on; 2: interval bounds; 4: new tapes go to the octant pool;
-                     // 8: jobs end in the dispatch that starts them (prune.comp: s_meta)
+    uint flags;      // 1: far field on; 2: interval bounds; 4: new tapes go to the octant pool
                      // (the finest cells before refinement: near ones listed in refine_list)
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's team jobs: [first_job, jobs)

@@ -43,13 +43,11 @@ struct GpuCounters {
 };
 // prune.comp: kStateWords, the words of a lane's job state in its team's scratch; kTeam, the
 // lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step
-// and phase; kBatchesPerStep, the batches of sub-boxes a step evaluates over a tape that fits
-// one window.
+// and phase. prune_refine.comp: kSquad, the lanes that refine one cell.
 inline constexpr uint64_t kPruneStateWords = 16;
 inline constexpr uint64_t kPruneTeam = 8;
-inline constexpr uint64_t kRefineSquad = 32;  // prune_refine.comp: lanes per cell
 inline constexpr uint64_t kPruneWindow = 64;
-inline constexpr uint64_t kPruneBatchesPerStep = 4;
+inline constexpr uint64_t kRefineSquad = 32;
 // prune_wide.comp: kWide, the lanes of a workgroup that takes one team job (kPruneTeam boxes of
 // one parent tape); kWideEntryWords, its scratch words per tape entry and box;
 // kWideHeightWords, per scene height (the counting sort's, the rounds' and their runs').

@@ -1,7 +1,8 @@
 // gpu_prune.cpp — hierarchical pruning on the device (gpu.hpp): the host walks the levels as
 // src/prune/prune.cpp does. A level's steps (prune.comp: the octants, the cells; then
 // prune_refine.comp: the finest cells' refinement) each run over all their jobs in teams of
-// lanes that share a parent tape, then expand.comp makes the next level's blocks. Steps with few
+// lanes that share a parent tape (in refinement, a squad of lanes per cell, a lane per
+// sub-box), then expand.comp makes the next level's blocks. Steps with few
 // jobs and long parent tapes (the top levels) run prune_wide.comp instead: a workgroup per
 // parent tape. Each level's tapes go to a pool of their own; before each run (the octants, the
 // cells, the refinement) a pool is made room for what its parents' tapes bound, and one that
@@ -9,8 +10,8 @@
 //
 // Reading order: Pruner::run (the levels), prune_level (a level: its pools and buffers),
 // prune_slices (its blocks, a slice at a time, and the steps of a slice), run_steps (one
-// submission), plan_step / plan_wide (a step's shape: teams or wide) and record_step (its
-// dispatches).
+// submission), plan_step / plan_wide / plan_refine (a step's shape: teams, wide or squads) and
+// record_step (its dispatches).
 #include <algorithm>
 #include <bit>
 #include <chrono>
@@ -595,26 +596,16 @@ Step Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uin
     s.teams = std::min(unlimited, fit);
     s.threads = uint32_t(s.teams * kPruneTeam);
     s.groups = uint32_t(ceil_div(s.threads, kWorkgroupSize));
-    // Steps of a job: per batch of sub-boxes an evaluation window by window, the far-field
-    // test, the sweep and the write window by window (and one to spare).
-    const uint64_t batches =
-        mode == 3 ? teams_for(uint64_t(opt.refine) * opt.refine * opt.refine) : 1;
-    // Refinement takes its batches of sub-boxes only over tapes up to kRefineMaxTape; a longer
-    // tape is evaluated once.
-    const auto windows = [](uint64_t words) { return ceil_div(words, kPruneWindow); };
-    const uint64_t batch_len =
-        mode == 3 ? std::min<uint64_t>(max_len, math::kRefineMaxTape) : max_len;
-    const uint64_t per_job = std::max((batches + 2) * windows(batch_len), 3 * windows(max_len)) + 2;
+    // Steps of a job: the evaluation window by window, the sweep and the write window by
+    // window (and one to spare).
+    const uint64_t per_job = 3 * ceil_div(max_len, kPruneWindow) + 2;
     // Under a loop limit (lavapipe), as many jobs per team and dispatch as fit the limit, or
     // one job resumed over as many rounds as its steps need; elsewhere one unlimited round. A
-    // step's loops: staging the window, evaluating it (in refinement up to
-    // kPruneBatchesPerStep times, over a tape that fits it), refinement's far-field test over
-    // the team, the sweep, the write; each over at most the longest tape.
+    // step's loops: staging the window, evaluating it, the sweep, the write; each over at most
+    // the longest tape.
     const bool limited = ctx.loop_limited();
     const uint64_t step_len = std::min<uint64_t>(max_len, kPruneWindow);
-    const uint64_t step_loops = kPruneWindow / kPruneTeam +
-                                (mode == 3 ? kPruneBatchesPerStep : 1) * step_len + kPruneTeam +
-                                2 * step_len + 8;
+    const uint64_t step_loops = kPruneWindow / kPruneTeam + 3 * step_len + 8;
     const uint64_t max_steps = (Context::kLoopLimit - 1024) / step_loops;
     s.rounds = limited ? ceil_div(per_job, max_steps) : 1;
     const uint32_t budget = !limited ? 0xffffffffu : uint32_t(s.rounds > 1 ? max_steps : per_job);
@@ -628,7 +619,7 @@ Step Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uin
                        s.threads,
                        max_len,
                        max_depth,
-                       flags | (transient ? 4u : 0u) | (s.rounds == 1 ? 8u : 0u),
+                       flags | (transient ? 4u : 0u),
                        0,
                        0,
                        0,
@@ -640,13 +631,12 @@ Step Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uin
     s.shape.jobs = jobs;
     s.shape.lanes_per_tape = uint32_t(kPruneTeam);
     s.shape.lanes = std::min<uint64_t>(s.team_jobs, s.teams) * kPruneTeam;
-    // A lane's walk per job: the evaluation once per batch, the sweep and the write.
-    s.job_walk = std::max((batches + 2) * batch_len, uint64_t(3) * max_len);
+    // A lane's walk per job: the evaluation, the sweep and the write.
+    s.job_walk = 3 * max_len;
     s.shape.longest_walk_words = s.team_jobs == 0 ? 0 : ceil_div(s.team_jobs, s.teams) * s.job_walk;
     s.wide = false;
     uint64_t scratch_bytes = s.teams * team_bytes;
-    if (mode != 3 && wide_override != 0 && ctx.can_run(KernelId::kPruneWide))
-        plan_wide(s, scratch_bytes);
+    if (wide_override != 0 && ctx.can_run(KernelId::kPruneWide)) plan_wide(s, scratch_bytes);
     if (scratch.size < scratch_bytes) {
         ctx.destroy(scratch);
         scratch = ctx.create_buffer(scratch_bytes);

@@ -23,7 +23,7 @@ inline constexpr uint32_t kWorkgroupSize = 64;
 // The kernels, one per compute shader in shaders/gpu/.
 enum class KernelId : uint32_t {
     kPrune,
-    kPruneRefine,  // refinement (mode 3) with its window in shared memory
+    kPruneRefine,  // refinement (mode 3): a squad of lanes per cell
     kPruneWide,
     kPruneWideSubgroups,  // needs subgroups() (else not built)
     kExpand,
