@@ -948,7 +948,18 @@ TEST(Gpu, SmallBufferRangeSplitsTheWork) {
     ro.camera = orbit_camera(sc.aabb, 35, 20, 0, 40);
     RenderStats cs, gs;
     ro.shading = Shading::kHeatmap;  // every pixel shows its own work, hit or miss
-    expect_similar(render(cpu, ro, &cs), gpu::render(*small, gpu, ro, &gs), "chunked image");
+    const Image chunked = gpu::render(*small, gpu, ro, &gs);
+    // The chunks give the image in one piece, as the same driver renders it whole, bit for bit;
+    // and, where the driver rounds as the CPU does, the CPU's image. (Elsewhere a last-bit
+    // difference moves a heat-map pixel's steps: on an H100, 108 of these 49,152 pixels, and
+    // Gpu.RenderMatchesCpu bounds the difference of shaded images.)
+    {
+        SDFPRUNE_REQUIRE_DEVICE(dev);
+        const Image whole = gpu::render(*dev, gpu::prune(*dev, sc, o), ro);
+        EXPECT_TRUE(chunked.rgb == whole.rgb) << "the chunked image differs from the whole one";
+    }
+    const Image on_cpu = render(cpu, ro, &cs);
+    if (exact_device(*small)) expect_similar(on_cpu, chunked, "chunked image");
     EXPECT_NEAR(cs.hit_fraction, gs.hit_fraction, 1e-3);
     EXPECT_NEAR(cs.steps_avg, gs.steps_avg, 0.01 * cs.steps_avg);
     EXPECT_GT(gs.hit_fraction, 0.0);

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <bit>
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <thread>
@@ -40,6 +41,7 @@ const uint32_t kDiscretizeSpv[] = {
 };
 
 struct KernelCode {
+    const char* name;  // its shader's, in SDFPRUNE_VULKAN_KERNEL_STATS's report
     const uint32_t* words;
     size_t bytes;
     uint32_t bindings;                     // storage buffers 0 .. bindings-1
@@ -49,14 +51,15 @@ struct KernelCode {
 
 // Binding counts must match the shaders' layouts (shaders/gpu/*.comp).
 const KernelCode kKernels[] = {
-    {kPruneSpv, sizeof(kPruneSpv), 13},
-    {kPruneRefineSpv, sizeof(kPruneRefineSpv), 13},
-    {kPruneWideSpv, sizeof(kPruneWideSpv), 13, uint32_t(kPruneWide)},
-    {kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 13, uint32_t(kPruneWide), true},
-    {kExpandSpv, sizeof(kExpandSpv), 4},
-    {kCellInfoSpv, sizeof(kCellInfoSpv), 3},
-    {kTraceSpv, sizeof(kTraceSpv), 10},
-    {kDiscretizeSpv, sizeof(kDiscretizeSpv), 10},
+    {"prune", kPruneSpv, sizeof(kPruneSpv), 13},
+    {"prune_refine", kPruneRefineSpv, sizeof(kPruneRefineSpv), 13},
+    {"prune_wide", kPruneWideSpv, sizeof(kPruneWideSpv), 13, uint32_t(kPruneWide)},
+    {"prune_wide_subgroups", kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 13,
+     uint32_t(kPruneWide), true},
+    {"expand", kExpandSpv, sizeof(kExpandSpv), 4},
+    {"cell_info", kCellInfoSpv, sizeof(kCellInfoSpv), 3},
+    {"trace", kTraceSpv, sizeof(kTraceSpv), 10},
+    {"discretize", kDiscretizeSpv, sizeof(kDiscretizeSpv), 10},
 };
 static_assert(std::size(kKernels) == size_t(KernelId::kCount));
 
@@ -94,6 +97,52 @@ bool has_extension(VkPhysicalDevice device, const char* name) {
 }
 
 }  // namespace
+
+// SDFPRUNE_VULKAN_KERNEL_STATS: one line per compiled kernel and executable on stderr, the
+// driver's statistics of it ("vulkan kernel NAME: statistic=value, ...").
+void Context::report_kernel_statistics(const char* name, VkPipeline pipeline) const {
+    const auto properties = reinterpret_cast<PFN_vkGetPipelineExecutablePropertiesKHR>(
+        vkGetDeviceProcAddr(device_, "vkGetPipelineExecutablePropertiesKHR"));
+    const auto statistics = reinterpret_cast<PFN_vkGetPipelineExecutableStatisticsKHR>(
+        vkGetDeviceProcAddr(device_, "vkGetPipelineExecutableStatisticsKHR"));
+    if (!properties || !statistics) return;
+    auto info = vk_struct<VkPipelineInfoKHR>(VK_STRUCTURE_TYPE_PIPELINE_INFO_KHR);
+    info.pipeline = pipeline;
+    uint32_t executables = 0;
+    if (properties(device_, &info, &executables, nullptr) != VK_SUCCESS) return;
+    for (uint32_t e = 0; e < executables; ++e) {
+        auto exe =
+            vk_struct<VkPipelineExecutableInfoKHR>(VK_STRUCTURE_TYPE_PIPELINE_EXECUTABLE_INFO_KHR);
+        exe.pipeline = pipeline;
+        exe.executableIndex = e;
+        uint32_t n = 0;
+        if (statistics(device_, &exe, &n, nullptr) != VK_SUCCESS) continue;
+        std::vector<VkPipelineExecutableStatisticKHR> stats(
+            n, vk_struct<VkPipelineExecutableStatisticKHR>(
+                   VK_STRUCTURE_TYPE_PIPELINE_EXECUTABLE_STATISTIC_KHR));
+        if (statistics(device_, &exe, &n, stats.data()) != VK_SUCCESS) continue;
+        std::string line = std::string("vulkan kernel ") + name + ":";
+        for (const VkPipelineExecutableStatisticKHR& st : stats) {
+            line += std::string(" ") + st.name + "=";
+            switch (st.format) {
+                case VK_PIPELINE_EXECUTABLE_STATISTIC_FORMAT_BOOL32_KHR:
+                    line += st.value.b32 ? "true" : "false";
+                    break;
+                case VK_PIPELINE_EXECUTABLE_STATISTIC_FORMAT_INT64_KHR:
+                    line += std::to_string(st.value.i64);
+                    break;
+                case VK_PIPELINE_EXECUTABLE_STATISTIC_FORMAT_UINT64_KHR:
+                    line += std::to_string(st.value.u64);
+                    break;
+                default:
+                    line += std::to_string(st.value.f64);
+            }
+            line += ",";
+        }
+        line.back() = '\n';
+        std::fputs(line.c_str(), stderr);
+    }
+}
 
 void Context::check(VkResult r, const char* what) const {
     if (r == VK_SUCCESS) return;
@@ -251,11 +300,29 @@ Context::Context() {
     dci.queueCreateInfoCount = 1;
     dci.pQueueCreateInfos = &qci;
     // Such a driver must be told that the application knows (the Vulkan spec).
+    const char* extensions[2];
     const char* portability_subset = "VK_KHR_portability_subset";
-    if (has_extension(physical_, portability_subset)) {
-        dci.enabledExtensionCount = 1;
-        dci.ppEnabledExtensionNames = &portability_subset;
+    if (has_extension(physical_, portability_subset))
+        extensions[dci.enabledExtensionCount++] = portability_subset;
+    // SDFPRUNE_VULKAN_KERNEL_STATS=1: the driver's statistics of each compiled kernel (an
+    // NVIDIA driver's registers, shared memory and the like) on stderr, where the driver has
+    // VK_KHR_pipeline_executable_properties: what bounds a kernel's occupancy.
+    auto executable_info = vk_struct<VkPhysicalDevicePipelineExecutablePropertiesFeaturesKHR>(
+        VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PIPELINE_EXECUTABLE_PROPERTIES_FEATURES_KHR);
+    const char* kernel_stats_env = std::getenv("SDFPRUNE_VULKAN_KERNEL_STATS");
+    const bool kernel_stats =
+        kernel_stats_env && std::atoi(kernel_stats_env) != 0 &&
+        has_extension(physical_, VK_KHR_PIPELINE_EXECUTABLE_PROPERTIES_EXTENSION_NAME);
+    if (kernel_stats) {
+        extensions[dci.enabledExtensionCount++] =
+            VK_KHR_PIPELINE_EXECUTABLE_PROPERTIES_EXTENSION_NAME;
+        executable_info.pipelineExecutableInfo = VK_TRUE;
+        dci.pNext = &executable_info;
+    } else if (kernel_stats_env && std::atoi(kernel_stats_env) != 0) {
+        std::fprintf(stderr, "vulkan: %s has no VK_KHR_pipeline_executable_properties\n",
+                     device_name_.c_str());
     }
+    dci.ppEnabledExtensionNames = extensions;
     check(vkCreateDevice(physical_, &dci, nullptr, &device_), "vkCreateDevice");
     vkGetDeviceQueue(device_, queue_family_, 0, &queue_);
 
@@ -329,10 +396,12 @@ Context::Context() {
         cpci.stage.module = module;
         cpci.stage.pName = "main";
         cpci.layout = k.layout;
+        if (kernel_stats) cpci.flags = VK_PIPELINE_CREATE_CAPTURE_STATISTICS_BIT_KHR;
         const VkResult r =
             vkCreateComputePipelines(device_, VK_NULL_HANDLE, 1, &cpci, nullptr, &k.pipeline);
         vkDestroyShaderModule(device_, module, nullptr);
         check(r, "vkCreateComputePipelines");
+        if (kernel_stats) report_kernel_statistics(code.name, k.pipeline);
         kernels_.push_back(k);
     }
 }

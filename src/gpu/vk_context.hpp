@@ -158,6 +158,7 @@ class Context {
     void download(const Buffer& src, void* data, uint64_t bytes, uint64_t src_offset = 0);
 
   private:
+    void report_kernel_statistics(const char* name, VkPipeline pipeline) const;
     struct Kernel {
         VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
         VkPipelineLayout layout = VK_NULL_HANDLE;
