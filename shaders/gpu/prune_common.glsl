@@ -103,6 +103,56 @@ void tape_write(uint ref, uint value) {
         level_pool[ref] = value;
 }
 
+// A pruning step's work on one tape entry over a box (evaluate_cell and refine_cell; the same
+// float operations as the CPU backend), shared by the three pruning kernels. x: value, lo, hi.
+// A tape sign on an entry: its value negated, its range flipped.
+vec3 negate_range(vec3 x) { return vec3(-x.x, -x.z, -x.y); }
+
+// A primitive's value at the box's centre p and its range over the box (half sizes h, radius
+// spread_r): v ± L·R, with interval bounds narrowed by its similarity bound.
+vec3 primitive_range(Node nd, vec3 p, vec3 h, float spread_r, bool interval) {
+    float spread = nd.lipschitz * spread_r;
+    uint prim = nd.primitive;
+    float v = eval_primitive(nd.kind, params[prim], p);
+    float lo = v - spread, hi = v + spread;
+    vec4 b0 = extras[prim].bound0;
+    if (interval && b0.w > 0.0) {
+        vec2 r = similarity_range(b0.xyz, b0.w, extras[prim].bound1.x, extras[prim].bound1.y, p,
+                                  h);
+        lo = max(lo, r.x);
+        hi = min(hi, r.y);
+    }
+    return vec3(v, lo, hi);
+}
+
+// An operator's value and range and its decision, from its operands'. An undecided operator's
+// range with interval bounds: the operator's range over its operands' ranges, narrowed by
+// v ± L·R; in refinement (`refining`) that range alone (OperatorMode::kRefine), which holds the
+// Lipschitz range up to rounding.
+vec3 combine_operator(Node nd, float spread_r, bool interval, bool refining, vec3 left,
+                      vec3 right, out uint decision) {
+    float spread = nd.lipschitz * spread_r;
+    float sgn = operator_s(nd.kind), k2 = nd.blend;
+    decision = prune_decision(sgn, k2, left.y, left.z, right.y, right.z);
+    float v = apply_operator(sgn, k2, left.x, right.x);
+    float lo, hi;
+    if (decision == kLeftWins) {
+        lo = left.y;
+        hi = left.z;
+    } else if (decision == kRightWins) {
+        lo = right.y;
+        hi = right.z;
+    } else if (interval) {
+        vec2 r2 = operator_range(sgn, k2, left.y, left.z, right.y, right.z);
+        lo = refining ? r2.x : max(v - spread, r2.x);
+        hi = refining ? r2.y : min(v + spread, r2.y);
+    } else {
+        lo = v - spread;
+        hi = v + spread;
+    }
+    return vec3(v, lo, hi);
+}
+
 // Stores a finished box's result: `tape` of `words` words (near), or the far-field constant.
 // Mode 3 writes the refined cell `c` (to binding 5).
 void store(uint dest, bool near, float value, float constant, uint tape, uint words, Cell c) {

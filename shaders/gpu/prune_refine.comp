@@ -113,8 +113,8 @@ void main() {
             float clearance = far_field_clearance(pc.csize.w, L, radius);
             uint far_flags = far_field ? 3u : 0u;
             float lowest = kInfinity, highest = -kInfinity;
-            float st_v[kStackMax], st_lo[kStackMax], st_hi[kStackMax];
-            uint st_e[kStackMax];
+            vec3 st[kStackMax];  // the stack's values and ranges
+            uint st_entry[kStackMax];
             for (uint batch = 0u; batch < nbatch; ++batch) {
                 // Lanes past the last sub-box repeat it.
                 uint sb = min(batch * kSquad + lane, nsub - 1u);
@@ -124,59 +124,23 @@ void main() {
                 for (uint i = 0u; i < len; ++i) {
                     uint w = s_word[q][i];
                     Node nd = nodes[tape_node(w)];
-                    float spread = nd.lipschitz * sub_R;
-                    float v, lo, hi;
+                    vec3 x;
                     if (nd.kind < kPrimitiveKindCount) {
-                        uint prim = nd.primitive;
-                        v = eval_primitive(nd.kind, params[prim], p);
-                        lo = v - spread;
-                        hi = v + spread;
-                        vec4 b0 = extras[prim].bound0;
-                        if (interval && b0.w > 0.0) {
-                            vec2 r = similarity_range(b0.xyz, b0.w, extras[prim].bound1.x,
-                                                      extras[prim].bound1.y, p, sub_half);
-                            lo = max(lo, r.x);
-                            hi = min(hi, r.y);
-                        }
+                        x = primitive_range(nd, p, sub_half, sub_R, interval);
                     } else {
                         top -= 2u;
-                        float lv = st_v[top], llo = st_lo[top], lhi = st_hi[top];
-                        float rv = st_v[top + 1u], rlo = st_lo[top + 1u], rhi = st_hi[top + 1u];
-                        float sgn = operator_s(nd.kind), k = nd.blend;
-                        uint decision = prune_decision(sgn, k, llo, lhi, rlo, rhi);
+                        uint decision;
+                        x = combine_operator(nd, sub_R, interval, true, st[top], st[top + 1u],
+                                             decision);
                         atomicOr(s_seen[q][i], 1u << decision);
-                        if (lane == 0u && batch == 0u) s_left[q][i] = st_e[top];
-                        v = apply_operator(sgn, k, lv, rv);
-                        if (decision == kLeftWins) {
-                            lo = llo;
-                            hi = lhi;
-                        } else if (decision == kRightWins) {
-                            lo = rlo;
-                            hi = rhi;
-                        } else if (interval) {
-                            // The operator's range alone, which holds the Lipschitz range up
-                            // to rounding (refine_cell's OperatorMode::kRefine).
-                            vec2 r2 = operator_range(sgn, k, llo, lhi, rlo, rhi);
-                            lo = r2.x;
-                            hi = r2.y;
-                        } else {
-                            lo = v - spread;
-                            hi = v + spread;
-                        }
+                        if (lane == 0u && batch == 0u) s_left[q][i] = st_entry[top];
                     }
-                    if (tape_negated(w)) {
-                        v = -v;
-                        float t = lo;
-                        lo = -hi;
-                        hi = -t;
-                    }
-                    st_v[top] = v;
-                    st_lo[top] = lo;
-                    st_hi[top] = hi;
-                    st_e[top] = i;
+                    if (tape_negated(w)) x = negate_range(x);
+                    st[top] = x;
+                    st_entry[top] = i;
                     ++top;
                 }
-                vec2 range = far_field_range(st_v[0], st_lo[0], st_hi[0], L, sub_R);
+                vec2 range = far_field_range(st[0].x, st[0].y, st[0].z, L, sub_R);
                 if (!clears_above(range.x, clearance)) far_flags &= ~1u;
                 if (!clears_below(range.y, clearance)) far_flags &= ~2u;
                 lowest = min(lowest, range.x);

@@ -147,70 +147,36 @@ void main() {
             barrier();
             // Stage 1: values and ranges at the box centre, decisions (evaluate_cell).
             if (phase == kPhaseEvaluate) {
-                float spread_R = R;
                 uint we = min(i + kWindow, len);
                 for (; i < we; ++i) {
                     uint w = s_word[win + i - w0];
                     Node nd = s_node[win + i - w0];
-                    uint kind = nd.kind;
-                    float spread = nd.lipschitz * spread_R;
-                    float v, lo, hi;
+                    vec3 x;
                     uint decision = kKeepBoth;
-                    if (kind < kPrimitiveKindCount) {
-                        uint p = nd.primitive;
-                        v = eval_primitive(kind, params[p], centre);
-                        lo = v - spread;
-                        hi = v + spread;
-                        vec4 b0 = extras[p].bound0;
-                        if (interval && b0.w > 0.0) {
-                            vec2 r = similarity_range(b0.xyz, b0.w, extras[p].bound1.x,
-                                                      extras[p].bound1.y, centre, half_size);
-                            lo = max(lo, r.x);
-                            hi = min(hi, r.y);
-                        }
+                    if (nd.kind < kPrimitiveKindCount) {
+                        x = primitive_range(nd, centre, half_size, R, interval);
                     } else {
                         uint sr = sbase + 4u * (top - 1u) * kTeam + lane;
                         uint sl = sbase + 4u * (top - 2u) * kTeam + lane;
                         top -= 2u;
-                        float lv = uintBitsToFloat(lane_scratch[sl]);
-                        float llo = uintBitsToFloat(lane_scratch[sl + kTeam]);
-                        float lhi = uintBitsToFloat(lane_scratch[sl + 2u * kTeam]);
-                        float rv = uintBitsToFloat(lane_scratch[sr]);
-                        float rlo = uintBitsToFloat(lane_scratch[sr + kTeam]);
-                        float rhi = uintBitsToFloat(lane_scratch[sr + 2u * kTeam]);
-                        float sgn = operator_s(kind), k = nd.blend;
-                        decision = prune_decision(sgn, k, llo, lhi, rlo, rhi);
+                        vec3 left = vec3(uintBitsToFloat(lane_scratch[sl]),
+                                         uintBitsToFloat(lane_scratch[sl + kTeam]),
+                                         uintBitsToFloat(lane_scratch[sl + 2u * kTeam]));
+                        vec3 right = vec3(uintBitsToFloat(lane_scratch[sr]),
+                                          uintBitsToFloat(lane_scratch[sr + kTeam]),
+                                          uintBitsToFloat(lane_scratch[sr + 2u * kTeam]));
                         // Written by every lane (the same value): a lane's sweep may follow in
                         // this very step, and reads its own write, with no barrier between.
                         scratch[lbase + i] = lane_scratch[sl + 3u * kTeam];
-                        v = apply_operator(sgn, k, lv, rv);
-                        if (decision == kLeftWins) {
-                            lo = llo;
-                            hi = lhi;
-                        } else if (decision == kRightWins) {
-                            lo = rlo;
-                            hi = rhi;
-                        } else if (interval) {
-                            vec2 r2 = operator_range(sgn, k, llo, lhi, rlo, rhi);
-                            lo = max(v - spread, r2.x);
-                            hi = min(v + spread, r2.y);
-                        } else {
-                            lo = v - spread;
-                            hi = v + spread;
-                        }
+                        x = combine_operator(nd, R, interval, false, left, right, decision);
                     }
-                    if (tape_negated(w)) {
-                        v = -v;
-                        float tmp = lo;
-                        lo = -hi;
-                        hi = -tmp;
-                    }
+                    if (tape_negated(w)) x = negate_range(x);
                     // The decision, its sweep flags cleared for stage 3.
                     scratch[dbase + i * kTeam + lane] = decision;
                     uint so = sbase + 4u * top * kTeam + lane;
-                    lane_scratch[so] = floatBitsToUint(v);
-                    lane_scratch[so + kTeam] = floatBitsToUint(lo);
-                    lane_scratch[so + 2u * kTeam] = floatBitsToUint(hi);
+                    lane_scratch[so] = floatBitsToUint(x.x);
+                    lane_scratch[so + kTeam] = floatBitsToUint(x.y);
+                    lane_scratch[so + 2u * kTeam] = floatBitsToUint(x.z);
                     lane_scratch[so + 3u * kTeam] = i;
                     ++top;
                     pdepth = max(pdepth, top);

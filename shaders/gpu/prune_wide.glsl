@@ -142,35 +142,6 @@ void store_item(uint at, vec3 x, uint decision) {
     scratch[at + 2u] = floatBitsToUint(x.z);
     scratch[at + 3u] = decision;  // the sweep's flags cleared
 }
-// A tape sign on an entry: its value negated, its range flipped.
-vec3 negate_range(vec3 x) { return vec3(-x.x, -x.z, -x.y); }
-
-// An operator's value and range (x: value, lo, hi) at a box and its decision, from its
-// operands' (evaluate_cell; the same float operations as the CPU backend).
-vec3 combine_operator(Node nd, float spread_r, bool interval, vec3 left, vec3 right,
-                      out uint decision) {
-    float spread = nd.lipschitz * spread_r;
-    float sgn = operator_s(nd.kind), k2 = nd.blend;
-    decision = prune_decision(sgn, k2, left.y, left.z, right.y, right.z);
-    float v = apply_operator(sgn, k2, left.x, right.x);
-    float lo, hi;
-    if (decision == kLeftWins) {
-        lo = left.y;
-        hi = left.z;
-    } else if (decision == kRightWins) {
-        lo = right.y;
-        hi = right.z;
-    } else if (interval) {
-        vec2 r2 = operator_range(sgn, k2, left.y, left.z, right.y, right.z);
-        lo = max(v - spread, r2.x);
-        hi = min(v + spread, r2.y);
-    } else {
-        lo = v - spread;
-        hi = v + spread;
-    }
-    return vec3(v, lo, hi);
-}
-
 // Round q's record in a run: its entry, left operand, and `third` (kRunWord or kRunSigns).
 uvec3 run_record(uint rbase, uint q, uint third) {
     uint at = rbase + kRoundWords * q;
@@ -214,7 +185,7 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, uint b, float sprea
         if (rec0.x - 1u == e_back1) right0 = x_back1;
         else if (rec0.x - 1u == e_back2) right0 = x_back2;
         uint decision;
-        vec3 x = combine_operator(nd0, spread_r, interval, left0, right0, decision);
+        vec3 x = combine_operator(nd0, spread_r, interval, false, left0, right0, decision);
         if (tape_negated(rec0.z)) x = negate_range(x);
         store_item(item_at(vbase, rec0.x, b), x, decision);
         e_back2 = e_back1;
@@ -440,22 +411,11 @@ void main() {
                 vec3 x;
                 uint decision = kKeepBoth;
                 if (kind < kPrimitiveKindCount) {
-                    float spread = nd.lipschitz * spread_r;
-                    uint p = nd.primitive;
-                    float v = eval_primitive(kind, params[p], centre);
-                    float lo = v - spread, hi = v + spread;
-                    vec4 b0 = extras[p].bound0;
-                    if (interval && b0.w > 0.0) {
-                        vec2 r = similarity_range(b0.xyz, b0.w, extras[p].bound1.x,
-                                                  extras[p].bound1.y, centre, half_size);
-                        lo = max(lo, r.x);
-                        hi = min(hi, r.y);
-                    }
-                    x = vec3(v, lo, hi);
+                    x = primitive_range(nd, centre, half_size, spread_r, interval);
                 } else {
                     vec3 left = item_range(item_at(vbase, scratch[lbase + e], box));
                     vec3 right = item_range(item_at(vbase, e - 1u, box));
-                    x = combine_operator(nd, spread_r, interval, left, right, decision);
+                    x = combine_operator(nd, spread_r, interval, false, left, right, decision);
                 }
                 if (tape_negated(w)) x = negate_range(x);
                 store_item(item_at(vbase, e, box), x, decision);
