@@ -59,8 +59,7 @@ layout(push_constant) uniform Push {
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's team jobs: [first_job, jobs)
     uint round;       // 0: start the jobs; later rounds resume them (prune.comp)
-    uint budget;      // steps per job and round (prune.comp); jobs a squad takes at a time
-                      // (prune_refine.comp)
+    uint budget;      // steps per job and round (prune.comp)
     uint refine;      // mode 3: sub-boxes per axis
     uint octant_start;  // octant pool words in use before this step
 } pc;

@@ -1,18 +1,16 @@
 #version 450
 // prune_refine.comp — refinement (mode 3): each finest near-field cell decided again over its
 // refine³ sub-boxes (src/prune/prune_cell.cpp: refine_cell), from `cells` into the buffer of
-// binding 5. Job k takes cell refine_list[k], for k below refine_cells (the near-field cells the
-// cells step listed); the far-field cells were copied to binding 5 before, as they are.
-// A squad of kSquad lanes takes its jobs a batch at a time: each lane reads one job's cell and
-// tape length; a lone primitive that cannot clear the far field (refine_far_possible) has
-// nothing to decide again, and that lane copies its tape alone; the other cells are listed for
-// the squad. The squad then takes them one by one: the cell's tape sits in shared memory and
-// every lane walks it in lockstep over its own sub-box (the next kSquad sub-boxes after each
-// walk, while any are left), its evaluation stack in registers and the thread's local memory.
-// The lanes' decisions meet in one shared word per entry, their far-field tests in one per lane;
+// binding 5. A squad of kSquad lanes takes one cell: its tape sits in shared memory and every
+// lane walks it in lockstep over its own sub-box (the next kSquad sub-boxes after each walk,
+// while any are left), its evaluation stack in registers and the thread's local memory. The
+// lanes' decisions meet in one shared word per entry, their far-field tests in one per lane;
 // then one lane compacts the tape (the top-down sweep of compact_tape) and writes it to the
-// level's pool. Tapes longer than kRefineMaxTape are not refined: the squad's lanes copy them, a
-// chunk each.
+// level's pool. Job k takes cell refine_list[k], for k below refine_cells (the near-field cells
+// the cells step listed); the far-field cells were copied to binding 5 before, as they are.
+// Tapes longer than kRefineMaxTape, and a lone primitive that cannot clear the far field
+// (refine_far_possible), have nothing to decide again: they are copied as they are, by all the
+// squad's lanes.
 #include "scene.glsl"
 
 layout(local_size_x = 64) in;
@@ -40,13 +38,6 @@ shared float s_lowest[kSquads][kSquad];
 shared float s_highest[kSquads][kSquad];
 shared uint s_at[kSquads];
 shared int s_net[kSquads][kSquad], s_peak[kSquads][kSquad];
-// A batch of jobs: the cells the squad takes (their index, contents, tape length and coordinates
-// in the level), and how many.
-shared uint s_job_cell[kSquads][kSquad];
-shared Cell s_job_c0[kSquads][kSquad];
-shared uint s_job_len[kSquads][kSquad];
-shared uvec3 s_job_at[kSquads][kSquad];
-shared uint s_count[kSquads];
 
 void main() {
     counts_begin();
@@ -70,254 +61,205 @@ void main() {
 
     // The host records the dispatches for every finest cell; the jobs are the listed ones only
     // (the same count in every lane: the step before wrote it). Every lane of a workgroup sees
-    // the same trip counts (barriers inside). A squad takes its jobs pc.budget at a time: each
-    // lane reads one job's cell, finishes it alone where the squad has nothing to do for it (a
-    // far cell, a lone primitive that cannot turn far-field), and else lists it for the squad,
-    // which then takes the listed cells one by one. A cell's chain of dependent loads (list,
-    // cell, block, tape) is paid once for the squad's batch, not once per cell.
+    // the same trip count (barriers inside).
     uint jobs = min(pc.jobs, refine_cells);
-    uint batch_jobs = pc.budget;
-    for (uint first = pc.first_job; first < jobs; first += squads * batch_jobs) {
-        if (lane == 0u) s_count[q] = 0u;
-        memoryBarrierShared();
-        barrier();
-        uint job = first + squad * batch_jobs + lane;
-        if (squad < squads && lane < batch_jobs && job < jobs) {
-            uint cell = refine_list[job];
-            Cell c0 = cells[cell];
+    for (uint first = pc.first_job; first < jobs; first += squads) {
+        uint job = first + squad;
+        bool has_job = squad < squads && job < jobs;
+        uint cell = 0u, parent = 0u, len = 0u;
+        Cell c0 = Cell(kFarField, 0u, 0.0, 0.0);
+        precise vec3 centre = vec3(0.0);
+        bool evaluate = false, copy = false;
+        if (has_job) {
+            cell = refine_list[job];
+            uint bi = cell / per_block, local = cell % per_block;
+            Block b = blocks[bi];
+            uvec3 lc = uvec3(local % f, (local / f) % f, local / (f * f));
+            centre = origin + (vec3(b.x + lc.x, b.y + lc.y, b.z + lc.z) + 0.5) * cs;
+            c0 = cells[cell];
             if (c0.tape == kFarField) {
                 // Only near cells are listed; were one not, it is copied as it is.
-                octants[cell] = c0;
+                if (lane == 0u) octants[cell] = c0;
             } else {
-                uint parent = c0.tape;
-                uint len = tape_read(parent, 0u);
-                bool lone_copy = false;
+                parent = c0.tape;
+                len = tape_read(parent, 0u);
+                copy = len > kRefineMaxTape;
                 if (len == 1u) {
-                    // A lone primitive in a cell that cannot clear the far field
-                    // (refine_far_possible: refine_cell's test, where the CPU returns at once
-                    // too) has nothing to decide again: its tape is copied as it is.
-                    uint w = tape_read(parent, 2u);
-                    Node lone = nodes[tape_node(w)];
+                    Node lone = nodes[tape_node(tape_read(parent, 2u))];
                     float clearance = far_field_clearance(pc.csize.w, lone.lipschitz, radius);
                     float sigma = extras[lone.primitive].bound0.w;
-                    lone_copy =
-                        !far_field || !refine_far_possible(c0.value, clearance, sigma, half_cell);
-                    if (lone_copy) {
-                        uint at = atomicAdd(pool_used, 3u);
-                        if (at < pc.pool_start || at + 3u > pool_capacity || at + 3u < at ||
-                            at >= kInOctantPool) {
-                            atomicOr(overflow, 1u);
-                            store(cell, false, c0.value, 0.0, kFarField, 0u, c0);
-                        } else {
-                            tape_write(at, 1u);
-                            tape_write(at + 1u, tape_read(parent, 1u));
-                            tape_write(at + 2u, w);
-                            note_len(1u);
-                            note_depth(1u);
-                            store(cell, true, c0.value, 0.0, at, 1u, c0);
-                        }
-                    }
+                    copy = !far_field || !refine_far_possible(c0.value, clearance, sigma, half_cell);
                 }
-                if (!lone_copy) {
-                    uint bi = cell / per_block, local = cell % per_block;
-                    Block b = blocks[bi];
-                    uint k = atomicAdd(s_count[q], 1u);
-                    s_job_cell[q][k] = cell;
-                    s_job_c0[q][k] = c0;
-                    s_job_len[q][k] = len;
-                    s_job_at[q][k] = uvec3(b.x + local % f, b.y + (local / f) % f,
-                                           b.z + local / (f * f));
-                }
+                evaluate = !copy;
             }
+        }
+
+        barrier();  // the squads' last reads of the previous job's shared words are done
+        if (evaluate)
+            for (uint k = lane; k < len; k += kSquad) {
+                uint w = tape_read(parent, 2u + k);
+                s_word[q][k] = w;
+                s_seen[q][k] = 0u;
+                s_flag[q][k] = 0u;
+            }
+        memoryBarrierShared();
+        barrier();
+
+        if (evaluate) {
+            // Stage 1 over each sub-box: values, ranges and decisions (evaluate_boxes in
+            // OperatorMode::kRefine), then stage 2, the far-field test of is_near_field on the
+            // sub-box's root range against the whole cell's clearance.
+            float L = nodes[tape_node(s_word[q][len - 1u])].lipschitz;
+            float clearance = far_field_clearance(pc.csize.w, L, radius);
+            uint far_flags = far_field ? 3u : 0u;
+            float lowest = kInfinity, highest = -kInfinity;
+            vec3 st[kStackMax];  // the stack's values and ranges
+            uint st_entry[kStackMax];
+            for (uint batch = 0u; batch < nbatch; ++batch) {
+                // Lanes past the last sub-box repeat it.
+                uint sb = min(batch * kSquad + lane, nsub - 1u);
+                uvec3 sc = uvec3(sb % subs, (sb / subs) % subs, sb / (subs * subs));
+                precise vec3 p = centre - half_cell + vec3(2u * sc + 1u) * sub_half;
+                uint top = 0u;
+                for (uint i = 0u; i < len; ++i) {
+                    uint w = s_word[q][i];
+                    Node nd = nodes[tape_node(w)];
+                    vec3 x;
+                    if (nd.kind < kPrimitiveKindCount) {
+                        x = primitive_range(nd, p, sub_half, sub_R, interval);
+                    } else {
+                        top -= 2u;
+                        uint decision;
+                        x = combine_operator(nd, sub_R, interval, true, st[top], st[top + 1u],
+                                             decision);
+                        atomicOr(s_seen[q][i], 1u << decision);
+                        if (lane == 0u && batch == 0u) s_left[q][i] = st_entry[top];
+                    }
+                    if (tape_negated(w)) x = negate_range(x);
+                    st[top] = x;
+                    st_entry[top] = i;
+                    ++top;
+                }
+                vec2 range = far_field_range(st[0].x, st[0].y, st[0].z, L, sub_R);
+                if (!clears_above(range.x, clearance)) far_flags &= ~1u;
+                if (!clears_below(range.y, clearance)) far_flags &= ~2u;
+                lowest = min(lowest, range.x);
+                highest = max(highest, range.y);
+            }
+            s_far[q][lane] = far_flags;
+            s_lowest[q][lane] = lowest;
+            s_highest[q][lane] = highest;
+        }
+        if (copy && lane == 0u) {
+            uint at = atomicAdd(pool_used, len + 2u);
+            if (at < pc.pool_start || at + len + 2u > pool_capacity || at + len + 2u < at ||
+                at >= kInOctantPool) {
+                atomicOr(overflow, 1u);
+                store(cell, false, c0.value, 0.0, kFarField, 0u, c0);
+                at = kFarField;
+            } else {
+                tape_write(at, len);
+                tape_write(at + 1u, tape_read(parent, 1u));
+            }
+            s_at[q] = at;
         }
         memoryBarrierShared();
         barrier();
-        uint count = s_count[q];
-        uint rounds = 0u;  // the same in every lane: the busiest squad's
-        for (uint k = 0u; k < kSquads; ++k) rounds = max(rounds, s_count[k]);
-        for (uint m = 0u; m < rounds; ++m) {
-            uint cell = 0u, parent = 0u, len = 0u;
-            Cell c0 = Cell(kFarField, 0u, 0.0, 0.0);
-            precise vec3 centre = vec3(0.0);
-            bool evaluate = false, copy = false;
-            if (m < count) {
-                cell = s_job_cell[q][m];
-                c0 = s_job_c0[q][m];
-                parent = c0.tape;
-                len = s_job_len[q][m];
-                centre = origin + (vec3(s_job_at[q][m]) + 0.5) * cs;
-                copy = len > kRefineMaxTape;
-                evaluate = !copy;
+
+        if (copy && s_at[q] != kFarField) {
+            // Copied word for word, a chunk a lane; each chunk's change of the stack depth and
+            // the highest it reaches within give the tape's deepest stack.
+            uint at = s_at[q];
+            uint chunk = (len + kSquad - 1u) / kSquad;
+            uint k0 = min(lane * chunk, len), k1 = min(k0 + chunk, len);
+            int depth = 0, peak = 0;
+            for (uint k = k0; k < k1; ++k) {
+                uint w = tape_read(parent, 2u + k);
+                tape_write(at + 2u + k, w);
+                depth += is_primitive(tape_node(w)) ? 1 : -1;
+                peak = max(peak, depth);
             }
+            s_net[q][lane] = depth;
+            s_peak[q][lane] = peak;
+        }
+        memoryBarrierShared();
+        barrier();
 
-            barrier();  // the squads' last reads of the previous job's shared words are done
-            if (evaluate)
-                for (uint k = lane; k < len; k += kSquad) {
-                    uint w = tape_read(parent, 2u + k);
-                    s_word[q][k] = w;
-                    s_seen[q][k] = 0u;
-                    s_flag[q][k] = 0u;
-                }
-            memoryBarrierShared();
-            barrier();
-
-            if (evaluate) {
-                // Stage 1 over each sub-box: values, ranges and decisions (evaluate_boxes in
-                // OperatorMode::kRefine), then stage 2, the far-field test of is_near_field on the
-                // sub-box's root range against the whole cell's clearance.
-                float L = nodes[tape_node(s_word[q][len - 1u])].lipschitz;
-                float clearance = far_field_clearance(pc.csize.w, L, radius);
-                uint far_flags = far_field ? 3u : 0u;
-                float lowest = kInfinity, highest = -kInfinity;
-                vec3 st[kStackMax];  // the stack's values and ranges
-                uint st_entry[kStackMax];
-                for (uint batch = 0u; batch < nbatch; ++batch) {
-                    // Lanes past the last sub-box repeat it.
-                    uint sb = min(batch * kSquad + lane, nsub - 1u);
-                    uvec3 sc = uvec3(sb % subs, (sb / subs) % subs, sb / (subs * subs));
-                    precise vec3 p = centre - half_cell + vec3(2u * sc + 1u) * sub_half;
-                    uint top = 0u;
-                    for (uint i = 0u; i < len; ++i) {
-                        uint w = s_word[q][i];
-                        Node nd = nodes[tape_node(w)];
-                        vec3 x;
-                        if (nd.kind < kPrimitiveKindCount) {
-                            x = primitive_range(nd, p, sub_half, sub_R, interval);
-                        } else {
-                            top -= 2u;
-                            uint decision;
-                            x = combine_operator(nd, sub_R, interval, true, st[top], st[top + 1u],
-                                                 decision);
-                            atomicOr(s_seen[q][i], 1u << decision);
-                            if (lane == 0u && batch == 0u) s_left[q][i] = st_entry[top];
-                        }
-                        if (tape_negated(w)) x = negate_range(x);
-                        st[top] = x;
-                        st_entry[top] = i;
-                        ++top;
+        if (copy && lane == 0u && s_at[q] != kFarField) {
+            int depth = 0, depth_max = 0;
+            for (uint m = 0u; m < kSquad; ++m) {
+                depth_max = max(depth_max, depth + s_peak[q][m]);
+                depth += s_net[q][m];
+            }
+            note_len(len);
+            note_depth(uint(depth_max));
+            store(cell, true, c0.value, 0.0, s_at[q], len, c0);
+        }
+        if (evaluate && lane == 0u) {
+            uint far_flags = 3u;
+            float lowest = kInfinity, highest = -kInfinity;
+            for (uint m = 0u; m < kSquad; ++m) {
+                far_flags &= s_far[q][m];
+                lowest = min(lowest, s_lowest[q][m]);
+                highest = max(highest, s_highest[q][m]);
+            }
+            if (far_flags != 0u) {
+                store(cell, false, c0.value, (far_flags & 1u) != 0u ? lowest : highest,
+                      kFarField, 0u, c0);
+            } else {
+                // Stage 3, compact_tape: the top-down sweep from the root, an operator decided
+                // alike in every sub-box replaced by its winner.
+                s_flag[q][len - 1u] = 1u | (tape_negated(s_word[q][len - 1u]) ? 4u : 0u);
+                uint out_len = 0u, prims = 0u;
+                for (uint i = len; i > 0u; --i) {
+                    uint e = i - 1u;
+                    uint fl = s_flag[q][e];
+                    if ((fl & 3u) != 1u) continue;
+                    uint w = s_word[q][e];
+                    if (is_primitive(tape_node(w))) {
+                        ++out_len;
+                        ++prims;
+                        continue;
                     }
-                    vec2 range = far_field_range(st[0].x, st[0].y, st[0].z, L, sub_R);
-                    if (!clears_above(range.x, clearance)) far_flags &= ~1u;
-                    if (!clears_below(range.y, clearance)) far_flags &= ~2u;
-                    lowest = min(lowest, range.x);
-                    highest = max(highest, range.y);
+                    uint l = s_left[q][e], r = e - 1u;
+                    uint seen = s_seen[q][e];
+                    uint d = bitCount(seen) == 1 ? uint(findLSB(seen)) : kKeepBoth;
+                    if (d == kKeepBoth) {
+                        ++out_len;
+                        s_flag[q][l] = 1u | (tape_negated(s_word[q][l]) ? 4u : 0u);
+                        s_flag[q][r] = 1u | (tape_negated(s_word[q][r]) ? 4u : 0u);
+                        continue;
+                    }
+                    uint wn = d == kLeftWins ? l : r;
+                    uint neg = ((fl >> 2) & 1u) ^ (tape_negated(s_word[q][wn]) ? 1u : 0u);
+                    s_flag[q][e] = 2u | (fl & 4u);
+                    s_flag[q][wn] = 1u | (neg << 2);
                 }
-                s_far[q][lane] = far_flags;
-                s_lowest[q][lane] = lowest;
-                s_highest[q][lane] = highest;
-            }
-            if (copy && lane == 0u) {
-                uint at = atomicAdd(pool_used, len + 2u);
-                if (at < pc.pool_start || at + len + 2u > pool_capacity || at + len + 2u < at ||
-                    at >= kInOctantPool) {
+                note_len(out_len);
+                uint at = atomicAdd(pool_used, out_len + 2u);
+                if (at < pc.pool_start || at + out_len + 2u > pool_capacity ||
+                    at + out_len + 2u < at || at >= kInOctantPool) {
+                    // The host grows the pool and redoes the step; until then the cell reads
+                    // as far-field.
                     atomicOr(overflow, 1u);
                     store(cell, false, c0.value, 0.0, kFarField, 0u, c0);
-                    at = kFarField;
                 } else {
-                    tape_write(at, len);
-                    tape_write(at + 1u, tape_read(parent, 1u));
-                }
-                s_at[q] = at;
-            }
-            memoryBarrierShared();
-            barrier();
-
-            if (copy && s_at[q] != kFarField) {
-                // Copied word for word, a chunk a lane; each chunk's change of the stack depth and
-                // the highest it reaches within give the tape's deepest stack.
-                uint at = s_at[q];
-                uint chunk = (len + kSquad - 1u) / kSquad;
-                uint k0 = min(lane * chunk, len), k1 = min(k0 + chunk, len);
-                int depth = 0, peak = 0;
-                for (uint k = k0; k < k1; ++k) {
-                    uint w = tape_read(parent, 2u + k);
-                    tape_write(at + 2u + k, w);
-                    depth += is_primitive(tape_node(w)) ? 1 : -1;
-                    peak = max(peak, depth);
-                }
-                s_net[q][lane] = depth;
-                s_peak[q][lane] = peak;
-            }
-            memoryBarrierShared();
-            barrier();
-
-            if (copy && lane == 0u && s_at[q] != kFarField) {
-                int depth = 0, depth_max = 0;
-                for (uint m = 0u; m < kSquad; ++m) {
-                    depth_max = max(depth_max, depth + s_peak[q][m]);
-                    depth += s_net[q][m];
-                }
-                note_len(len);
-                note_depth(uint(depth_max));
-                store(cell, true, c0.value, 0.0, s_at[q], len, c0);
-            }
-            if (evaluate && lane == 0u) {
-                uint far_flags = 3u;
-                float lowest = kInfinity, highest = -kInfinity;
-                for (uint m = 0u; m < kSquad; ++m) {
-                    far_flags &= s_far[q][m];
-                    lowest = min(lowest, s_lowest[q][m]);
-                    highest = max(highest, s_highest[q][m]);
-                }
-                if (far_flags != 0u) {
-                    store(cell, false, c0.value, (far_flags & 1u) != 0u ? lowest : highest,
-                          kFarField, 0u, c0);
-                } else {
-                    // Stage 3, compact_tape: the top-down sweep from the root, an operator decided
-                    // alike in every sub-box replaced by its winner.
-                    s_flag[q][len - 1u] = 1u | (tape_negated(s_word[q][len - 1u]) ? 4u : 0u);
-                    uint out_len = 0u, prims = 0u;
-                    for (uint i = len; i > 0u; --i) {
-                        uint e = i - 1u;
-                        uint fl = s_flag[q][e];
+                    tape_write(at, out_len);
+                    tape_write(at + 1u, prims);
+                    uint next = at + 2u, depth = 0u, depth_max = 0u;
+                    for (uint i = 0u; i < len; ++i) {
+                        uint fl = s_flag[q][i];
                         if ((fl & 3u) != 1u) continue;
-                        uint w = s_word[q][e];
-                        if (is_primitive(tape_node(w))) {
-                            ++out_len;
-                            ++prims;
-                            continue;
-                        }
-                        uint l = s_left[q][e], r = e - 1u;
-                        uint seen = s_seen[q][e];
-                        uint d = bitCount(seen) == 1 ? uint(findLSB(seen)) : kKeepBoth;
-                        if (d == kKeepBoth) {
-                            ++out_len;
-                            s_flag[q][l] = 1u | (tape_negated(s_word[q][l]) ? 4u : 0u);
-                            s_flag[q][r] = 1u | (tape_negated(s_word[q][r]) ? 4u : 0u);
-                            continue;
-                        }
-                        uint wn = d == kLeftWins ? l : r;
-                        uint neg = ((fl >> 2) & 1u) ^ (tape_negated(s_word[q][wn]) ? 1u : 0u);
-                        s_flag[q][e] = 2u | (fl & 4u);
-                        s_flag[q][wn] = 1u | (neg << 2);
+                        uint node = tape_node(s_word[q][i]);
+                        tape_write(next++, tape_word(node, (fl & 4u) != 0u));
+                        depth = is_primitive(node) ? depth + 1u : depth - 1u;
+                        depth_max = max(depth_max, depth);
                     }
-                    note_len(out_len);
-                    uint at = atomicAdd(pool_used, out_len + 2u);
-                    if (at < pc.pool_start || at + out_len + 2u > pool_capacity ||
-                        at + out_len + 2u < at || at >= kInOctantPool) {
-                        // The host grows the pool and redoes the step; until then the cell reads
-                        // as far-field.
-                        atomicOr(overflow, 1u);
-                        store(cell, false, c0.value, 0.0, kFarField, 0u, c0);
-                    } else {
-                        tape_write(at, out_len);
-                        tape_write(at + 1u, prims);
-                        uint next = at + 2u, depth = 0u, depth_max = 0u;
-                        for (uint i = 0u; i < len; ++i) {
-                            uint fl = s_flag[q][i];
-                            if ((fl & 3u) != 1u) continue;
-                            uint node = tape_node(s_word[q][i]);
-                            tape_write(next++, tape_word(node, (fl & 4u) != 0u));
-                            depth = is_primitive(node) ? depth + 1u : depth - 1u;
-                            depth_max = max(depth_max, depth);
-                        }
-                        note_depth(depth_max);
-                        store(cell, true, c0.value, 0.0, at, out_len, c0);
-                    }
+                    note_depth(depth_max);
+                    store(cell, true, c0.value, 0.0, at, out_len, c0);
                 }
             }
         }
-        barrier();  // the batch's counts and cells are read before the next batch writes them
     }
     counts_end();
 }

@@ -645,8 +645,7 @@ Step Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uin
 }
 
 // Refinement (prune_refine.comp): a squad of kRefineSquad lanes a listed cell, its sub-boxes a
-// lane each, as many squads as the device runs at once, in a grid-stride loop over the list
-// that takes a batch of cells a squad at a time.
+// lane each, as many squads as the device runs at once, in a grid-stride loop over the list.
 // Its jobs' count is the device's (refine_cells): the dispatches are recorded for all the
 // slice's cells. A lane's loops per job: staging the tape, one walk per batch of kRefineSquad
 // sub-boxes over at most kRefineMaxTape words, the far-field test over the squad, the sweep and
@@ -665,13 +664,9 @@ void Pruner::plan_refine(const Level& lv, Step& s) {
     s.threads = uint32_t(squads * kRefineSquad);
     s.groups = uint32_t(ceil_div(s.threads, kWorkgroupSize));
     s.rounds = 1;
-    // A squad takes kRefineSquad jobs at a time (its lanes read their cells together), and
-    // under a loop limit (lavapipe) as many as fit it.
-    const uint64_t fit = (Context::kLoopLimit - 1024) / per_job;
-    const uint64_t batch =
-        ctx.loop_limited() ? std::clamp<uint64_t>(fit, 1, kRefineSquad) : kRefineSquad;
-    s.per_dispatch = ctx.loop_limited() ? squads * batch * std::max<uint64_t>(1, fit / batch)
-                                        : std::max<uint64_t>(s.team_jobs, 1);
+    s.per_dispatch = ctx.loop_limited()
+                         ? squads * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / per_job)
+                         : std::max<uint64_t>(s.team_jobs, 1);
     s.push = PrunePush{vec4(origin.x, origin.y, origin.z, L),
                        vec4(lv.csize.x, lv.csize.y, lv.csize.z, opt.far_field_c),
                        3,
@@ -684,7 +679,7 @@ void Pruner::plan_refine(const Level& lv, Step& s) {
                        0,
                        0,
                        0,
-                       uint32_t(batch),
+                       0,
                        opt.refine,
                        0};
     s.job_walk = batches * walked;
