@@ -1,0 +1,68 @@
+#!/usr/bin/env bash
+# bench/gpu_steps.sh LABEL=COMMAND [LABEL=COMMAND ...] — the Vulkan pruning's time step by step,
+# for comparing builds or settings on one device within one session (BENCHMARKS.md, stop 27).
+# Each COMMAND is an sdfprune binary, with settings before it if wanted, for example
+#   bash bench/gpu_steps.sh old=/tmp/sdfprune.old new=build/sdfprune \
+#     b8="env SDFPRUNE_VULKAN_REFINE_BATCH=8 build/sdfprune"
+# Per scene the variants run one after another (`stats --backend vulkan --json --repeat
+# REPEAT`, the last run kept), after one untimed warm-up pruning: a fresh machine's GPU ran its
+# first scene 3–4 times slower. One line per scene and variant: prune_ms, near-field cells,
+# average active primitives (equal across variants, or the variants disagree) and each step's
+# GPU time (L level, o octants, c cells, x refinement, W wide). SDFPRUNE_GPU_SCENES names the
+# scenes (default: molecule, trees and five generated kinds); molecule and trees are read from
+# SDFPRUNE_SCENES (default ../shared/scenes), the others generated. GRID sets `--grid` (default
+# stats' 256; a small one checks the script on lavapipe).
+set -euo pipefail
+[ $# -ge 1 ] || { echo "usage: bench/gpu_steps.sh LABEL=COMMAND [LABEL=COMMAND ...]" >&2; exit 2; }
+here=$(cd "$(dirname "$0")" && pwd)
+scenes=${SDFPRUNE_SCENES:-$here/../../shared/scenes}
+repeat=${REPEAT:-3}
+grid=()
+[ -n "${GRID:-}" ] && grid=(--grid "$GRID")
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+
+labels=() commands=()
+for v in "$@"; do
+  case $v in
+    *=*) labels+=("${v%%=*}"); commands+=("${v#*=}") ;;
+    *) echo "gpu_steps: '$v' is not LABEL=COMMAND" >&2; exit 2 ;;
+  esac
+done
+first=${commands[0]}
+for k in ${SDFPRUNE_GPU_SCENES:-molecule trees character gameboy crowd monument fluid}; do
+  case $k in
+    molecule | trees) cp "$scenes/$k.json" "$tmp/$k.json" ;;
+    *) $first generate "$k" -o "$tmp/$k.json" >/dev/null ;;
+  esac
+done
+
+# One stats line: the last JSON object of the output, in a line.
+show() {  # show SCENE LABEL < stats output
+  python3 -c '
+import json, sys
+scene, label = sys.argv[1], sys.argv[2]
+d = None
+for line in sys.stdin:
+    if line.startswith("{"):
+        d = json.loads(line)
+    elif line.strip():
+        print(scene, label, "says:", line.strip()[:200])
+if d is None:
+    print(scene, label, "no result")
+else:
+    steps = " ".join("L%d%s%s:%.2f" % (s["level"], "bocx"[s["mode"]], "W" if s["wide"] else "",
+                                       s["gpu_ms"]) for s in d["gpu_steps"])
+    print(scene, label, "%.2f ms" % d["prune_ms"], "near", d["near_field_cells"],
+          "active %.5f" % d["active_avg"], steps)
+' "$1" "$2"
+}
+
+$first stats builtin:demo "${grid[@]}" --backend vulkan --json >/dev/null  # the warm-up
+for f in "$tmp"/*.json; do
+  k=$(basename "$f" .json)
+  for i in "${!labels[@]}"; do
+    ${commands[$i]} stats "$f" "${grid[@]}" --backend vulkan --json --repeat "$repeat" 2>&1 |
+      show "$k" "${labels[$i]}"
+  done
+done
