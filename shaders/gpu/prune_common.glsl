@@ -103,6 +103,22 @@ void tape_write(uint ref, uint value) {
         level_pool[ref] = value;
 }
 
+// Room for a tape of `words` words (with its header) in the level's pool, or in the octant pool
+// (`transient`): its reference (kInOctantPool set for the octant pool), or kFarField where the
+// pool has no room. Then the overflow is flagged: the host grows the pool and runs the steps
+// again, and until then the box is stored far-field, so that the steps after this one in the
+// same submission read no garbage.
+uint pool_allocate(bool transient, uint words) {
+    uint at = transient ? atomicAdd(octant_used, words) : atomicAdd(pool_used, words);
+    uint start = transient ? pc.octant_start : pc.pool_start;
+    uint capacity = transient ? octant_capacity : pool_capacity;
+    if (at < start || at + words > capacity || at + words < at || at >= kInOctantPool) {
+        atomicOr(overflow, transient ? 2u : 1u);
+        return kFarField;
+    }
+    return transient ? at | kInOctantPool : at;
+}
+
 // A pruning step's work on one tape entry over a box (evaluate_cell and refine_cell; the same
 // float operations as the CPU backend), shared by the three pruning kernels. x: value, lo, hi.
 // A tape sign on an entry: its value negated, its range flipped.

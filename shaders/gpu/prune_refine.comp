@@ -151,12 +151,9 @@ void main() {
             s_highest[q][lane] = highest;
         }
         if (copy && lane == 0u) {
-            uint at = atomicAdd(pool_used, len + 2u);
-            if (at < pc.pool_start || at + len + 2u > pool_capacity || at + len + 2u < at ||
-                at >= kInOctantPool) {
-                atomicOr(overflow, 1u);
+            uint at = pool_allocate(false, len + 2u);
+            if (at == kFarField) {
                 store(cell, false, c0.value, 0.0, kFarField, 0u, c0);
-                at = kFarField;
             } else {
                 tape_write(at, len);
                 tape_write(at + 1u, tape_read(parent, 1u));
@@ -236,12 +233,8 @@ void main() {
                     s_flag[q][wn] = 1u | (neg << 2);
                 }
                 note_len(out_len);
-                uint at = atomicAdd(pool_used, out_len + 2u);
-                if (at < pc.pool_start || at + out_len + 2u > pool_capacity ||
-                    at + out_len + 2u < at || at >= kInOctantPool) {
-                    // The host grows the pool and redoes the step; until then the cell reads
-                    // as far-field.
-                    atomicOr(overflow, 1u);
+                uint at = pool_allocate(false, out_len + 2u);
+                if (at == kFarField) {
                     store(cell, false, c0.value, 0.0, kFarField, 0u, c0);
                 } else {
                     tape_write(at, out_len);

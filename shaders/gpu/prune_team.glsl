@@ -247,20 +247,11 @@ void main() {
                         phase = kPhaseDone;
                         store(dest, true, value, constant, parent, out_len, kNoCell);
                     } else {
-                        at = transient ? atomicAdd(octant_used, out_len + 2u)
-                                       : atomicAdd(pool_used, out_len + 2u);
-                        uint start = transient ? pc.octant_start : pc.pool_start;
-                        uint capacity = transient ? octant_capacity : pool_capacity;
-                        if (at < start || at + out_len + 2u > capacity ||
-                            at + out_len + 2u < at || at >= kInOctantPool) {
-                            // The host grows the pool and redoes the level; until then
-                            // the box reads as far-field, so the steps after this one in the
-                            // same submission read no garbage.
-                            atomicOr(overflow, transient ? 2u : 1u);
+                        at = pool_allocate(transient, out_len + 2u);
+                        if (at == kFarField) {
                             phase = kPhaseDone;
                             store(dest, false, value, constant, kFarField, 0u, kNoCell);
                         } else {
-                            if (transient) at |= kInOctantPool;
                             tape_write(at, out_len);
                             tape_write(at + 1u, prims);
                             phase = kPhaseWrite;

@@ -110,6 +110,8 @@ class Pruner {
     Step plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
                    uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient);
     void plan_refine(const Level& lv, Step& s);
+    PrunePush push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
+                       uint32_t budget) const;
     void plan_wide(Step& s, uint64_t& scratch_bytes);
     void record_step(Step& s);
     void resize(Buffer& pool, uint64_t& cap, uint64_t words, uint64_t keep);
@@ -611,21 +613,7 @@ Step Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uin
     const uint32_t budget = !limited ? 0xffffffffu : uint32_t(s.rounds > 1 ? max_steps : per_job);
     s.per_dispatch = limited ? s.teams * std::max<uint64_t>(1, max_steps / per_job)
                              : std::max<uint64_t>(s.team_jobs, 1);
-    s.push = PrunePush{vec4(origin.x, origin.y, origin.z, L),
-                       vec4(lv.csize.x, lv.csize.y, lv.csize.z, opt.far_field_c),
-                       mode,
-                       lv.f,
-                       0,
-                       s.threads,
-                       max_len,
-                       max_depth,
-                       flags | (transient ? 4u : 0u),
-                       0,
-                       0,
-                       0,
-                       budget,
-                       opt.refine,
-                       0};
+    s.push = push_for(lv, mode, s.threads, flags | (transient ? 4u : 0u), budget);
     s.shape.level = lv.index;
     s.shape.mode = mode;
     s.shape.jobs = jobs;
@@ -642,6 +630,27 @@ Step Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uin
         scratch = ctx.create_buffer(scratch_bytes);
     }
     return s;
+}
+
+// A step's push constants (prune_common.glsl: Push): the level's, the parents' longest tape and
+// deepest stack; record_step sets the pools' starts and each dispatch's jobs.
+PrunePush Pruner::push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
+                           uint32_t budget) const {
+    return PrunePush{vec4(origin.x, origin.y, origin.z, L),
+                     vec4(lv.csize.x, lv.csize.y, lv.csize.z, opt.far_field_c),
+                     mode,
+                     lv.f,
+                     0,
+                     threads,
+                     max_len,
+                     max_depth,
+                     step_flags,
+                     0,
+                     0,
+                     0,
+                     budget,
+                     opt.refine,
+                     0};
 }
 
 // Refinement (prune_refine.comp): a squad of kRefineSquad lanes a listed cell, its sub-boxes a
@@ -667,21 +676,7 @@ void Pruner::plan_refine(const Level& lv, Step& s) {
     s.per_dispatch = ctx.loop_limited()
                          ? squads * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / per_job)
                          : std::max<uint64_t>(s.team_jobs, 1);
-    s.push = PrunePush{vec4(origin.x, origin.y, origin.z, L),
-                       vec4(lv.csize.x, lv.csize.y, lv.csize.z, opt.far_field_c),
-                       3,
-                       lv.f,
-                       0,
-                       s.threads,
-                       max_len,
-                       max_depth,
-                       flags,
-                       0,
-                       0,
-                       0,
-                       0,
-                       opt.refine,
-                       0};
+    s.push = push_for(lv, 3, s.threads, flags, 0);
     s.job_walk = batches * walked;
     s.wide = false;
     s.shape.level = lv.index;

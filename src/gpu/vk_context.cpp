@@ -310,15 +310,16 @@ Context::Context() {
     auto executable_info = vk_struct<VkPhysicalDevicePipelineExecutablePropertiesFeaturesKHR>(
         VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PIPELINE_EXECUTABLE_PROPERTIES_FEATURES_KHR);
     const char* kernel_stats_env = std::getenv("SDFPRUNE_VULKAN_KERNEL_STATS");
+    const bool want_kernel_stats = kernel_stats_env && std::atoi(kernel_stats_env) != 0;
     const bool kernel_stats =
-        kernel_stats_env && std::atoi(kernel_stats_env) != 0 &&
+        want_kernel_stats &&
         has_extension(physical_, VK_KHR_PIPELINE_EXECUTABLE_PROPERTIES_EXTENSION_NAME);
     if (kernel_stats) {
         extensions[dci.enabledExtensionCount++] =
             VK_KHR_PIPELINE_EXECUTABLE_PROPERTIES_EXTENSION_NAME;
         executable_info.pipelineExecutableInfo = VK_TRUE;
         dci.pNext = &executable_info;
-    } else if (kernel_stats_env && std::atoi(kernel_stats_env) != 0) {
+    } else if (want_kernel_stats) {
         std::fprintf(stderr, "vulkan: %s has no VK_KHR_pipeline_executable_properties\n",
                      device_name_.c_str());
     }
