@@ -208,10 +208,11 @@ const std::vector<Mirror>& mirrors() {
     using namespace gpu;
     using math::PrimitiveParams;
     const std::vector<std::string> all = {
-        "prune",  "prune_refine", "prune_wide", "prune_wide_subgroups",
-        "expand", "cell_info",    "trace",      "discretize"};
-    const std::vector<std::string> scene = {
-        "prune", "prune_refine", "prune_wide", "prune_wide_subgroups", "trace", "discretize"};
+        "prune",  "prune_refine_lanes", "prune_refine", "prune_wide", "prune_wide_subgroups",
+        "expand", "cell_info",          "trace",        "discretize"};
+    const std::vector<std::string> scene = {"prune",      "prune_refine_lanes",   "prune_refine",
+                                            "prune_wide", "prune_wide_subgroups", "trace",
+                                            "discretize"};
     const std::vector<std::string> grid = {"trace", "discretize"};
     static const std::vector<Mirror> table = {
         mirror<GpuNode>("Node", scene,
@@ -231,7 +232,8 @@ const std::vector<Mirror>& mirrors() {
             {SDFPRUNE_MEMBER(PrunedCell, tape), SDFPRUNE_MEMBER(PrunedCell, children),
              SDFPRUNE_MEMBER(PrunedCell, value), SDFPRUNE_MEMBER(PrunedCell, bound)}),
         mirror<GpuBlock>("Block",
-                         {"prune", "prune_refine", "prune_wide", "prune_wide_subgroups", "expand"},
+                         {"prune", "prune_refine_lanes", "prune_refine", "prune_wide",
+                          "prune_wide_subgroups", "expand"},
                          {SDFPRUNE_MEMBER(GpuBlock, x), SDFPRUNE_MEMBER(GpuBlock, y),
                           SDFPRUNE_MEMBER(GpuBlock, z), SDFPRUNE_MEMBER(GpuBlock, tape)}),
         mirror<GpuLevel>("Level", grid,
@@ -243,14 +245,16 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(GpuGridParams, cell_size), SDFPRUNE_MEMBER(GpuGridParams, inv_cell)}),
         // GpuCounters' trailing pad is the host's only.
         mirror<GpuCounters>(
-            "Counters", {"prune", "prune_refine", "prune_wide", "prune_wide_subgroups"},
+            "Counters",
+            {"prune", "prune_refine_lanes", "prune_refine", "prune_wide", "prune_wide_subgroups"},
             {SDFPRUNE_MEMBER(GpuCounters, pool_used), SDFPRUNE_MEMBER(GpuCounters, pool_capacity),
              SDFPRUNE_MEMBER(GpuCounters, overflow), SDFPRUNE_MEMBER(GpuCounters, max_len),
              SDFPRUNE_MEMBER(GpuCounters, near_jobs), SDFPRUNE_MEMBER(GpuCounters, next_blocks),
              SDFPRUNE_MEMBER(GpuCounters, max_depth), SDFPRUNE_MEMBER(GpuCounters, octant_used),
              SDFPRUNE_MEMBER(GpuCounters, octant_capacity),
              SDFPRUNE_MEMBER(GpuCounters, near_words), SDFPRUNE_MEMBER(GpuCounters, refine_cells),
-             SDFPRUNE_MEMBER(GpuCounters, near_lo), SDFPRUNE_MEMBER(GpuCounters, near_hi)},
+             SDFPRUNE_MEMBER(GpuCounters, near_lo), SDFPRUNE_MEMBER(GpuCounters, near_hi),
+             SDFPRUNE_MEMBER(GpuCounters, long_cells)},
             Scope::kKernel),
         mirror<TraceParams>(
             "TraceParams", {"trace"},
@@ -271,7 +275,8 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(DiscretizeParams, pad0), SDFPRUNE_MEMBER(DiscretizeParams, pad1),
              SDFPRUNE_MEMBER(DiscretizeParams, pad2)}),
         mirror<PrunePush>(
-            "Push", {"prune", "prune_refine", "prune_wide", "prune_wide_subgroups"},
+            "Push",
+            {"prune", "prune_refine_lanes", "prune_refine", "prune_wide", "prune_wide_subgroups"},
             {SDFPRUNE_MEMBER(PrunePush, origin), SDFPRUNE_MEMBER(PrunePush, csize),
              SDFPRUNE_MEMBER(PrunePush, mode), SDFPRUNE_MEMBER(PrunePush, factor),
              SDFPRUNE_MEMBER(PrunePush, jobs), SDFPRUNE_MEMBER(PrunePush, threads),
@@ -279,7 +284,8 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(PrunePush, flags), SDFPRUNE_MEMBER(PrunePush, pool_start),
              SDFPRUNE_MEMBER(PrunePush, first_job), SDFPRUNE_MEMBER(PrunePush, round),
              SDFPRUNE_MEMBER(PrunePush, budget), SDFPRUNE_MEMBER(PrunePush, refine),
-             SDFPRUNE_MEMBER(PrunePush, octant_start)},
+             SDFPRUNE_MEMBER(PrunePush, octant_start), SDFPRUNE_MEMBER(PrunePush, long_list),
+             SDFPRUNE_MEMBER(PrunePush, lane_tape)},
             Scope::kPush),
         mirror<ExpandPush>(
             "Push", {"expand"},
@@ -380,6 +386,9 @@ struct EmbeddedKernel {
 constexpr uint32_t kPruneSpv[] = {
 #include "prune.reflect.spv.inc"
 };
+constexpr uint32_t kPruneRefineLanesSpv[] = {
+#include "prune_refine_lanes.reflect.spv.inc"
+};
 constexpr uint32_t kPruneRefineSpv[] = {
 #include "prune_refine.reflect.spv.inc"
 };
@@ -401,11 +410,15 @@ constexpr uint32_t kTraceSpv[] = {
 constexpr uint32_t kDiscretizeSpv[] = {
 #include "discretize.reflect.spv.inc"
 };
-const EmbeddedKernel kKernels[] = {
-    {"prune", kPruneSpv},          {"prune_refine", kPruneRefineSpv},
-    {"prune_wide", kPruneWideSpv}, {"prune_wide_subgroups", kPruneWideSubgroupsSpv},
-    {"expand", kExpandSpv},        {"cell_info", kCellInfoSpv},
-    {"trace", kTraceSpv},          {"discretize", kDiscretizeSpv}};
+const EmbeddedKernel kKernels[] = {{"prune", kPruneSpv},
+                                   {"prune_refine_lanes", kPruneRefineLanesSpv},
+                                   {"prune_refine", kPruneRefineSpv},
+                                   {"prune_wide", kPruneWideSpv},
+                                   {"prune_wide_subgroups", kPruneWideSubgroupsSpv},
+                                   {"expand", kExpandSpv},
+                                   {"cell_info", kCellInfoSpv},
+                                   {"trace", kTraceSpv},
+                                   {"discretize", kDiscretizeSpv}};
 #else
 const std::vector<EmbeddedKernel> kKernels;
 #endif
@@ -469,6 +482,9 @@ void check_kernel(const std::string& kernel) {
 
 TEST(GpuLayout, Prune) {
     check_kernel("prune");
+}
+TEST(GpuLayout, PruneRefineLanes) {
+    check_kernel("prune_refine_lanes");
 }
 TEST(GpuLayout, PruneRefine) {
     check_kernel("prune_refine");

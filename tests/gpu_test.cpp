@@ -181,17 +181,22 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
         const PrunedGrid cpu = prune(sc, o);
         // These tapes are short: the team kernel by default, then the wide kernel wherever
         // it fits (prune_wide.comp: a workgroup per parent tape), with subgroup operations
-        // where the device has them, and without.
+        // where the device has them, and without. Refinement: a lane per cell up to the
+        // default tape length, then squads for every cell, then lanes up to the longest.
         for (int variant = 0; variant < 3; ++variant) {
             if (variant > 0) ::setenv("SDFPRUNE_VULKAN_WIDE", "1", 1);
+            if (variant > 0)
+                ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE", variant == 1 ? "0" : "32", 1);
             const gpu::Grid gpu = gpu::prune(variant == 2 ? plain : *dev, sc, o);
             ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+            ::unsetenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE");
             if (variant == 2) {
                 EXPECT_FALSE(gpu.stats().subgroups);
             }
-            const std::string how = what + (variant == 1   ? ", wide"
-                                            : variant == 2 ? ", wide without subgroups"
-                                                           : "");
+            const std::string how =
+                what + (variant == 1   ? ", wide, refinement on squads"
+                        : variant == 2 ? ", wide without subgroups, refinement on lanes"
+                                       : "");
             const bool exact = exact_device(*dev);
             expect_same_stats(cpu.stats(), gpu.stats(), how, exact);
             if (exact) expect_same_cells(cpu, gpu, how);
@@ -249,11 +254,14 @@ TEST(Gpu, StepShapesFollowTheLevels) {
     PruneOptions o;
     o.resolution = 64;  // levels 4, 16, 64
     ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
+    // Refinement's lanes take tapes of up to 4 words, its squads the rest.
+    ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE", "4", 1);
     const gpu::Grid gpu = gpu::prune(*dev, sc, o);
     ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+    ::unsetenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE");
     const std::vector<gpu::GpuStepShape>& steps = gpu.stats().steps;
-    ASSERT_EQ(steps.size(), 7u);
-    const uint32_t levels[] = {0, 0, 1, 1, 2, 2, 2}, modes[] = {1, 2, 1, 2, 1, 2, 3};
+    ASSERT_EQ(steps.size(), 8u);
+    const uint32_t levels[] = {0, 0, 1, 1, 2, 2, 2, 2}, modes[] = {1, 2, 1, 2, 1, 2, 3, 4};
     uint64_t jobs = 0;
     for (size_t i = 0; i < steps.size(); ++i) {
         const gpu::GpuStepShape& st = steps[i];
@@ -262,13 +270,16 @@ TEST(Gpu, StepShapesFollowTheLevels) {
         EXPECT_EQ(st.mode, modes[i]);
         EXPECT_GE(st.dispatches, 1u);
         EXPECT_GE(st.workgroups, st.dispatches);
-        EXPECT_GT(st.lanes, 0u);
-        // Teams of 8 lanes; refinement a squad of 32 lanes (its sub-boxes) per cell.
-        EXPECT_EQ(st.lanes_per_tape, st.mode == 3 ? 32u : 8u);
+        // Teams of 8 lanes; refinement a lane per cell, then a squad of 32 lanes (its sub-boxes)
+        // per cell with a longer tape.
+        EXPECT_EQ(st.lanes_per_tape, st.mode == 3 ? 1u : st.mode == 4 ? 32u : 8u);
         EXPECT_EQ(st.lanes % st.lanes_per_tape, 0u);
-        // One lane per cell or octant; refinement has a squad per cell.
-        EXPECT_LE(st.lanes, st.mode == 3 ? st.lanes_per_tape * st.jobs : st.jobs);
-        EXPECT_GT(st.longest_walk_words, 0u);
+        // One lane per cell or octant; refinement's squads a squad per cell.
+        EXPECT_LE(st.lanes, st.mode >= 3 ? st.lanes_per_tape * st.jobs : st.jobs);
+        if (st.mode != 4 || st.jobs > 0) {
+            EXPECT_GT(st.lanes, 0u);
+            EXPECT_GT(st.longest_walk_words, 0u);
+        }
         if (st.mode == 2) jobs += st.jobs;
     }
     const PrunedGrid cpu = prune(sc, o);
@@ -280,8 +291,15 @@ TEST(Gpu, StepShapesFollowTheLevels) {
     // Refinement's jobs are the finest near-field cells before it (the CPU's without it).
     PruneOptions unrefined = o;
     unrefined.refine = 1;
-    EXPECT_EQ(steps[6].jobs, prune(sc, unrefined).stats().near_field_cells);
+    const PrunedGrid before = prune(sc, unrefined);
+    EXPECT_EQ(steps[6].jobs, before.stats().near_field_cells);
     EXPECT_LT(steps[6].jobs, steps[5].jobs);
+    // The squads take the cells whose tapes are longer than a lane takes.
+    uint64_t long_cells = 0;
+    for (const PrunedCell& c : before.level_cells(2))
+        if (c.tape != PrunedCell::kFarField && before.tape_at(c.tape).size() > 4) ++long_cells;
+    EXPECT_GT(long_cells, 0u);
+    EXPECT_EQ(steps[7].jobs, long_cells);
     // The root's octants walk the full tape: evaluation and compaction, and one more pass.
     EXPECT_GE(steps[0].longest_walk_words, 3ull * sc.size());
     // The steps' GPU times are parts of the pruning's GPU time; with timestamps (every device
@@ -328,9 +346,11 @@ TEST(Gpu, RefinementTakesTheNearFieldCellsOnly) {
         ::unsetenv("SDFPRUNE_VULKAN_PRESIZE_WORDS");
         ::unsetenv("SDFPRUNE_VULKAN_WIDE");
         const std::vector<gpu::GpuStepShape>& steps = gpu.stats().steps;
-        ASSERT_GE(steps.size(), 2u);
-        const gpu::GpuStepShape &cells = steps[steps.size() - 2], &refine = steps.back();
+        ASSERT_GE(steps.size(), 3u);
+        const gpu::GpuStepShape &cells = steps[steps.size() - 3], &refine = steps[steps.size() - 2];
         ASSERT_EQ(refine.mode, 3u);
+        ASSERT_EQ(steps.back().mode, 4u);
+        EXPECT_LE(steps.back().jobs, refine.jobs);
         EXPECT_EQ(cells.mode, c.hierarchy ? 2u : 0u);
         EXPECT_EQ(cells.wide, c.wide);
         EXPECT_GT(near_before, 0u);
@@ -369,7 +389,7 @@ TEST(Gpu, TopLevelsRunWide) {
         EXPECT_EQ(st.jobs, team.jobs);
         EXPECT_FALSE(team.wide);
         if (!st.wide) continue;
-        EXPECT_NE(st.mode, 3u);
+        EXPECT_LT(st.mode, 3u);
         EXPECT_EQ(st.lanes_per_tape, 256u);
         EXPECT_EQ(st.lanes % 256u, 0u);
         EXPECT_LE(st.lanes, (st.jobs + 7) / 8 * 256);

@@ -71,7 +71,8 @@ class Device {
 struct GpuStepShape {
     uint32_t level = 0;
     // 0: cells from their parents' tapes; 1: a block's octants; 2: cells from their octants';
-    // 3: the finest cells' sub-box refinement
+    // 3: the finest cells' sub-box refinement, a lane per cell (those with short tapes); 4: its
+    // second pass, a squad of lanes per cell (the rest)
     uint32_t mode = 0;
     uint32_t dispatches = 0;  // redone levels (a pool grew) included
     uint64_t workgroups = 0;  // over all dispatches
@@ -82,7 +83,8 @@ struct GpuStepShape {
     // takes one parent tape and its kPruneTeam boxes, the tape's nodes spread over its lanes
     // and combined height by height.
     bool wide = false;
-    // Lanes that take one parent tape together: the team (8), or the workgroup (256) when wide.
+    // Lanes that take one parent tape together: the team (8), the workgroup (256) when wide, in
+    // refinement one lane (mode 3) or a squad (32, mode 4).
     uint32_t lanes_per_tape = 1;
     // The tape words one lane reads in sequence, at most: its jobs (rounded up) times, per job,
     // in a team the passes over a parent tape (evaluation once per batch of sub-boxes, the

@@ -1,8 +1,9 @@
 // prune_common.glsl — what the pruning kernels share: prune.comp (a team of kTeam lanes walks
 // one parent tape, one lane per child box), prune_wide.comp (a whole workgroup takes one parent
-// tape, its nodes spread over the lanes) and prune_refine.comp (a squad of lanes a finest cell,
-// a lane per sub-box): the step's buffers (bindings 4–11) and push constants, the tape pools,
-// the boxes of a job (modes 0–2) and the store of a box's result.
+// tape, its nodes spread over the lanes), prune_refine_lanes.comp (a lane per finest cell) and
+// prune_refine.comp (a squad of lanes per finest cell, a lane per sub-box): the step's buffers
+// (bindings 4–11) and push constants, the tape pools, the boxes of a job (modes 0–2) and the
+// store of a box's result.
 // Include after scene.glsl and cells.glsl.
 
 const uint kTeam = 8u;  // boxes per job: lanes per team (gpu_prune.cpp: kPruneTeam)
@@ -25,6 +26,7 @@ layout(std430, binding = 7) buffer Counters {
     uint refine_cells;  // entries of refine_list
     uint near_lo[3];    // expand.comp's (GpuCounters)
     uint near_hi[3];
+    uint long_cells;  // entries of refinement's long list (prune_refine_lanes.comp)
 };
 // The kernel's scratch (its layout is the kernel's own). Coherent: lanes read what other lanes
 // of their workgroup wrote at earlier steps (a barrier between).
@@ -36,7 +38,8 @@ layout(std430, binding = 9) buffer OctantPool { uint octant_pool[]; };
 const uint kInOctantPool = 0x80000000u;
 // The finest near-field cells, the only ones refinement (mode 3) has work for: the step that
 // makes the finest cells (flag 4) appends each near one's index; mode 3 takes its jobs from
-// here (the far ones are copied to the refined cells beforehand, by the host).
+// here (the far ones are copied to the refined cells beforehand, by the host), and its first
+// pass lists from pc.long_list the cells its second pass takes.
 layout(std430, binding = 10) buffer RefineList { uint refine_list[]; };
 // The level's own pool, where its cells' tapes go; a main-pool reference read (tape_read) is a
 // parent's, in the last level's pool (binding 3). The parents' pool is freed after the level, so
@@ -62,6 +65,8 @@ layout(push_constant) uniform Push {
     uint budget;      // steps per job and round (prune.comp)
     uint refine;      // mode 3: sub-boxes per axis
     uint octant_start;  // octant pool words in use before this step
+    uint long_list;     // mode 3: where refinement's long list starts in refine_list
+    uint lane_tape;     // mode 3: the longest tape a lane refines alone
 } pc;
 
 // The step's counters (near_jobs, near_words, max_len, max_depth), summed and maxed first in

@@ -73,6 +73,7 @@ struct Step {
     uint64_t job_walk;         // in teams, the tape words a lane reads per job, at most
     uint32_t threads, groups;  // lanes that take jobs, and their workgroups
     bool wide;
+    KernelId kernel = KernelId::kPrune;  // (wide steps: record_step's choice)
     GpuStepShape shape;
     uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
 };
@@ -110,6 +111,7 @@ class Pruner {
     Step plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
                    uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient);
     void plan_refine(const Level& lv, Step& s);
+    Step plan_squads(const Level& lv, const Step& lanes);
     PrunePush push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
                        uint32_t budget) const;
     void plan_wide(Step& s, uint64_t& scratch_bytes);
@@ -155,6 +157,7 @@ class Pruner {
     // buffer, or SDFPRUNE_VULKAN_PRESIZE_WORDS).
     uint64_t room_cap = 0;
     int wide_override = -1;
+    uint32_t lane_tape = kRefineLaneTape;  // refinement's, SDFPRUNE_VULKAN_REFINE_LANE_TAPE
     vec3 origin, extent;
     float L = 1;
     uint32_t flags = 0;  // the push constants' (prune_common.glsl)
@@ -238,6 +241,11 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
         room_cap = presize_cap = std::strtoull(env, nullptr, 10);
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE"); env && *env)
         wide_override = std::atoi(env) != 0;
+    // The longest tape refinement's lanes take alone (0: the squads take every cell; for tests
+    // and measurements), at most the lanes' arrays.
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE"); env && *env)
+        lane_tape =
+            std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), kRefineLaneTapeMax);
     origin = sc.aabb.min;
     extent = sc.aabb.max - sc.aabb.min;
     L = sc.lipschitz[sc.root()];
@@ -316,10 +324,10 @@ void Pruner::prune_level(uint32_t li) {
     lv.octants = &local.create(lv.split ? block_count * 8 * sizeof(PrunedCell) : 16);
     lv.refined = &local.create(lv.refine ? lv.total * sizeof(PrunedCell) : 16);
     lv.next = &local.create(lv.finest ? 16 : lv.total * sizeof(GpuBlock));
-    // Room to list every finest cell for refinement.
-    if (lv.refine && refine_list.size < lv.total * 4) {
+    // Room to list every finest cell for refinement, and again for its long list.
+    if (lv.refine && refine_list.size < lv.total * 8) {
         ctx.destroy(refine_list);
-        refine_list = ctx.create_buffer(lv.total * 4);
+        refine_list = ctx.create_buffer(lv.total * 8);
     }
     lv.first_shape = st.steps.size();
 
@@ -425,6 +433,7 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             max_depth = std::max(sc->max_depth, 1u);
             std::vector<Step> refinement{plan_step(lv, 3, b0, blocks_in, blocks_in * lv.per_block,
                                                    *lv.refined, *lv.cells, false)};
+            refinement.push_back(plan_squads(lv, refinement.front()));
             const GpuCounters rc = *run_steps(lv, refinement, false, sc->octant_used, false,
                                               bound ? lv.refined : nullptr);
             sc->max_depth = rc.max_depth;
@@ -468,7 +477,7 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
                 ctx.fill(counters, 0, offsetof(GpuCounters, max_len), 4);
                 ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
             }
-            if (s.push.mode == 3) {
+            if (s.kernel == KernelId::kPruneRefineLanes) {
                 ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
                 // The far-field cells refined as they are: the slice's cells copied, the near
                 // ones (listed by the step before) then refined over them.
@@ -514,9 +523,10 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
                                       counter->near_lo, counter->near_hi);
     for (Step& s : steps) {
         if (s.push.mode == 3) {
-            // Refinement's jobs, the listed cells (its dispatches were recorded for all, those
-            // past the list's end returning at once).
-            const uint64_t jobs = counter->refine_cells;
+            // Refinement's jobs, the listed cells, and the squads' the long list (its dispatches
+            // were recorded for all, those past the list's end returning at once).
+            const uint64_t jobs =
+                s.kernel == KernelId::kPruneRefine ? counter->long_cells : counter->refine_cells;
             s.shape.jobs = jobs;
             s.shape.lanes = std::min(jobs, s.teams) * s.shape.lanes_per_tape;
             s.shape.longest_walk_words = ceil_div(jobs, s.teams) * s.job_walk;
@@ -650,16 +660,52 @@ PrunePush Pruner::push_for(const Level& lv, uint32_t mode, uint32_t threads, uin
                      0,
                      budget,
                      opt.refine,
+                     0,
+                     0,
                      0};
 }
 
-// Refinement (prune_refine.comp): a squad of kRefineSquad lanes a listed cell, its sub-boxes a
-// lane each, as many squads as the device runs at once, in a grid-stride loop over the list.
-// Its jobs' count is the device's (refine_cells): the dispatches are recorded for all the
-// slice's cells. A lane's loops per job: staging the tape, one walk per batch of kRefineSquad
-// sub-boxes over at most kRefineMaxTape words, the far-field test over the squad, the sweep and
-// the write (one lane), or a chunk of a copied tape and the chunks' depths.
+// Refinement, in two passes over the slice's listed cells. Its jobs' count is the device's
+// (refine_cells, long_cells): the dispatches are recorded for all the slice's cells, those past
+// the list's end returning at once. First (prune_refine_lanes.comp) a lane a cell, as many
+// lanes as the device runs at once in a grid-stride loop: a tape of at most lane_tape words is
+// refined by its lane alone (its loops per job: the tape staged, one walk per sub-box, the sweep
+// and the write), a longer one listed for the second pass.
 void Pruner::plan_refine(const Level& lv, Step& s) {
+    const uint64_t len = std::min<uint64_t>(max_len, lane_tape);
+    const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
+    const uint64_t per_job = (subs + 3) * len + 8;
+    const uint64_t lanes = std::min({std::max<uint64_t>(s.team_jobs, 1),
+                                     uint64_t(ctx.max_workgroups()) * kWorkgroupSize,
+                                     std::max<uint64_t>(ctx.resident_threads(), 1)});
+    s.kernel = KernelId::kPruneRefineLanes;
+    s.teams = lanes;
+    s.threads = uint32_t(ceil_div(lanes, kWorkgroupSize) * kWorkgroupSize);
+    s.groups = uint32_t(s.threads / kWorkgroupSize);
+    s.rounds = 1;
+    s.per_dispatch = ctx.loop_limited()
+                         ? s.threads * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / per_job)
+                         : std::max<uint64_t>(s.team_jobs, 1);
+    s.push = push_for(lv, 3, s.threads, flags, 0);
+    s.push.long_list = uint32_t(lv.total);
+    s.push.lane_tape = lane_tape;
+    s.job_walk = subs * len;
+    s.wide = false;
+    s.shape.level = lv.index;
+    s.shape.mode = 3;
+    s.shape.jobs = s.team_jobs;  // until the device's count is read back
+    s.shape.lanes_per_tape = 1;
+    s.shape.lanes = lanes;
+    s.shape.longest_walk_words = ceil_div(s.team_jobs, lanes) * s.job_walk;
+}
+
+// Then (prune_refine.comp) the long list: a squad of kRefineSquad lanes a cell, its sub-boxes a
+// lane each, as many squads as the device runs at once, in a grid-stride loop. A lane's loops
+// per job: staging the tape, one walk per batch of kRefineSquad sub-boxes over at most
+// kRefineMaxTape words, the far-field test over the squad, the sweep and the write (one lane),
+// or a chunk of a copied tape and the chunks' depths. Its shape is step "4" of the statistics.
+Step Pruner::plan_squads(const Level& lv, const Step& lanes) {
+    Step s = lanes;
     const uint64_t len = max_len, walked = std::min<uint64_t>(len, math::kRefineMaxTape);
     const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
     const uint64_t batches = ceil_div(subs, kRefineSquad);
@@ -669,22 +715,23 @@ void Pruner::plan_refine(const Level& lv, Step& s) {
         std::min({std::max<uint64_t>(s.team_jobs, 1),
                   uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kRefineSquad),
                   std::max<uint64_t>(ctx.resident_threads() / kRefineSquad, 1)});
+    s.kernel = KernelId::kPruneRefine;
     s.teams = squads;
     s.threads = uint32_t(squads * kRefineSquad);
     s.groups = uint32_t(ceil_div(s.threads, kWorkgroupSize));
-    s.rounds = 1;
     s.per_dispatch = ctx.loop_limited()
                          ? squads * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / per_job)
                          : std::max<uint64_t>(s.team_jobs, 1);
-    s.push = push_for(lv, 3, s.threads, flags, 0);
+    s.push.threads = s.threads;
     s.job_walk = batches * walked;
-    s.wide = false;
+    s.shape = GpuStepShape{};
     s.shape.level = lv.index;
-    s.shape.mode = 3;
-    s.shape.jobs = s.team_jobs;  // until the device's count is read back
+    s.shape.mode = 4;
+    s.shape.jobs = s.team_jobs;
     s.shape.lanes_per_tape = uint32_t(kRefineSquad);
     s.shape.lanes = std::min<uint64_t>(s.team_jobs, squads) * kRefineSquad;
     s.shape.longest_walk_words = ceil_div(s.team_jobs, squads) * s.job_walk;
+    return s;
 }
 
 // The wide kernel instead of teams, where it fits and its modelled cost wins (kWideRoundCost).
@@ -762,7 +809,7 @@ void Pruner::record_step(Step& s) {
                     &push, sizeof(push), s.groups);
             else
                 ctx.dispatch(
-                    s.push.mode == 3 ? KernelId::kPruneRefine : KernelId::kPrune,
+                    s.kernel,
                     {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants, s.cells,
                      &counters, &scratch, &octant_pool, &refine_list, &g.pool, &scratch},
                     &push, sizeof(push), s.groups);

@@ -23,7 +23,8 @@ inline constexpr uint32_t kWorkgroupSize = 64;
 // The kernels, one per compute shader in shaders/gpu/.
 enum class KernelId : uint32_t {
     kPrune,
-    kPruneRefine,  // refinement (mode 3): a squad of lanes per cell
+    kPruneRefineLanes,  // refinement (mode 3), first pass: a lane per cell with a short tape
+    kPruneRefine,       // refinement, second pass: a squad of lanes per cell
     kPruneWide,
     kPruneWideSubgroups,  // needs subgroups() (else not built)
     kExpand,

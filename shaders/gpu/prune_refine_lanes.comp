@@ -1,0 +1,101 @@
+#version 450
+// prune_refine_lanes.comp — refinement (mode 3), its first pass: each finest near-field cell
+// whose tape has at most pc.lane_tape words decided again over its refine³ sub-boxes by one
+// lane alone (src/prune/prune_cell.cpp: refine_cell), from `cells` into the buffer of binding 5.
+// Most refined cells have tapes of a few words, and a lane per cell keeps as many cells in
+// flight as the device has lanes: a cell's chain of dependent loads (the list, the cell, its
+// block, its tape, the nodes) is waited for by 32 cells of a subgroup at once, where a squad
+// (prune_refine.comp) waits for it alone. The lane's arrays (the tape, the decisions, the sweep)
+// are private, its stack too. Cells with longer tapes are listed for the squads, from
+// refine_list[pc.long_list], counted in long_cells.
+// Job k takes cell refine_list[k], for k below refine_cells (listed by the cells step); the
+// far-field cells were copied to binding 5 before, as they are.
+#include "scene.glsl"
+
+layout(local_size_x = 64) in;
+
+#include "cells.glsl"
+#include "prune_common.glsl"
+
+const uint kLaneTape = 32u;  // the longest tape a lane refines (device_layout.hpp)
+
+uint r_word[kLaneTape], r_seen[kLaneTape], r_left[kLaneTape], r_flag[kLaneTape];
+#define REFINE_WORD(i) r_word[i]
+#define REFINE_SEEN(i) r_seen[i]
+#define REFINE_SEE(i, bits) r_seen[i] |= (bits)
+#define REFINE_LEFT(i) r_left[i]
+#define REFINE_FLAG(i) r_flag[i]
+const uint kRefineStack = kLaneTape / 2u + 1u;
+#include "refine_common.glsl"
+
+void main() {
+    counts_begin();
+    vec3 half_cell = pc.csize.xyz * 0.5;
+    float radius = length(half_cell);
+    bool interval = (pc.flags & 2u) != 0u;
+    bool far_field = (pc.flags & 1u) != 0u;
+    uint subs = pc.refine;
+    uint nsub = subs * subs * subs;
+    vec3 sub_half = half_cell / float(subs);
+    float sub_R = length(sub_half);
+    uint lane_tape = min(pc.lane_tape, kLaneTape);
+
+    // The host records the dispatches for every finest cell; the jobs are the listed ones only.
+    uint jobs = min(pc.jobs, refine_cells);
+    for (uint job = pc.first_job + gl_GlobalInvocationID.x; job < jobs; job += pc.threads) {
+        uint cell = refine_list[job];
+        Cell c0 = cells[cell];
+        if (c0.tape == kFarField) {
+            octants[cell] = c0;  // only near cells are listed; were one not, it is copied
+            continue;
+        }
+        uint parent = c0.tape;
+        uint len = tape_read(parent, 0u);
+        if (len > lane_tape) {
+            refine_list[pc.long_list + atomicAdd(long_cells, 1u)] = cell;
+            continue;
+        }
+        if (refine_copies(parent, len, c0, radius, half_cell)) {
+            // A lone primitive (the only copied tape this short), as it is.
+            uint at = pool_allocate(false, 3u);
+            if (at == kFarField) {
+                store(cell, false, c0.value, 0.0, kFarField, 0u, c0);
+            } else {
+                tape_write(at, 1u);
+                tape_write(at + 1u, tape_read(parent, 1u));
+                tape_write(at + 2u, tape_read(parent, 2u));
+                note_len(1u);
+                note_depth(1u);
+                store(cell, true, c0.value, 0.0, at, 1u, c0);
+            }
+            continue;
+        }
+        for (uint k = 0u; k < len; ++k) {
+            r_word[k] = tape_read(parent, 2u + k);
+            r_seen[k] = 0u;
+            r_flag[k] = 0u;
+        }
+        // Stage 1 over each sub-box, then stage 2: the far-field test of is_near_field on the
+        // sub-box's root range against the whole cell's clearance.
+        precise vec3 centre = refine_cell_centre(cell);
+        float L = nodes[tape_node(r_word[len - 1u])].lipschitz;
+        float clearance = far_field_clearance(pc.csize.w, L, radius);
+        uint far_flags = far_field ? 3u : 0u;
+        float lowest = kInfinity, highest = -kInfinity;
+        for (uint sb = 0u; sb < nsub; ++sb) {
+            uvec3 sc = uvec3(sb % subs, (sb / subs) % subs, sb / (subs * subs));
+            precise vec3 p = centre - half_cell + vec3(2u * sc + 1u) * sub_half;
+            vec2 range = refine_sub_box(len, p, sub_half, sub_R, interval, L, sb == 0u);
+            if (!clears_above(range.x, clearance)) far_flags &= ~1u;
+            if (!clears_below(range.y, clearance)) far_flags &= ~2u;
+            lowest = min(lowest, range.x);
+            highest = max(highest, range.y);
+        }
+        if (far_flags != 0u)
+            store(cell, false, c0.value, (far_flags & 1u) != 0u ? lowest : highest, kFarField, 0u,
+                  c0);
+        else
+            refine_write(cell, len, c0);
+    }
+    counts_end();
+}

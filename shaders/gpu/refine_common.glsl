@@ -1,0 +1,116 @@
+// refine_common.glsl — refinement's work on one cell (src/prune/prune_cell.cpp: refine_cell,
+// then compact_tape), shared by prune_refine_lanes.comp (a lane per cell, its arrays private)
+// and prune_refine.comp (a squad of lanes per cell, its arrays in shared memory). The includer
+// says where a cell's arrays are, by defining before the include:
+//   REFINE_WORD(i)        the tape's word i
+//   REFINE_SEEN(i)        entry i's decisions over the sub-boxes so far (bit d: some decided d)
+//   REFINE_SEE(i, bits)   adds decisions to REFINE_SEEN(i)
+//   REFINE_LEFT(i)        entry i's left operand (an entry index)
+//   REFINE_FLAG(i)        the sweep's flags: bits 0-1 alive (0 dead, 1 kept, 2 skipped), bit 2
+//                         negate; cleared before the sweep
+//   kRefineStack          the deepest evaluation stack of a tape it walks
+// Include after prune_common.glsl.
+
+// One sub-box's walk over the cell's tape of `len` words (evaluate_boxes in
+// OperatorMode::kRefine): each operator's decision added to REFINE_SEEN, its left operand
+// recorded where `record`. Gives the root's range widened as the far-field test reads it
+// (far_field_range; L: the root's Lipschitz bound).
+vec2 refine_sub_box(uint len, vec3 p, vec3 sub_half, float sub_R, bool interval, float L,
+                    bool record) {
+    vec3 st[kRefineStack];  // values and ranges
+    uint st_entry[kRefineStack];
+    uint top = 0u;
+    for (uint i = 0u; i < len; ++i) {
+        uint w = REFINE_WORD(i);
+        Node nd = nodes[tape_node(w)];
+        vec3 x;
+        if (nd.kind < kPrimitiveKindCount) {
+            x = primitive_range(nd, p, sub_half, sub_R, interval);
+        } else {
+            top -= 2u;
+            uint decision;
+            x = combine_operator(nd, sub_R, interval, true, st[top], st[top + 1u], decision);
+            REFINE_SEE(i, 1u << decision);
+            if (record) REFINE_LEFT(i) = st_entry[top];
+        }
+        if (tape_negated(w)) x = negate_range(x);
+        st[top] = x;
+        st_entry[top] = i;
+        ++top;
+    }
+    return far_field_range(st[0].x, st[0].y, st[0].z, L, sub_R);
+}
+
+// Stage 3 of a near cell (compact_tape): the top-down sweep from the root, an operator decided
+// alike in every sub-box replaced by its winner; then the kept entries written to the level's
+// pool, and the refined cell `cell` (c0 as it was, with its new tape) stored.
+void refine_write(uint cell, uint len, Cell c0) {
+    REFINE_FLAG(len - 1u) = 1u | (tape_negated(REFINE_WORD(len - 1u)) ? 4u : 0u);
+    uint out_len = 0u, prims = 0u;
+    for (uint i = len; i > 0u; --i) {
+        uint e = i - 1u;
+        uint fl = REFINE_FLAG(e);
+        if ((fl & 3u) != 1u) continue;
+        uint w = REFINE_WORD(e);
+        if (is_primitive(tape_node(w))) {
+            ++out_len;
+            ++prims;
+            continue;
+        }
+        uint l = REFINE_LEFT(e), r = e - 1u;
+        uint seen = REFINE_SEEN(e);
+        uint d = bitCount(seen) == 1 ? uint(findLSB(seen)) : kKeepBoth;
+        if (d == kKeepBoth) {
+            ++out_len;
+            REFINE_FLAG(l) = 1u | (tape_negated(REFINE_WORD(l)) ? 4u : 0u);
+            REFINE_FLAG(r) = 1u | (tape_negated(REFINE_WORD(r)) ? 4u : 0u);
+            continue;
+        }
+        uint wn = d == kLeftWins ? l : r;
+        uint neg = ((fl >> 2) & 1u) ^ (tape_negated(REFINE_WORD(wn)) ? 1u : 0u);
+        REFINE_FLAG(e) = 2u | (fl & 4u);
+        REFINE_FLAG(wn) = 1u | (neg << 2);
+    }
+    note_len(out_len);
+    uint at = pool_allocate(false, out_len + 2u);
+    if (at == kFarField) {
+        store(cell, false, c0.value, 0.0, kFarField, 0u, c0);
+        return;
+    }
+    tape_write(at, out_len);
+    tape_write(at + 1u, prims);
+    uint next = at + 2u, depth = 0u, depth_max = 0u;
+    for (uint i = 0u; i < len; ++i) {
+        uint fl = REFINE_FLAG(i);
+        if ((fl & 3u) != 1u) continue;
+        uint node = tape_node(REFINE_WORD(i));
+        tape_write(next++, tape_word(node, (fl & 4u) != 0u));
+        depth = is_primitive(node) ? depth + 1u : depth - 1u;
+        depth_max = max(depth_max, depth);
+    }
+    note_depth(depth_max);
+    store(cell, true, c0.value, 0.0, at, out_len, c0);
+}
+
+// A listed cell's centre (exact: `precise`, as the CPU computes it), from its block.
+vec3 refine_cell_centre(uint cell) {
+    uint f = pc.factor;
+    uint per_block = f * f * f;
+    uint bi = cell / per_block, local = cell % per_block;
+    Block b = blocks[bi];
+    uvec3 lc = uvec3(local % f, (local / f) % f, local / (f * f));
+    precise vec3 centre = pc.origin.xyz + (vec3(b.x + lc.x, b.y + lc.y, b.z + lc.z) + 0.5) *
+                                              pc.csize.xyz;
+    return centre;
+}
+
+// Whether a near cell's tape of `len` words is copied as it is rather than refined: longer than
+// kRefineMaxTape, or a lone primitive that cannot clear the far field (refine_far_possible).
+bool refine_copies(uint parent, uint len, Cell c0, float radius, vec3 half_cell) {
+    if (len > kRefineMaxTape) return true;
+    if (len != 1u) return false;
+    Node lone = nodes[tape_node(tape_read(parent, 2u))];
+    float clearance = far_field_clearance(pc.csize.w, lone.lipschitz, radius);
+    float sigma = extras[lone.primitive].bound0.w;
+    return (pc.flags & 1u) == 0u || !refine_far_possible(c0.value, clearance, sigma, half_cell);
+}
