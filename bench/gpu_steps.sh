@@ -8,7 +8,7 @@
 # REPEAT`, the last run kept), after one untimed warm-up pruning: a fresh machine's GPU ran its
 # first scene 3–4 times slower. One line per scene and variant: prune_ms, near-field cells,
 # average active primitives (equal across variants, or the variants disagree) and each step's
-# GPU time (L level, o octants, c cells, x refinement by lanes, q refinement by squads, W wide).
+# GPU time (L level, o octants, c cells, x refinement, W wide; [lane pass's part]).
 # SDFPRUNE_GPU_SCENES names the scenes (default: molecule, trees and five generated kinds);
 # molecule and trees are read from SDFPRUNE_SCENES (default ../shared/scenes), the others
 # generated. GRID sets `--grid` (default stats' 256; a small one checks the script on lavapipe).
@@ -51,8 +51,10 @@ for line in sys.stdin:
 if d is None:
     print(scene, label, "no result")
 else:
-    steps = " ".join("L%d%s%s:%.2f" % (s["level"], "bocxq"[s["mode"]], "W" if s["wide"] else "",
-                                       s["gpu_ms"]) for s in d["gpu_steps"])
+    steps = " ".join("L%d%s%s:%.2f" % (s["level"], "bocx"[s["mode"]], "W" if s["wide"] else "",
+                                       s["gpu_ms"]) +
+                     ("[%.2f]" % s["lanes_ms"] if s.get("lanes_ms") else "")
+                     for s in d["gpu_steps"])
     print(scene, label, "%.2f ms" % d["prune_ms"], "near", d["near_field_cells"],
           "active %.5f" % d["active_avg"], steps)
 ' "$1" "$2"

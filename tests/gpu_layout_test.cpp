@@ -207,12 +207,13 @@ Mirror mirror(std::string name, std::vector<std::string> kernels, std::vector<Me
 const std::vector<Mirror>& mirrors() {
     using namespace gpu;
     using math::PrimitiveParams;
-    const std::vector<std::string> all = {
-        "prune",  "prune_refine_lanes", "prune_refine", "prune_wide", "prune_wide_subgroups",
-        "expand", "cell_info",          "trace",        "discretize"};
-    const std::vector<std::string> scene = {"prune",      "prune_refine_lanes",   "prune_refine",
-                                            "prune_wide", "prune_wide_subgroups", "trace",
-                                            "discretize"};
+    const std::vector<std::string> all = {"prune",        "prune_lanes", "prune_refine_lanes",
+                                          "prune_refine", "prune_wide",  "prune_wide_subgroups",
+                                          "expand",       "cell_info",   "trace",
+                                          "discretize"};
+    const std::vector<std::string> scene = {"prune",        "prune_lanes", "prune_refine_lanes",
+                                            "prune_refine", "prune_wide",  "prune_wide_subgroups",
+                                            "trace",        "discretize"};
     const std::vector<std::string> grid = {"trace", "discretize"};
     static const std::vector<Mirror> table = {
         mirror<GpuNode>("Node", scene,
@@ -232,8 +233,8 @@ const std::vector<Mirror>& mirrors() {
             {SDFPRUNE_MEMBER(PrunedCell, tape), SDFPRUNE_MEMBER(PrunedCell, children),
              SDFPRUNE_MEMBER(PrunedCell, value), SDFPRUNE_MEMBER(PrunedCell, bound)}),
         mirror<GpuBlock>("Block",
-                         {"prune", "prune_refine_lanes", "prune_refine", "prune_wide",
-                          "prune_wide_subgroups", "expand"},
+                         {"prune", "prune_lanes", "prune_refine_lanes", "prune_refine",
+                          "prune_wide", "prune_wide_subgroups", "expand"},
                          {SDFPRUNE_MEMBER(GpuBlock, x), SDFPRUNE_MEMBER(GpuBlock, y),
                           SDFPRUNE_MEMBER(GpuBlock, z), SDFPRUNE_MEMBER(GpuBlock, tape)}),
         mirror<GpuLevel>("Level", grid,
@@ -246,7 +247,8 @@ const std::vector<Mirror>& mirrors() {
         // GpuCounters' trailing pad is the host's only.
         mirror<GpuCounters>(
             "Counters",
-            {"prune", "prune_refine_lanes", "prune_refine", "prune_wide", "prune_wide_subgroups"},
+            {"prune", "prune_lanes", "prune_refine_lanes", "prune_refine", "prune_wide",
+             "prune_wide_subgroups"},
             {SDFPRUNE_MEMBER(GpuCounters, pool_used), SDFPRUNE_MEMBER(GpuCounters, pool_capacity),
              SDFPRUNE_MEMBER(GpuCounters, overflow), SDFPRUNE_MEMBER(GpuCounters, max_len),
              SDFPRUNE_MEMBER(GpuCounters, near_jobs), SDFPRUNE_MEMBER(GpuCounters, next_blocks),
@@ -254,7 +256,7 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(GpuCounters, octant_capacity),
              SDFPRUNE_MEMBER(GpuCounters, near_words), SDFPRUNE_MEMBER(GpuCounters, refine_cells),
              SDFPRUNE_MEMBER(GpuCounters, near_lo), SDFPRUNE_MEMBER(GpuCounters, near_hi),
-             SDFPRUNE_MEMBER(GpuCounters, long_cells)},
+             SDFPRUNE_MEMBER(GpuCounters, long_jobs)},
             Scope::kKernel),
         mirror<TraceParams>(
             "TraceParams", {"trace"},
@@ -276,7 +278,8 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(DiscretizeParams, pad2)}),
         mirror<PrunePush>(
             "Push",
-            {"prune", "prune_refine_lanes", "prune_refine", "prune_wide", "prune_wide_subgroups"},
+            {"prune", "prune_lanes", "prune_refine_lanes", "prune_refine", "prune_wide",
+             "prune_wide_subgroups"},
             {SDFPRUNE_MEMBER(PrunePush, origin), SDFPRUNE_MEMBER(PrunePush, csize),
              SDFPRUNE_MEMBER(PrunePush, mode), SDFPRUNE_MEMBER(PrunePush, factor),
              SDFPRUNE_MEMBER(PrunePush, jobs), SDFPRUNE_MEMBER(PrunePush, threads),
@@ -284,7 +287,7 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(PrunePush, flags), SDFPRUNE_MEMBER(PrunePush, pool_start),
              SDFPRUNE_MEMBER(PrunePush, first_job), SDFPRUNE_MEMBER(PrunePush, round),
              SDFPRUNE_MEMBER(PrunePush, budget), SDFPRUNE_MEMBER(PrunePush, refine),
-             SDFPRUNE_MEMBER(PrunePush, octant_start), SDFPRUNE_MEMBER(PrunePush, long_list),
+             SDFPRUNE_MEMBER(PrunePush, octant_start), SDFPRUNE_MEMBER(PrunePush, list_start),
              SDFPRUNE_MEMBER(PrunePush, lane_tape)},
             Scope::kPush),
         mirror<ExpandPush>(
@@ -386,6 +389,9 @@ struct EmbeddedKernel {
 constexpr uint32_t kPruneSpv[] = {
 #include "prune.reflect.spv.inc"
 };
+constexpr uint32_t kPruneLanesSpv[] = {
+#include "prune_lanes.reflect.spv.inc"
+};
 constexpr uint32_t kPruneRefineLanesSpv[] = {
 #include "prune_refine_lanes.reflect.spv.inc"
 };
@@ -411,6 +417,7 @@ constexpr uint32_t kDiscretizeSpv[] = {
 #include "discretize.reflect.spv.inc"
 };
 const EmbeddedKernel kKernels[] = {{"prune", kPruneSpv},
+                                   {"prune_lanes", kPruneLanesSpv},
                                    {"prune_refine_lanes", kPruneRefineLanesSpv},
                                    {"prune_refine", kPruneRefineSpv},
                                    {"prune_wide", kPruneWideSpv},
@@ -482,6 +489,9 @@ void check_kernel(const std::string& kernel) {
 
 TEST(GpuLayout, Prune) {
     check_kernel("prune");
+}
+TEST(GpuLayout, PruneLanes) {
+    check_kernel("prune_lanes");
 }
 TEST(GpuLayout, PruneRefineLanes) {
     check_kernel("prune_refine_lanes");

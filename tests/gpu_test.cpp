@@ -181,21 +181,26 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
         const PrunedGrid cpu = prune(sc, o);
         // These tapes are short: the team kernel by default, then the wide kernel wherever
         // it fits (prune_wide.comp: a workgroup per parent tape), with subgroup operations
-        // where the device has them, and without. Refinement: a lane per cell up to the
-        // default tape length, then squads for every cell, then lanes up to the longest.
-        for (int variant = 0; variant < 3; ++variant) {
-            if (variant > 0) ::setenv("SDFPRUNE_VULKAN_WIDE", "1", 1);
-            if (variant > 0)
-                ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE", variant == 1 ? "0" : "32", 1);
+        // where the device has them, and without. Lane passes: by default most of these
+        // tapes go to a lane per box (cell) alone, then none (refinement on squads), then
+        // refinement's lanes up to their longest tape, then teams and squads for the tapes
+        // longer than 4 words and lanes for the rest.
+        for (int variant = 0; variant < 4; ++variant) {
+            ::setenv("SDFPRUNE_VULKAN_WIDE", variant == 3 ? "0" : variant > 0 ? "1" : "", 1);
+            const char* lanes = variant == 1 ? "0" : variant == 3 ? "4" : "";
+            ::setenv("SDFPRUNE_VULKAN_LANE_TAPE", lanes, 1);
+            ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE", variant == 2 ? "32" : lanes, 1);
             const gpu::Grid gpu = gpu::prune(variant == 2 ? plain : *dev, sc, o);
             ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+            ::unsetenv("SDFPRUNE_VULKAN_LANE_TAPE");
             ::unsetenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE");
             if (variant == 2) {
                 EXPECT_FALSE(gpu.stats().subgroups);
             }
             const std::string how =
-                what + (variant == 1   ? ", wide, refinement on squads"
-                        : variant == 2 ? ", wide without subgroups, refinement on lanes"
+                what + (variant == 1   ? ", wide, no lane passes"
+                        : variant == 2 ? ", wide without subgroups, refinement's lanes up to 32"
+                        : variant == 3 ? ", teams, lanes up to 4 words"
                                        : "");
             const bool exact = exact_device(*dev);
             expect_same_stats(cpu.stats(), gpu.stats(), how, exact);
@@ -248,20 +253,28 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
 // a lane per sub-box), and
 // the busiest lane walks at least one parent tape; their GPU times add up to at most the
 // pruning's. (Teams only: SDFPRUNE_VULKAN_WIDE=0.)
+void expect_same_device_cells(const gpu::Grid& a, const gpu::Grid& b, const std::string& what);
+
 TEST(Gpu, StepShapesFollowTheLevels) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = builtin_scene("demo");
     PruneOptions o;
     o.resolution = 64;  // levels 4, 16, 64
+    // Teams and squads alone (no lane passes).
     ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
-    // Refinement's lanes take tapes of up to 4 words, its squads the rest.
-    ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE", "4", 1);
+    ::setenv("SDFPRUNE_VULKAN_LANE_TAPE", "0", 1);
+    ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE", "0", 1);
     const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+    // Then lane passes for parent tapes of up to 4 words, the teams and squads for the rest.
+    ::setenv("SDFPRUNE_VULKAN_LANE_TAPE", "4", 1);
+    ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE", "4", 1);
+    const gpu::Grid passes = gpu::prune(*dev, sc, o);
     ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+    ::unsetenv("SDFPRUNE_VULKAN_LANE_TAPE");
     ::unsetenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE");
     const std::vector<gpu::GpuStepShape>& steps = gpu.stats().steps;
-    ASSERT_EQ(steps.size(), 8u);
-    const uint32_t levels[] = {0, 0, 1, 1, 2, 2, 2, 2}, modes[] = {1, 2, 1, 2, 1, 2, 3, 4};
+    ASSERT_EQ(steps.size(), 7u);
+    const uint32_t levels[] = {0, 0, 1, 1, 2, 2, 2}, modes[] = {1, 2, 1, 2, 1, 2, 3};
     uint64_t jobs = 0;
     for (size_t i = 0; i < steps.size(); ++i) {
         const gpu::GpuStepShape& st = steps[i];
@@ -270,16 +283,15 @@ TEST(Gpu, StepShapesFollowTheLevels) {
         EXPECT_EQ(st.mode, modes[i]);
         EXPECT_GE(st.dispatches, 1u);
         EXPECT_GE(st.workgroups, st.dispatches);
-        // Teams of 8 lanes; refinement a lane per cell, then a squad of 32 lanes (its sub-boxes)
-        // per cell with a longer tape.
-        EXPECT_EQ(st.lanes_per_tape, st.mode == 3 ? 1u : st.mode == 4 ? 32u : 8u);
+        EXPECT_GT(st.lanes, 0u);
+        // Teams of 8 lanes; refinement a squad of 32 lanes (its sub-boxes) per cell.
+        EXPECT_EQ(st.lanes_per_tape, st.mode == 3 ? 32u : 8u);
         EXPECT_EQ(st.lanes % st.lanes_per_tape, 0u);
-        // One lane per cell or octant; refinement's squads a squad per cell.
-        EXPECT_LE(st.lanes, st.mode >= 3 ? st.lanes_per_tape * st.jobs : st.jobs);
-        if (st.mode != 4 || st.jobs > 0) {
-            EXPECT_GT(st.lanes, 0u);
-            EXPECT_GT(st.longest_walk_words, 0u);
-        }
+        // One lane per cell or octant; refinement has a squad per cell.
+        EXPECT_LE(st.lanes, st.mode == 3 ? st.lanes_per_tape * st.jobs : st.jobs);
+        EXPECT_GT(st.longest_walk_words, 0u);
+        EXPECT_EQ(st.lanes_ms, 0.0);
+        EXPECT_EQ(st.long_jobs, 0u);
         if (st.mode == 2) jobs += st.jobs;
     }
     const PrunedGrid cpu = prune(sc, o);
@@ -294,12 +306,6 @@ TEST(Gpu, StepShapesFollowTheLevels) {
     const PrunedGrid before = prune(sc, unrefined);
     EXPECT_EQ(steps[6].jobs, before.stats().near_field_cells);
     EXPECT_LT(steps[6].jobs, steps[5].jobs);
-    // The squads take the cells whose tapes are longer than a lane takes.
-    uint64_t long_cells = 0;
-    for (const PrunedCell& c : before.level_cells(2))
-        if (c.tape != PrunedCell::kFarField && before.tape_at(c.tape).size() > 4) ++long_cells;
-    EXPECT_GT(long_cells, 0u);
-    EXPECT_EQ(steps[7].jobs, long_cells);
     // The root's octants walk the full tape: evaluation and compaction, and one more pass.
     EXPECT_GE(steps[0].longest_walk_words, 3ull * sc.size());
     // The steps' GPU times are parts of the pruning's GPU time; with timestamps (every device
@@ -313,6 +319,33 @@ TEST(Gpu, StepShapesFollowTheLevels) {
         sum += st.gpu_ms;
     }
     EXPECT_LE(sum, gpu.stats().prune_ms * 1.0001 + 1e-6);
+
+    // With lane passes: the same steps, jobs and cells; each step's lane pass leaves to the
+    // teams the jobs whose parent tapes are longer than 4 words (refinement: the listed cells',
+    // counted here from the CPU's cells before refinement).
+    const std::vector<gpu::GpuStepShape>& with = passes.stats().steps;
+    ASSERT_EQ(with.size(), steps.size());
+    uint64_t left = 0;
+    for (size_t i = 0; i < with.size(); ++i) {
+        SCOPED_TRACE("with lane passes, step " + std::to_string(i));
+        EXPECT_EQ(with[i].mode, steps[i].mode);
+        EXPECT_EQ(with[i].jobs, steps[i].jobs);
+        EXPECT_LE(with[i].lanes_ms, with[i].gpu_ms);
+        if (passes.stats().prune_ms > 0) {
+            EXPECT_GT(with[i].lanes_ms, 0.0);
+        }
+        // In team jobs of 8 boxes; refinement in cells.
+        EXPECT_LE(with[i].long_jobs, with[i].mode == 3 ? with[i].jobs : (with[i].jobs + 7) / 8);
+        left += with[i].long_jobs;
+    }
+    EXPECT_GT(left, 0u);
+    uint64_t long_cells = 0;
+    for (const PrunedCell& c : before.level_cells(2))
+        if (c.tape != PrunedCell::kFarField && before.tape_at(c.tape).size() > 4) ++long_cells;
+    EXPECT_GT(long_cells, 0u);
+    EXPECT_EQ(with[6].long_jobs, long_cells);
+    expect_same_stats(gpu.stats(), passes.stats(), "lane passes");
+    expect_same_device_cells(gpu, passes, "lane passes");
 }
 
 // Refinement takes the finest near-field cells only (listed by the step that makes the finest
@@ -346,16 +379,15 @@ TEST(Gpu, RefinementTakesTheNearFieldCellsOnly) {
         ::unsetenv("SDFPRUNE_VULKAN_PRESIZE_WORDS");
         ::unsetenv("SDFPRUNE_VULKAN_WIDE");
         const std::vector<gpu::GpuStepShape>& steps = gpu.stats().steps;
-        ASSERT_GE(steps.size(), 3u);
-        const gpu::GpuStepShape &cells = steps[steps.size() - 3], &refine = steps[steps.size() - 2];
+        ASSERT_GE(steps.size(), 2u);
+        const gpu::GpuStepShape &cells = steps[steps.size() - 2], &refine = steps.back();
         ASSERT_EQ(refine.mode, 3u);
-        ASSERT_EQ(steps.back().mode, 4u);
-        EXPECT_LE(steps.back().jobs, refine.jobs);
+        EXPECT_LE(refine.long_jobs, refine.jobs);
         EXPECT_EQ(cells.mode, c.hierarchy ? 2u : 0u);
         EXPECT_EQ(cells.wide, c.wide);
         EXPECT_GT(near_before, 0u);
         EXPECT_EQ(refine.jobs, near_before);
-        EXPECT_LE(refine.lanes, refine.lanes_per_tape * refine.jobs);
+        EXPECT_LE(refine.lanes, std::max(refine.lanes_per_tape, 32u) * refine.jobs);
         if (c.grow) {
             EXPECT_GT(gpu.stats().pool_grows, 0u);
         }

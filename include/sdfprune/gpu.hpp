@@ -71,8 +71,7 @@ class Device {
 struct GpuStepShape {
     uint32_t level = 0;
     // 0: cells from their parents' tapes; 1: a block's octants; 2: cells from their octants';
-    // 3: the finest cells' sub-box refinement, a lane per cell (those with short tapes); 4: its
-    // second pass, a squad of lanes per cell (the rest)
+    // 3: the finest cells' sub-box refinement
     uint32_t mode = 0;
     uint32_t dispatches = 0;  // redone levels (a pool grew) included
     uint64_t workgroups = 0;  // over all dispatches
@@ -84,7 +83,7 @@ struct GpuStepShape {
     // and combined height by height.
     bool wide = false;
     // Lanes that take one parent tape together: the team (8), the workgroup (256) when wide, in
-    // refinement one lane (mode 3) or a squad (32, mode 4).
+    // refinement a squad (32); 1 where a lane pass took every job (see long_jobs).
     uint32_t lanes_per_tape = 1;
     // The tape words one lane reads in sequence, at most: its jobs (rounded up) times, per job,
     // in a team the passes over a parent tape (evaluation once per batch of sub-boxes, the
@@ -96,6 +95,12 @@ struct GpuStepShape {
     // The step's GPU time (timestamps around its dispatches; 0 where the device has none), in
     // its level's last run.
     double gpu_ms = 0;
+    // A step not wide runs first a lane per box (a lane per cell in refinement) where the box's
+    // parent tape is short (prune_lanes.comp, prune_refine_lanes.comp): its GPU time, within
+    // gpu_ms, and the jobs it left to the teams (squads) after it, in team jobs of kPruneTeam
+    // boxes (refinement: cells).
+    double lanes_ms = 0;
+    uint64_t long_jobs = 0;
 };
 
 struct DevicePruneStats : PruneStats {

@@ -1,7 +1,8 @@
 #version 450
 // prune_refine.comp — refinement (mode 3), its second pass: the finest near-field cells whose
-// tapes are too long for a lane alone (prune_refine_lanes.comp lists them, from
-// refine_list[pc.long_list], counted in long_cells) decided again over their refine³ sub-boxes
+// tapes are too long for a lane alone (prune_refine_lanes.comp lists them in the long list,
+// scratch[pc.list_start], counted in long_jobs; without a lane pass, every listed near cell)
+// decided again over their refine³ sub-boxes
 // (src/prune/prune_cell.cpp: refine_cell), into the buffer of binding 5. A squad of kSquad
 // lanes takes one cell: its tape sits in shared memory and every lane walks it in lockstep over
 // its own sub-box (the next kSquad sub-boxes after each walk, while any are left), its
@@ -63,9 +64,11 @@ void main() {
     float sub_R = length(sub_half);
 
     // The host records the dispatches for every finest cell; the jobs are the cells the lanes
-    // listed (the same count in every lane: the pass before wrote it). Every lane of a workgroup
-    // sees the same trip count (barriers inside).
-    uint jobs = min(pc.jobs, long_cells);
+    // listed (flag 8), or without a lane pass every listed near cell (the same count in every
+    // lane: an earlier step wrote it). Every lane of a workgroup sees the same trip count
+    // (barriers inside).
+    bool listed = (pc.flags & 8u) != 0u;
+    uint jobs = min(pc.jobs, listed ? long_jobs : refine_cells);
     for (uint first = pc.first_job; first < jobs; first += squads) {
         uint job = first + squad;
         bool has_job = squad < squads && job < jobs;
@@ -73,12 +76,17 @@ void main() {
         Cell c0 = Cell(kFarField, 0u, 0.0, 0.0);
         bool evaluate = false, copy = false;
         if (has_job) {
-            cell = refine_list[pc.long_list + job];
+            cell = listed ? scratch[pc.list_start + job] : refine_list[job];
             c0 = cells[cell];
-            parent = c0.tape;
-            len = tape_read(parent, 0u);
-            copy = refine_copies(parent, len, c0, radius, half_cell);
-            evaluate = !copy;
+            if (c0.tape == kFarField) {
+                // Only near cells are listed; were one not, it is copied as it is.
+                if (lane == 0u) octants[cell] = c0;
+            } else {
+                parent = c0.tape;
+                len = tape_read(parent, 0u);
+                copy = refine_copies(parent, len, c0, radius, half_cell);
+                evaluate = !copy;
+            }
         }
 
         barrier();  // the squads' last reads of the previous job's shared words are done

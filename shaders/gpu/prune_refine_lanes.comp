@@ -6,8 +6,8 @@
 // flight as the device has lanes: a cell's chain of dependent loads (the list, the cell, its
 // block, its tape, the nodes) is waited for by 32 cells of a subgroup at once, where a squad
 // (prune_refine.comp) waits for it alone. The lane's arrays (the tape, the decisions, the sweep)
-// are private, its stack too. Cells with longer tapes are listed for the squads, from
-// refine_list[pc.long_list], counted in long_cells.
+// are private, its stack too. Cells with longer tapes are listed for the squads, in the long
+// list (scratch[pc.list_start], counted in long_jobs).
 // Job k takes cell refine_list[k], for k below refine_cells (listed by the cells step); the
 // far-field cells were copied to binding 5 before, as they are.
 #include "scene.glsl"
@@ -52,7 +52,7 @@ void main() {
         uint parent = c0.tape;
         uint len = tape_read(parent, 0u);
         if (len > lane_tape) {
-            refine_list[pc.long_list + atomicAdd(long_cells, 1u)] = cell;
+            scratch[pc.list_start + atomicAdd(long_jobs, 1u)] = cell;
             continue;
         }
         if (refine_copies(parent, len, c0, radius, half_cell)) {

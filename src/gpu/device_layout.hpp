@@ -36,22 +36,25 @@ struct GpuGridParams {  // GridParams
 // prune.comp: Counters (expand.comp sees the same buffer as uint[]: [5] is next_blocks).
 // refine_cells: the entries of the refinement's list (prune_common.glsl: RefineList).
 // near_lo, near_hi: expand.comp's bounds of the finest level's near-field cells ([lo, hi)).
-// long_cells: the entries of refinement's long list (prune_refine_lanes.comp).
+// long_jobs: the entries of the long list, the jobs a lane pass (prune_lanes.comp,
+// prune_refine_lanes.comp) leaves to the teams or squads after it.
 struct GpuCounters {
     uint32_t pool_used, pool_capacity, overflow, max_len, near_jobs, next_blocks, max_depth;
     uint32_t octant_used, octant_capacity, near_words, refine_cells;
-    uint32_t near_lo[3], near_hi[3], long_cells, pad[2];
+    uint32_t near_lo[3], near_hi[3], long_jobs, pad[2];
 };
 // prune.comp: kStateWords, the words of a lane's job state in its team's scratch; kTeam, the
 // lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step
 // and phase. prune_refine.comp: kSquad, the lanes that refine one cell.
-// prune_refine_lanes.comp: kLaneTape, the longest tape a lane may refine alone (the size of its
-// arrays); kRefineLaneTape, the longest it does unless SDFPRUNE_VULKAN_REFINE_LANE_TAPE says.
+// prune_lanes.comp, prune_refine_lanes.comp: kLaneTapeMax, the longest parent tape a lane may
+// take alone (the size of their arrays); kPruneLaneTape and kRefineLaneTape, the longest each
+// takes unless SDFPRUNE_VULKAN_LANE_TAPE or SDFPRUNE_VULKAN_REFINE_LANE_TAPE says (0: no lanes).
 inline constexpr uint64_t kPruneStateWords = 16;
 inline constexpr uint64_t kPruneTeam = 8;
 inline constexpr uint64_t kPruneWindow = 64;
 inline constexpr uint64_t kRefineSquad = 32;
-inline constexpr uint32_t kRefineLaneTapeMax = 32;
+inline constexpr uint32_t kLaneTapeMax = 32;
+inline constexpr uint32_t kPruneLaneTape = 32;
 inline constexpr uint32_t kRefineLaneTape = 16;
 // prune_wide.comp: kWide, the lanes of a workgroup that takes one team job (kPruneTeam boxes of
 // one parent tape); kWideEntryWords, its scratch words per tape entry and box;
@@ -62,7 +65,7 @@ inline constexpr uint64_t kPruneWideHeightWords = 12;
 struct PrunePush {  // prune.comp and prune_wide.comp: Push
     vec4 origin, csize;
     uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
-    uint32_t round, budget, refine, octant_start, long_list, lane_tape;
+    uint32_t round, budget, refine, octant_start, list_start, lane_tape;
 };
 struct ExpandPush {  // expand.comp: Push
     uint32_t factor, cells_count, next_factor, bound_only;
@@ -101,7 +104,7 @@ static_assert(sizeof(math::PrimitiveParams) == 96 && offsetof(math::PrimitivePar
 static_assert(sizeof(PrunedCell) == 16 && offsetof(PrunedCell, value) == 8);
 static_assert(sizeof(GpuBlock) == 16 && sizeof(GpuLevel) == 16 && sizeof(GpuGridParams) == 64);
 static_assert(sizeof(GpuCounters) == 80 && offsetof(GpuCounters, near_lo) == 44 &&
-              offsetof(GpuCounters, long_cells) == 68);
+              offsetof(GpuCounters, long_jobs) == 68);
 static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) <= 128);
 static_assert(sizeof(TraceParams) == 192 && sizeof(DiscretizeParams) == 96);
 static_assert(sizeof(GpuPixel) == 32 && sizeof(SlicePush) == 32);

@@ -74,6 +74,10 @@ struct Step {
     uint32_t threads, groups;  // lanes that take jobs, and their workgroups
     bool wide;
     KernelId kernel = KernelId::kPrune;  // (wide steps: record_step's choice)
+    // A lane pass (prune_lanes.comp, prune_refine_lanes.comp), or the teams or squads after it
+    // that take the jobs it listed (`listed`: its team jobs are the long list's entries).
+    bool lane_pass = false, listed = false;
+    uint64_t scratch_words = 0;  // the teams' scratch, before the long list
     GpuStepShape shape;
     uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
 };
@@ -108,10 +112,14 @@ class Pruner {
                                          uint64_t octant_keep, bool may_slice,
                                          Buffer* bound = nullptr);
     void add_shape(const Level& lv, const GpuStepShape& shape);
-    Step plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
-                   uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient);
-    void plan_refine(const Level& lv, Step& s);
-    Step plan_squads(const Level& lv, const Step& lanes);
+    std::vector<Step> plan_step(const Level& lv, uint32_t mode, uint64_t first_block,
+                                uint64_t blocks, uint64_t jobs, const Buffer& octants,
+                                const Buffer& cells, bool transient);
+    Step plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
+                    uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient,
+                    uint64_t reserve_bytes);
+    Step plan_lanes(const Step& teams, uint32_t lane_max) const;
+    void plan_squads(const Level& lv, Step& s);
     PrunePush push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
                        uint32_t budget) const;
     void plan_wide(Step& s, uint64_t& scratch_bytes);
@@ -157,7 +165,9 @@ class Pruner {
     // buffer, or SDFPRUNE_VULKAN_PRESIZE_WORDS).
     uint64_t room_cap = 0;
     int wide_override = -1;
-    uint32_t lane_tape = kRefineLaneTape;  // refinement's, SDFPRUNE_VULKAN_REFINE_LANE_TAPE
+    // The longest parent tapes the lane passes take (prune_lanes.comp, prune_refine_lanes.comp);
+    // SDFPRUNE_VULKAN_LANE_TAPE, SDFPRUNE_VULKAN_REFINE_LANE_TAPE.
+    uint32_t lane_tape = kPruneLaneTape, refine_lane_tape = kRefineLaneTape;
     vec3 origin, extent;
     float L = 1;
     uint32_t flags = 0;  // the push constants' (prune_common.glsl)
@@ -241,11 +251,16 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
         room_cap = presize_cap = std::strtoull(env, nullptr, 10);
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE"); env && *env)
         wide_override = std::atoi(env) != 0;
-    // The longest tape refinement's lanes take alone (0: the squads take every cell; for tests
-    // and measurements), at most the lanes' arrays.
-    if (const char* env = std::getenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE"); env && *env)
-        lane_tape =
-            std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), kRefineLaneTapeMax);
+    // The longest parent tape a lane pass takes alone, at most their arrays' (0: no lane pass,
+    // teams or squads for every job; for tests and measurements).
+    const auto lane_setting = [](const char* name, uint32_t fallback) {
+        const char* env = std::getenv(name);
+        return env && *env
+                   ? std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), kLaneTapeMax)
+                   : fallback;
+    };
+    lane_tape = lane_setting("SDFPRUNE_VULKAN_LANE_TAPE", kPruneLaneTape);
+    refine_lane_tape = lane_setting("SDFPRUNE_VULKAN_REFINE_LANE_TAPE", kRefineLaneTape);
     origin = sc.aabb.min;
     extent = sc.aabb.max - sc.aabb.min;
     L = sc.lipschitz[sc.root()];
@@ -324,10 +339,10 @@ void Pruner::prune_level(uint32_t li) {
     lv.octants = &local.create(lv.split ? block_count * 8 * sizeof(PrunedCell) : 16);
     lv.refined = &local.create(lv.refine ? lv.total * sizeof(PrunedCell) : 16);
     lv.next = &local.create(lv.finest ? 16 : lv.total * sizeof(GpuBlock));
-    // Room to list every finest cell for refinement, and again for its long list.
-    if (lv.refine && refine_list.size < lv.total * 8) {
+    // Room to list every finest cell for refinement.
+    if (lv.refine && refine_list.size < lv.total * 4) {
         ctx.destroy(refine_list);
-        refine_list = ctx.create_buffer(lv.total * 8);
+        refine_list = ctx.create_buffer(lv.total * 4);
     }
     lv.first_shape = st.steps.size();
 
@@ -384,8 +399,7 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             // not redone for want of room (generated car-chase and city at 256³ with
             // --lipschitz-bounds were, their finest pool sized by the last level's share),
             // unless the bound passes the device's largest buffer.
-            steps.push_back(
-                plan_step(lv, 1, b0, blocks_in, blocks_in * 8, *lv.octants, *lv.cells, false));
+            steps = plan_step(lv, 1, b0, blocks_in, blocks_in * 8, *lv.octants, *lv.cells, false);
             sc = run_steps(lv, steps, false, 0, blocks_in > 1);
             if (!sc) {
                 slice_blocks = blocks_in / 2;
@@ -402,12 +416,11 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             } else if (g.pool_words + cells_bound > capacity) {
                 resize(g.pool, capacity, g.pool_words + cells_bound, g.pool_words);
             }
-            steps.clear();
-            steps.push_back(plan_step(lv, 2, b0, blocks_in, blocks_in * lv.per_block, *lv.octants,
-                                      *lv.cells, lv.refine));
+            steps = plan_step(lv, 2, b0, blocks_in, blocks_in * lv.per_block, *lv.octants,
+                              *lv.cells, lv.refine);
         } else {
-            steps.push_back(plan_step(lv, 0, b0, blocks_in, blocks_in * lv.per_block, *lv.cells,
-                                      *lv.cells, lv.refine));
+            steps = plan_step(lv, 0, b0, blocks_in, blocks_in * lv.per_block, *lv.cells, *lv.cells,
+                              lv.refine);
         }
         lv.listed_cells = 0;
         // (the finest level's final cells, after its last slice: bounded, for near_box; on a
@@ -431,9 +444,8 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             if (room > capacity) resize(g.pool, capacity, room, g.pool_words);
             max_len = std::max(sc->max_len, 1u);
             max_depth = std::max(sc->max_depth, 1u);
-            std::vector<Step> refinement{plan_step(lv, 3, b0, blocks_in, blocks_in * lv.per_block,
-                                                   *lv.refined, *lv.cells, false)};
-            refinement.push_back(plan_squads(lv, refinement.front()));
+            std::vector<Step> refinement = plan_step(lv, 3, b0, blocks_in, blocks_in * lv.per_block,
+                                                     *lv.refined, *lv.cells, false);
             const GpuCounters rc = *run_steps(lv, refinement, false, sc->octant_used, false,
                                               bound ? lv.refined : nullptr);
             sc->max_depth = rc.max_depth;
@@ -473,11 +485,11 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
             // not the octants'; and after refinement, the refined cells' deepest stack (what
             // the tracing kernels' stacks are sized by; every near-field cell's refinement adds
             // its tape's depth).
-            if (s.push.mode == 2) {
+            if (s.push.mode == 2 && !s.listed) {
                 ctx.fill(counters, 0, offsetof(GpuCounters, max_len), 4);
                 ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
             }
-            if (s.kernel == KernelId::kPruneRefineLanes) {
+            if (s.push.mode == 3 && !s.listed) {
                 ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
                 // The far-field cells refined as they are: the slice's cells copied, the near
                 // ones (listed by the step before) then refined over them.
@@ -522,16 +534,21 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
         g.near_box = finest_cells_box(sc.aabb, extent / float(res.back()), res.back(),
                                       counter->near_lo, counter->near_hi);
     for (Step& s : steps) {
-        if (s.push.mode == 3) {
-            // Refinement's jobs, the listed cells, and the squads' the long list (its dispatches
-            // were recorded for all, those past the list's end returning at once).
-            const uint64_t jobs =
-                s.kernel == KernelId::kPruneRefine ? counter->long_cells : counter->refine_cells;
-            s.shape.jobs = jobs;
+        // Jobs counted on the device: refinement's, the listed cells, and the long list's, the
+        // jobs a lane pass left (their dispatches were recorded for all, those past the list's
+        // end returning at once).
+        const bool refine_jobs = s.push.mode == 3 && !s.listed;
+        if (refine_jobs || s.listed) {
+            const uint64_t jobs = s.listed ? counter->long_jobs : counter->refine_cells;
+            if (refine_jobs) s.shape.jobs = jobs;
             s.shape.lanes = std::min(jobs, s.teams) * s.shape.lanes_per_tape;
             s.shape.longest_walk_words = ceil_div(jobs, s.teams) * s.job_walk;
         }
         s.shape.gpu_ms = ctx.stamp_ms(s.last_stamp) - ctx.stamp_ms(s.first_stamp);
+        if (s.lane_pass) {
+            s.shape.long_jobs = counter->long_jobs;
+            s.shape.lanes_ms = s.shape.gpu_ms;
+        }
         add_shape(lv, s.shape);
     }
     return *counter;
@@ -552,15 +569,49 @@ void Pruner::add_shape(const Level& lv, const GpuStepShape& shape) {
     same->jobs += shape.jobs;
     same->lanes = std::max(same->lanes, shape.lanes);
     same->lanes_per_tape = std::max(same->lanes_per_tape, shape.lanes_per_tape);
-    same->longest_walk_words += shape.longest_walk_words;  // one slice after another
+    same->longest_walk_words += shape.longest_walk_words;  // one slice or pass after another
     same->gpu_ms += shape.gpu_ms;
+    same->lanes_ms += shape.lanes_ms;
+    same->long_jobs += shape.long_jobs;
 }
 
-// A step over the blocks [first_block, first_block + blocks), `jobs` cells or octants, in
-// teams (or wide, plan_wide); `transient`: new tapes go to the octant pool (the finest cells'
-// tapes before refinement).
-Step Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
-                       uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient) {
+// A step over the blocks [first_block, first_block + blocks), `jobs` cells or octants (or in
+// refinement, mode 3, cells), `transient`: new tapes go to the octant pool (the finest cells'
+// tapes before refinement). Its passes: where a lane pass applies (not wide, its setting not
+// 0), first a lane per box (plan_lanes), then, unless the parents' longest tape is short enough
+// for the lanes, the teams or squads over the jobs the lanes listed; else teams (or wide) or
+// squads alone. The long list goes to scratch after the teams' own.
+std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block,
+                                    uint64_t blocks, uint64_t jobs, const Buffer& octants,
+                                    const Buffer& cells, bool transient) {
+    // The long list's room, held back from the teams' scratch (at most half the budget; past
+    // that, no lane pass).
+    const uint32_t lane_max = mode == 3 ? refine_lane_tape : lane_tape;
+    const uint64_t list_bytes = 4 * jobs;  // (a step has no more team jobs than boxes)
+    const bool may_list = lane_max > 0 && 2 * list_bytes <= ctx.prune_scratch_budget_bytes();
+    Step teams = plan_teams(lv, mode, first_block, blocks, jobs, octants, cells, transient,
+                            may_list ? list_bytes : 0);
+    if (teams.wide || !may_list) return {teams};
+    Step lanes = plan_lanes(teams, lane_max);
+    lanes.push.list_start = uint32_t(teams.scratch_words);
+    const uint64_t need = (teams.scratch_words + teams.team_jobs) * 4;
+    if (scratch.size < need) {
+        ctx.destroy(scratch);
+        scratch = ctx.create_buffer(need);
+    }
+    if (max_len <= lane_max) return {lanes};
+    teams.listed = true;
+    teams.push.flags |= 8u;
+    teams.push.list_start = lanes.push.list_start;
+    teams.first_team_job = 0;
+    teams.shape.jobs = 0;  // the lanes' (one shape, add_shape)
+    return {lanes, teams};
+}
+
+// A step's jobs in teams (or wide, plan_wide), or in refinement squads (plan_squads).
+Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
+                        uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient,
+                        uint64_t reserve_bytes) {
     const uint64_t hf = lv.f / 2;
     const auto teams_for = [](uint64_t boxes) { return ceil_div(boxes, kPruneTeam); };
     Step s;
@@ -581,7 +632,7 @@ Step Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uin
     if (s.first_team_job + s.team_jobs > 0xfffffffeull)
         throw std::length_error("too many cells in one level");
     if (mode == 3) {
-        plan_refine(lv, s);
+        plan_squads(lv, s);
         return s;
     }
     // A team's scratch: its lanes' state, per parent-tape entry a left operand and a word per
@@ -595,7 +646,7 @@ Step Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uin
     // in a grid-stride loop). Only teams with jobs hold scratch, so one parent tape as long as
     // the budget allows can be pruned (the root's, the full tree, at level 0) even where a
     // workgroup's 8 teams could not.
-    const uint64_t fit = ctx.prune_scratch_budget_bytes() / team_bytes;
+    const uint64_t fit = (ctx.prune_scratch_budget_bytes() - reserve_bytes) / team_bytes;
     if (fit == 0)
         throw GpuError("Vulkan: pruning a tape of " + std::to_string(max_len) + " words needs " +
                        std::to_string(team_bytes) +
@@ -634,6 +685,7 @@ Step Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block, uin
     s.shape.longest_walk_words = s.team_jobs == 0 ? 0 : ceil_div(s.team_jobs, s.teams) * s.job_walk;
     s.wide = false;
     uint64_t scratch_bytes = s.teams * team_bytes;
+    s.scratch_words = scratch_bytes / 4;
     if (wide_override != 0 && ctx.can_run(KernelId::kPruneWide)) plan_wide(s, scratch_bytes);
     if (scratch.size < scratch_bytes) {
         ctx.destroy(scratch);
@@ -665,47 +717,59 @@ PrunePush Pruner::push_for(const Level& lv, uint32_t mode, uint32_t threads, uin
                      0};
 }
 
-// Refinement, in two passes over the slice's listed cells. Its jobs' count is the device's
-// (refine_cells, long_cells): the dispatches are recorded for all the slice's cells, those past
-// the list's end returning at once. First (prune_refine_lanes.comp) a lane a cell, as many
-// lanes as the device runs at once in a grid-stride loop: a tape of at most lane_tape words is
-// refined by its lane alone (its loops per job: the tape staged, one walk per sub-box, the sweep
-// and the write), a longer one listed for the second pass.
-void Pruner::plan_refine(const Level& lv, Step& s) {
-    const uint64_t len = std::min<uint64_t>(max_len, lane_tape);
+// A step's lane pass (prune_lanes.comp; refinement, prune_refine_lanes.comp): a lane per box
+// (a cell, an octant; in refinement a listed cell), as many lanes as the device runs at once
+// in a grid-stride loop, each walking its box's parent tape alone where that tape has at most
+// `lane_max` words, and listing its job for the teams (squads) after it where not. Under a loop
+// limit (lavapipe), as many boxes per lane and dispatch as its loops allow: per box, the tape
+// staged and evaluated, swept and written (refinement: one walk per sub-box).
+Step Pruner::plan_lanes(const Step& teams, uint32_t lane_max) const {
+    Step s = teams;
+    const bool refine = teams.push.mode == 3;
+    const uint64_t len = std::min<uint64_t>(max_len, lane_max);
     const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
-    const uint64_t per_job = (subs + 3) * len + 8;
-    const uint64_t lanes = std::min({std::max<uint64_t>(s.team_jobs, 1),
-                                     uint64_t(ctx.max_workgroups()) * kWorkgroupSize,
-                                     std::max<uint64_t>(ctx.resident_threads(), 1)});
-    s.kernel = KernelId::kPruneRefineLanes;
+    const uint64_t per_team_job = refine ? 1 : kPruneTeam;  // boxes
+    const uint64_t boxes = s.team_jobs * per_team_job;
+    const uint64_t walk = refine ? subs * len : 3 * len;
+    const uint64_t per_box = walk + 2 * len + 8 + (refine ? subs : 0);
+    const uint64_t lanes =
+        std::min({std::max<uint64_t>(boxes, 1), uint64_t(ctx.max_workgroups()) * kWorkgroupSize,
+                  std::max<uint64_t>(ctx.resident_threads(), 1)});
+    s.kernel = refine ? KernelId::kPruneRefineLanes : KernelId::kPruneLanes;
+    s.lane_pass = true;
+    s.listed = false;
+    s.wide = false;
     s.teams = lanes;
     s.threads = uint32_t(ceil_div(lanes, kWorkgroupSize) * kWorkgroupSize);
     s.groups = uint32_t(s.threads / kWorkgroupSize);
     s.rounds = 1;
-    s.per_dispatch = ctx.loop_limited()
-                         ? s.threads * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / per_job)
-                         : std::max<uint64_t>(s.team_jobs, 1);
-    s.push = push_for(lv, 3, s.threads, flags, 0);
-    s.push.long_list = uint32_t(lv.total);
-    s.push.lane_tape = lane_tape;
-    s.job_walk = subs * len;
-    s.wide = false;
-    s.shape.level = lv.index;
-    s.shape.mode = 3;
-    s.shape.jobs = s.team_jobs;  // until the device's count is read back
+    s.per_dispatch =
+        ctx.loop_limited()
+            ? std::max<uint64_t>(
+                  1, s.threads * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / per_box) /
+                         per_team_job)
+            : std::max<uint64_t>(s.team_jobs, 1);
+    s.push.threads = s.threads;
+    s.push.round = 0;
+    s.push.budget = 0;
+    s.push.flags &= ~8u;
+    s.push.lane_tape = lane_max;
+    s.job_walk = walk;
+    s.shape.wide = false;
     s.shape.lanes_per_tape = 1;
     s.shape.lanes = lanes;
-    s.shape.longest_walk_words = ceil_div(s.team_jobs, lanes) * s.job_walk;
+    s.shape.longest_walk_words = ceil_div(boxes, lanes) * walk;
+    return s;
 }
 
-// Then (prune_refine.comp) the long list: a squad of kRefineSquad lanes a cell, its sub-boxes a
-// lane each, as many squads as the device runs at once, in a grid-stride loop. A lane's loops
-// per job: staging the tape, one walk per batch of kRefineSquad sub-boxes over at most
-// kRefineMaxTape words, the far-field test over the squad, the sweep and the write (one lane),
-// or a chunk of a copied tape and the chunks' depths. Its shape is step "4" of the statistics.
-Step Pruner::plan_squads(const Level& lv, const Step& lanes) {
-    Step s = lanes;
+// Refinement's squads (prune_refine.comp): a squad of kRefineSquad lanes a listed cell, its
+// sub-boxes a lane each, as many squads as the device runs at once, in a grid-stride loop over
+// the list. Its jobs' count is the device's (refine_cells, or after a lane pass long_jobs):
+// the dispatches are recorded for all the slice's cells. A lane's loops per job: staging the
+// tape, one walk per batch of kRefineSquad sub-boxes over at most kRefineMaxTape words, the
+// far-field test over the squad, the sweep and the write (one lane), or a chunk of a copied
+// tape and the chunks' depths.
+void Pruner::plan_squads(const Level& lv, Step& s) {
     const uint64_t len = max_len, walked = std::min<uint64_t>(len, math::kRefineMaxTape);
     const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
     const uint64_t batches = ceil_div(subs, kRefineSquad);
@@ -719,19 +783,20 @@ Step Pruner::plan_squads(const Level& lv, const Step& lanes) {
     s.teams = squads;
     s.threads = uint32_t(squads * kRefineSquad);
     s.groups = uint32_t(ceil_div(s.threads, kWorkgroupSize));
+    s.rounds = 1;
     s.per_dispatch = ctx.loop_limited()
                          ? squads * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / per_job)
                          : std::max<uint64_t>(s.team_jobs, 1);
-    s.push.threads = s.threads;
+    s.push = push_for(lv, 3, s.threads, flags, 0);
     s.job_walk = batches * walked;
-    s.shape = GpuStepShape{};
+    s.wide = false;
+    s.scratch_words = 0;
     s.shape.level = lv.index;
-    s.shape.mode = 4;
-    s.shape.jobs = s.team_jobs;
+    s.shape.mode = 3;
+    s.shape.jobs = s.team_jobs;  // until the device's count is read back
     s.shape.lanes_per_tape = uint32_t(kRefineSquad);
     s.shape.lanes = std::min<uint64_t>(s.team_jobs, squads) * kRefineSquad;
     s.shape.longest_walk_words = ceil_div(s.team_jobs, squads) * s.job_walk;
-    return s;
 }
 
 // The wide kernel instead of teams, where it fits and its modelled cost wins (kWideRoundCost).

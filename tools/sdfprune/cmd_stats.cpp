@@ -228,7 +228,9 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                                              .add("lanes", st.lanes)
                                              .add("lanes_per_tape", st.lanes_per_tape)
                                              .add("longest_walk_words", st.longest_walk_words)
-                                             .add("gpu_ms", st.gpu_ms));
+                                             .add("gpu_ms", st.gpu_ms)
+                                             .add("lanes_ms", st.lanes_ms)
+                                             .add("long_jobs", st.long_jobs));
                      j.add("device", device->name())
                          .add("wall_ms", device_grid->stats().wall_ms)
                          .add("submissions", device_grid->stats().submissions)
@@ -293,11 +295,13 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                  for (const gpu::GpuStepShape& st : device_grid->stats().steps)
                      std::printf(
                          "    level %u %-18s %s%u dispatches, %llu workgroups, %llu jobs "
-                         "on %llu lanes (%u to a tape), longest walk <= %llu words, %.2f ms\n",
+                         "on %llu lanes (%u to a tape), longest walk <= %llu words, %.2f ms "
+                         "(lane pass %.2f ms, %llu jobs left to teams)\n",
                          st.level, kModes[std::min(st.mode, 3u)], st.wide ? "wide: " : "",
                          st.dispatches, (unsigned long long)st.workgroups,
                          (unsigned long long)st.jobs, (unsigned long long)st.lanes,
-                         st.lanes_per_tape, (unsigned long long)st.longest_walk_words, st.gpu_ms);
+                         st.lanes_per_tape, (unsigned long long)st.longest_walk_words, st.gpu_ms,
+                         st.lanes_ms, (unsigned long long)st.long_jobs);
              } else
                  std::printf(
                      "  pruning                   %.1f ms, peak %.1f MB in pruning buffers\n",
