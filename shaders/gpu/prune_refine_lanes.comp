@@ -76,48 +76,20 @@ void main() {
             r_flag[k] = 0u;
         }
         // Stage 1 over each sub-box, then stage 2: the far-field test of is_near_field on the
-        // sub-box's root range against the whole cell's clearance, while it can pass
-        // (refine_need: refine_far_possible), as the CPU backend's refine_cell does. In its
-        // order (sub_box_order: the corners, the middle, the rest), and as it does, stopped
-        // where the far field is out of reach and no operator is decided alike in every
-        // sub-box so far: the rest cannot change the tape.
+        // sub-box's root range against the whole cell's clearance.
         precise vec3 centre = refine_cell_centre(cell);
         float L = nodes[tape_node(r_word[len - 1u])].lipschitz;
         float clearance = far_field_clearance(pc.csize.w, L, radius);
-        uint far_flags =
-            far_field && refine_far_possible(c0.value, clearance, 0.0, half_cell) ? 3u : 0u;
+        uint far_flags = far_field ? 3u : 0u;
         float lowest = kInfinity, highest = -kInfinity;
-        uint last = subs - 1u, mid = subs / 2u, raster = 0u;
-        for (uint t = 0u; t < nsub; ++t) {
-            uvec3 sc;
-            if (subs == 1u) {
-                sc = uvec3(0u);
-            } else if (t < 8u) {
-                sc = uvec3(t & 1u, (t >> 1) & 1u, (t >> 2) & 1u) * last;
-            } else if (t == 8u) {
-                sc = uvec3(mid);  // (subs >= 3: not a corner)
-            } else {
-                // The next sub-box in raster order that is neither a corner nor the middle.
-                bool skip = true;
-                while (skip) {
-                    sc = uvec3(raster % subs, (raster / subs) % subs, raster / (subs * subs));
-                    ++raster;
-                    bool corner = (sc.x == 0u || sc.x == last) && (sc.y == 0u || sc.y == last) &&
-                                  (sc.z == 0u || sc.z == last);
-                    skip = corner || all(equal(sc, uvec3(mid)));
-                }
-            }
+        for (uint sb = 0u; sb < nsub; ++sb) {
+            uvec3 sc = uvec3(sb % subs, (sb / subs) % subs, sb / (subs * subs));
             precise vec3 p = centre - half_cell + vec3(2u * sc + 1u) * sub_half;
-            vec2 range = refine_sub_box(len, p, sub_half, sub_R, interval, L, t == 0u);
+            vec2 range = refine_sub_box(len, p, sub_half, sub_R, interval, L, sb == 0u);
             if (!clears_above(range.x, clearance)) far_flags &= ~1u;
             if (!clears_below(range.y, clearance)) far_flags &= ~2u;
             lowest = min(lowest, range.x);
             highest = max(highest, range.y);
-            if (far_flags != 0u) continue;
-            bool candidate = false;
-            for (uint i = 0u; i < len; ++i)
-                candidate = candidate || (bitCount(r_seen[i]) == 1 && r_seen[i] != 1u << kKeepBoth);
-            if (!candidate) break;
         }
         if (far_flags != 0u)
             store(cell, false, c0.value, (far_flags & 1u) != 0u ? lowest : highest, kFarField, 0u,
