@@ -233,8 +233,8 @@ const std::vector<Mirror>& mirrors() {
             {SDFPRUNE_MEMBER(PrunedCell, tape), SDFPRUNE_MEMBER(PrunedCell, children),
              SDFPRUNE_MEMBER(PrunedCell, value), SDFPRUNE_MEMBER(PrunedCell, bound)}),
         mirror<GpuBlock>("Block",
-                         {"prune", "prune_lanes", "prune_refine_lanes", "prune_refine",
-                          "prune_wide", "prune_wide_subgroups", "expand"},
+                         {"prune", "prune_refine_lanes", "prune_refine", "prune_wide",
+                          "prune_wide_subgroups", "expand"},
                          {SDFPRUNE_MEMBER(GpuBlock, x), SDFPRUNE_MEMBER(GpuBlock, y),
                           SDFPRUNE_MEMBER(GpuBlock, z), SDFPRUNE_MEMBER(GpuBlock, tape)}),
         mirror<GpuLevel>("Level", grid,
@@ -247,8 +247,7 @@ const std::vector<Mirror>& mirrors() {
         // GpuCounters' trailing pad is the host's only.
         mirror<GpuCounters>(
             "Counters",
-            {"prune", "prune_lanes", "prune_refine_lanes", "prune_refine", "prune_wide",
-             "prune_wide_subgroups"},
+            {"prune", "prune_refine_lanes", "prune_refine", "prune_wide", "prune_wide_subgroups"},
             {SDFPRUNE_MEMBER(GpuCounters, pool_used), SDFPRUNE_MEMBER(GpuCounters, pool_capacity),
              SDFPRUNE_MEMBER(GpuCounters, overflow), SDFPRUNE_MEMBER(GpuCounters, max_len),
              SDFPRUNE_MEMBER(GpuCounters, near_jobs), SDFPRUNE_MEMBER(GpuCounters, next_blocks),
@@ -278,8 +277,7 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(DiscretizeParams, pad2)}),
         mirror<PrunePush>(
             "Push",
-            {"prune", "prune_lanes", "prune_refine_lanes", "prune_refine", "prune_wide",
-             "prune_wide_subgroups"},
+            {"prune", "prune_refine_lanes", "prune_refine", "prune_wide", "prune_wide_subgroups"},
             {SDFPRUNE_MEMBER(PrunePush, origin), SDFPRUNE_MEMBER(PrunePush, csize),
              SDFPRUNE_MEMBER(PrunePush, mode), SDFPRUNE_MEMBER(PrunePush, factor),
              SDFPRUNE_MEMBER(PrunePush, jobs), SDFPRUNE_MEMBER(PrunePush, threads),
@@ -389,9 +387,6 @@ struct EmbeddedKernel {
 constexpr uint32_t kPruneSpv[] = {
 #include "prune.reflect.spv.inc"
 };
-constexpr uint32_t kPruneLanesSpv[] = {
-#include "prune_lanes.reflect.spv.inc"
-};
 constexpr uint32_t kPruneRefineLanesSpv[] = {
 #include "prune_refine_lanes.reflect.spv.inc"
 };
@@ -417,7 +412,6 @@ constexpr uint32_t kDiscretizeSpv[] = {
 #include "discretize.reflect.spv.inc"
 };
 const EmbeddedKernel kKernels[] = {{"prune", kPruneSpv},
-                                   {"prune_lanes", kPruneLanesSpv},
                                    {"prune_refine_lanes", kPruneRefineLanesSpv},
                                    {"prune_refine", kPruneRefineSpv},
                                    {"prune_wide", kPruneWideSpv},
@@ -489,9 +483,6 @@ void check_kernel(const std::string& kernel) {
 
 TEST(GpuLayout, Prune) {
     check_kernel("prune");
-}
-TEST(GpuLayout, PruneLanes) {
-    check_kernel("prune_lanes");
 }
 TEST(GpuLayout, PruneRefineLanes) {
     check_kernel("prune_refine_lanes");

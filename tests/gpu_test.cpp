@@ -181,26 +181,27 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
         const PrunedGrid cpu = prune(sc, o);
         // These tapes are short: the team kernel by default, then the wide kernel wherever
         // it fits (prune_wide.comp: a workgroup per parent tape), with subgroup operations
-        // where the device has them, and without. Lane passes: by default most of these
-        // tapes go to a lane per box (cell) alone, then none (refinement on squads), then
-        // refinement's lanes up to their longest tape, then teams and squads for the tapes
-        // longer than 4 words and lanes for the rest.
+        // where the device has them, and without. Refinement: by default a lane per cell for
+        // the tapes of up to 16 words and squads for the rest, then squads alone, then lanes
+        // up to their longest tape, then lanes up to 4 words.
         for (int variant = 0; variant < 4; ++variant) {
             ::setenv("SDFPRUNE_VULKAN_WIDE", variant == 3 ? "0" : variant > 0 ? "1" : "", 1);
-            const char* lanes = variant == 1 ? "0" : variant == 3 ? "4" : "";
-            ::setenv("SDFPRUNE_VULKAN_LANE_TAPE", lanes, 1);
-            ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE", variant == 2 ? "32" : lanes, 1);
+            ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE",
+                     variant == 1   ? "0"
+                     : variant == 2 ? "32"
+                     : variant == 3 ? "4"
+                                    : "",
+                     1);
             const gpu::Grid gpu = gpu::prune(variant == 2 ? plain : *dev, sc, o);
             ::unsetenv("SDFPRUNE_VULKAN_WIDE");
-            ::unsetenv("SDFPRUNE_VULKAN_LANE_TAPE");
             ::unsetenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE");
             if (variant == 2) {
                 EXPECT_FALSE(gpu.stats().subgroups);
             }
             const std::string how =
-                what + (variant == 1   ? ", wide, no lane passes"
+                what + (variant == 1   ? ", wide, refinement on squads"
                         : variant == 2 ? ", wide without subgroups, refinement's lanes up to 32"
-                        : variant == 3 ? ", teams, lanes up to 4 words"
+                        : variant == 3 ? ", teams, refinement's lanes up to 4 words"
                                        : "");
             const bool exact = exact_device(*dev);
             expect_same_stats(cpu.stats(), gpu.stats(), how, exact);
@@ -260,17 +261,14 @@ TEST(Gpu, StepShapesFollowTheLevels) {
     const Scene sc = builtin_scene("demo");
     PruneOptions o;
     o.resolution = 64;  // levels 4, 16, 64
-    // Teams and squads alone (no lane passes).
+    // Teams, and refinement on squads alone (no lane pass).
     ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
-    ::setenv("SDFPRUNE_VULKAN_LANE_TAPE", "0", 1);
     ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE", "0", 1);
     const gpu::Grid gpu = gpu::prune(*dev, sc, o);
-    // Then lane passes for parent tapes of up to 4 words, the teams and squads for the rest.
-    ::setenv("SDFPRUNE_VULKAN_LANE_TAPE", "4", 1);
+    // Then refinement's lane pass for tapes of up to 4 words, the squads for the rest.
     ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE", "4", 1);
     const gpu::Grid passes = gpu::prune(*dev, sc, o);
     ::unsetenv("SDFPRUNE_VULKAN_WIDE");
-    ::unsetenv("SDFPRUNE_VULKAN_LANE_TAPE");
     ::unsetenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE");
     const std::vector<gpu::GpuStepShape>& steps = gpu.stats().steps;
     ASSERT_EQ(steps.size(), 7u);
@@ -320,32 +318,30 @@ TEST(Gpu, StepShapesFollowTheLevels) {
     }
     EXPECT_LE(sum, gpu.stats().prune_ms * 1.0001 + 1e-6);
 
-    // With lane passes: the same steps, jobs and cells; each step's lane pass leaves to the
-    // teams the jobs whose parent tapes are longer than 4 words (refinement: the listed cells',
-    // counted here from the CPU's cells before refinement).
+    // With refinement's lane pass: the same steps, jobs and cells; the lanes leave to the
+    // squads the cells whose tapes are longer than 4 words (counted here from the CPU's cells
+    // before refinement).
     const std::vector<gpu::GpuStepShape>& with = passes.stats().steps;
     ASSERT_EQ(with.size(), steps.size());
-    uint64_t left = 0;
     for (size_t i = 0; i < with.size(); ++i) {
-        SCOPED_TRACE("with lane passes, step " + std::to_string(i));
+        SCOPED_TRACE("with the lane pass, step " + std::to_string(i));
         EXPECT_EQ(with[i].mode, steps[i].mode);
         EXPECT_EQ(with[i].jobs, steps[i].jobs);
         EXPECT_LE(with[i].lanes_ms, with[i].gpu_ms);
-        if (passes.stats().prune_ms > 0) {
+        if (with[i].mode != 3) {
+            EXPECT_EQ(with[i].lanes_ms, 0.0);
+            EXPECT_EQ(with[i].long_jobs, 0u);
+        } else if (passes.stats().prune_ms > 0) {
             EXPECT_GT(with[i].lanes_ms, 0.0);
         }
-        // In team jobs of 8 boxes; refinement in cells.
-        EXPECT_LE(with[i].long_jobs, with[i].mode == 3 ? with[i].jobs : (with[i].jobs + 7) / 8);
-        left += with[i].long_jobs;
     }
-    EXPECT_GT(left, 0u);
     uint64_t long_cells = 0;
     for (const PrunedCell& c : before.level_cells(2))
         if (c.tape != PrunedCell::kFarField && before.tape_at(c.tape).size() > 4) ++long_cells;
     EXPECT_GT(long_cells, 0u);
     EXPECT_EQ(with[6].long_jobs, long_cells);
-    expect_same_stats(gpu.stats(), passes.stats(), "lane passes");
-    expect_same_device_cells(gpu, passes, "lane passes");
+    expect_same_stats(gpu.stats(), passes.stats(), "refinement's lane pass");
+    expect_same_device_cells(gpu, passes, "refinement's lane pass");
 }
 
 // Refinement takes the finest near-field cells only (listed by the step that makes the finest

@@ -83,7 +83,7 @@ struct GpuStepShape {
     // and combined height by height.
     bool wide = false;
     // Lanes that take one parent tape together: the team (8), the workgroup (256) when wide, in
-    // refinement a squad (32); 1 where a lane pass took every job (see long_jobs).
+    // refinement a squad (32), or 1 where its lane pass took every cell (see long_jobs).
     uint32_t lanes_per_tape = 1;
     // The tape words one lane reads in sequence, at most: its jobs (rounded up) times, per job,
     // in a team the passes over a parent tape (evaluation once per batch of sub-boxes, the
@@ -95,10 +95,9 @@ struct GpuStepShape {
     // The step's GPU time (timestamps around its dispatches; 0 where the device has none), in
     // its level's last run.
     double gpu_ms = 0;
-    // A step not wide runs first a lane per box (a lane per cell in refinement) where the box's
-    // parent tape is short (prune_lanes.comp, prune_refine_lanes.comp): its GPU time, within
-    // gpu_ms, and the jobs it left to the teams (squads) after it, in team jobs of kPruneTeam
-    // boxes (refinement: cells).
+    // Refinement runs first a lane per cell where the cell's tape is short
+    // (prune_refine_lanes.comp): its GPU time, within gpu_ms, and the cells it left to the squads
+    // after it (0 in other steps).
     double lanes_ms = 0;
     uint64_t long_jobs = 0;
 };

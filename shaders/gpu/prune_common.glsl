@@ -1,8 +1,8 @@
 // prune_common.glsl — what the pruning kernels share: prune.comp (a team of kTeam lanes walks
 // one parent tape, one lane per child box), prune_wide.comp (a whole workgroup takes one parent
-// tape, its nodes spread over the lanes), prune_lanes.comp (a lane per box, for short parent
-// tapes), prune_refine_lanes.comp (a lane per finest cell) and prune_refine.comp (a squad of
-// lanes per finest cell, a lane per sub-box): the step's buffers
+// tape, its nodes spread over the lanes), prune_refine_lanes.comp (a lane per finest cell with a
+// short tape) and prune_refine.comp (a squad of lanes per finest cell, a lane per sub-box): the
+// step's buffers
 // (bindings 4–11) and push constants, the tape pools, the boxes of a job (modes 0–2) and the
 // store of a box's result.
 // Include after scene.glsl and cells.glsl.
@@ -27,12 +27,12 @@ layout(std430, binding = 7) buffer Counters {
     uint refine_cells;  // entries of refine_list
     uint near_lo[3];    // expand.comp's (GpuCounters)
     uint near_hi[3];
-    uint long_jobs;  // entries of the long list (prune_lanes.comp, prune_refine_lanes.comp)
+    uint long_jobs;  // entries of refinement's long list (prune_refine_lanes.comp)
 };
 // The kernel's scratch (its layout is the kernel's own). Coherent: lanes read what other lanes
-// of their workgroup wrote at earlier steps (a barrier between). From pc.list_start, the long
-// list: the jobs a lane pass (prune_lanes.comp, prune_refine_lanes.comp) leaves to the teams
-// or squads that run after it, long_jobs of them.
+// of their workgroup wrote at earlier steps (a barrier between). In refinement, from
+// pc.list_start, the long list: the cells its lane pass (prune_refine_lanes.comp) leaves to the
+// squads that run after it (prune_refine.comp), long_jobs of them.
 layout(std430, binding = 8) coherent buffer Scratch { uint scratch[]; };
 // Octants' tapes (mode 1) live in a pool of their own, dropped after the level: a reference
 // with kInOctantPool set points there. So do the finest cells' tapes that refinement (mode 3)
@@ -61,16 +61,15 @@ layout(push_constant) uniform Push {
                      // prune_wide.comp: the highest node's height (scene_height)
     uint flags;      // 1: far field on; 2: interval bounds; 4: new tapes go to the octant pool
                      // (the finest cells before refinement: near ones listed in refine_list);
-                     // 8: prune.comp takes its jobs from the long list
+                     // 8: prune_refine.comp takes its jobs from the long list
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's team jobs: [first_job, jobs)
     uint round;       // 0: start the jobs; later rounds resume them (prune.comp)
     uint budget;      // steps per job and round (prune.comp)
     uint refine;      // mode 3: sub-boxes per axis
     uint octant_start;  // octant pool words in use before this step
-    uint list_start;    // where the long list starts in scratch
-    uint lane_tape;     // the longest tape a lane takes alone (prune_lanes.comp,
-                        // prune_refine_lanes.comp)
+    uint list_start;    // mode 3: where the long list starts in scratch
+    uint lane_tape;     // mode 3: the longest tape a lane refines alone
 } pc;
 
 // The step's counters (near_jobs, near_words, max_len, max_depth), summed and maxed first in

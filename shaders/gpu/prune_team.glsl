@@ -87,14 +87,9 @@ void main() {
 
     // Every lane of a workgroup sees the same trip count (barriers inside); teams past
     // pc.threads / kTeam hold no scratch and take no jobs.
-    // Flag 8: the jobs are the long list's (prune_lanes.comp listed them), its entries
-    // [first_job, jobs).
-    bool listed = (pc.flags & 8u) != 0u;
-    uint jobs = listed ? min(pc.jobs, long_jobs) : pc.jobs;
-    for (uint first = pc.first_job; first < jobs; first += teams) {
+    for (uint first = pc.first_job; first < pc.jobs; first += teams) {
         uint job = first + team;
-        bool has_job = team < teams && job < jobs;
-        if (has_job && listed) job = scratch[pc.list_start + job];
+        bool has_job = team < teams && job < pc.jobs;
         // This lane's box and the team's parent tape; `valid`: the lane stores a result.
         bool valid = has_job, walk = has_job;
         uint parent = 0u, dest = 0u;

@@ -36,8 +36,8 @@ struct GpuGridParams {  // GridParams
 // prune.comp: Counters (expand.comp sees the same buffer as uint[]: [5] is next_blocks).
 // refine_cells: the entries of the refinement's list (prune_common.glsl: RefineList).
 // near_lo, near_hi: expand.comp's bounds of the finest level's near-field cells ([lo, hi)).
-// long_jobs: the entries of the long list, the jobs a lane pass (prune_lanes.comp,
-// prune_refine_lanes.comp) leaves to the teams or squads after it.
+// long_jobs: the entries of refinement's long list, the cells its lane pass
+// (prune_refine_lanes.comp) leaves to the squads after it.
 struct GpuCounters {
     uint32_t pool_used, pool_capacity, overflow, max_len, near_jobs, next_blocks, max_depth;
     uint32_t octant_used, octant_capacity, near_words, refine_cells;
@@ -46,15 +46,14 @@ struct GpuCounters {
 // prune.comp: kStateWords, the words of a lane's job state in its team's scratch; kTeam, the
 // lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step
 // and phase. prune_refine.comp: kSquad, the lanes that refine one cell.
-// prune_lanes.comp, prune_refine_lanes.comp: kLaneTapeMax, the longest parent tape a lane may
-// take alone (the size of their arrays); kPruneLaneTape and kRefineLaneTape, the longest each
-// takes unless SDFPRUNE_VULKAN_LANE_TAPE or SDFPRUNE_VULKAN_REFINE_LANE_TAPE says (0: no lanes).
+// prune_refine_lanes.comp: kLaneTapeMax, the longest tape a lane may refine alone (the size of
+// its arrays); kRefineLaneTape, the longest it does unless SDFPRUNE_VULKAN_REFINE_LANE_TAPE says
+// (0: no lane pass, squads for every cell).
 inline constexpr uint64_t kPruneStateWords = 16;
 inline constexpr uint64_t kPruneTeam = 8;
 inline constexpr uint64_t kPruneWindow = 64;
 inline constexpr uint64_t kRefineSquad = 32;
 inline constexpr uint32_t kLaneTapeMax = 32;
-inline constexpr uint32_t kPruneLaneTape = 32;
 inline constexpr uint32_t kRefineLaneTape = 16;
 // prune_wide.comp: kWide, the lanes of a workgroup that takes one team job (kPruneTeam boxes of
 // one parent tape); kWideEntryWords, its scratch words per tape entry and box;

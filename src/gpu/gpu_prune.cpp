@@ -74,10 +74,9 @@ struct Step {
     uint32_t threads, groups;  // lanes that take jobs, and their workgroups
     bool wide;
     KernelId kernel = KernelId::kPrune;  // (wide steps: record_step's choice)
-    // A lane pass (prune_lanes.comp, prune_refine_lanes.comp), or the teams or squads after it
-    // that take the jobs it listed (`listed`: its team jobs are the long list's entries).
+    // Refinement's lane pass (prune_refine_lanes.comp), or the squads after it that take the
+    // cells it listed (`listed`: its jobs are the long list's entries).
     bool lane_pass = false, listed = false;
-    uint64_t scratch_words = 0;  // the teams' scratch, before the long list
     GpuStepShape shape;
     uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
 };
@@ -116,9 +115,8 @@ class Pruner {
                                 uint64_t blocks, uint64_t jobs, const Buffer& octants,
                                 const Buffer& cells, bool transient);
     Step plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
-                    uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient,
-                    uint64_t reserve_bytes);
-    Step plan_lanes(const Step& teams, uint32_t lane_max) const;
+                    uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient);
+    Step plan_refine_lanes(const Step& squads) const;
     void plan_squads(const Level& lv, Step& s);
     PrunePush push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
                        uint32_t budget) const;
@@ -165,9 +163,9 @@ class Pruner {
     // buffer, or SDFPRUNE_VULKAN_PRESIZE_WORDS).
     uint64_t room_cap = 0;
     int wide_override = -1;
-    // The longest parent tapes the lane passes take (prune_lanes.comp, prune_refine_lanes.comp);
-    // SDFPRUNE_VULKAN_LANE_TAPE, SDFPRUNE_VULKAN_REFINE_LANE_TAPE.
-    uint32_t lane_tape = kPruneLaneTape, refine_lane_tape = kRefineLaneTape;
+    // The longest tape refinement's lane pass takes (prune_refine_lanes.comp);
+    // SDFPRUNE_VULKAN_REFINE_LANE_TAPE.
+    uint32_t refine_lane_tape = kRefineLaneTape;
     vec3 origin, extent;
     float L = 1;
     uint32_t flags = 0;  // the push constants' (prune_common.glsl)
@@ -251,16 +249,11 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
         room_cap = presize_cap = std::strtoull(env, nullptr, 10);
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE"); env && *env)
         wide_override = std::atoi(env) != 0;
-    // The longest parent tape a lane pass takes alone, at most their arrays' (0: no lane pass,
-    // teams or squads for every job; for tests and measurements).
-    const auto lane_setting = [](const char* name, uint32_t fallback) {
-        const char* env = std::getenv(name);
-        return env && *env
-                   ? std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), kLaneTapeMax)
-                   : fallback;
-    };
-    lane_tape = lane_setting("SDFPRUNE_VULKAN_LANE_TAPE", kPruneLaneTape);
-    refine_lane_tape = lane_setting("SDFPRUNE_VULKAN_REFINE_LANE_TAPE", kRefineLaneTape);
+    // The longest tape refinement's lane pass takes, at most its arrays' (0: no lane pass,
+    // squads for every cell; for tests and measurements).
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE"); env && *env)
+        refine_lane_tape =
+            std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), kLaneTapeMax);
     origin = sc.aabb.min;
     extent = sc.aabb.max - sc.aabb.min;
     L = sc.lipschitz[sc.root()];
@@ -577,41 +570,31 @@ void Pruner::add_shape(const Level& lv, const GpuStepShape& shape) {
 
 // A step over the blocks [first_block, first_block + blocks), `jobs` cells or octants (or in
 // refinement, mode 3, cells), `transient`: new tapes go to the octant pool (the finest cells'
-// tapes before refinement). Its passes: where a lane pass applies (not wide, its setting not
-// 0), first a lane per box (plan_lanes), then, unless the parents' longest tape is short enough
-// for the lanes, the teams or squads over the jobs the lanes listed; else teams (or wide) or
-// squads alone. The long list goes to scratch after the teams' own.
+// tapes before refinement): in teams (or wide). Refinement runs first a lane per cell
+// (plan_refine_lanes), then, unless the cells' longest tape is short enough for the lanes, the
+// squads over the cells the lanes listed (the long list, in scratch); without a lane pass
+// (its setting 0, or no room for the list), squads alone.
 std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block,
                                     uint64_t blocks, uint64_t jobs, const Buffer& octants,
                                     const Buffer& cells, bool transient) {
-    // The long list's room, held back from the teams' scratch (at most half the budget; past
-    // that, no lane pass).
-    const uint32_t lane_max = mode == 3 ? refine_lane_tape : lane_tape;
-    const uint64_t list_bytes = 4 * jobs;  // (a step has no more team jobs than boxes)
-    const bool may_list = lane_max > 0 && 2 * list_bytes <= ctx.prune_scratch_budget_bytes();
-    Step teams = plan_teams(lv, mode, first_block, blocks, jobs, octants, cells, transient,
-                            may_list ? list_bytes : 0);
-    if (teams.wide || !may_list) return {teams};
-    Step lanes = plan_lanes(teams, lane_max);
-    lanes.push.list_start = uint32_t(teams.scratch_words);
-    const uint64_t need = (teams.scratch_words + teams.team_jobs) * 4;
-    if (scratch.size < need) {
+    Step teams = plan_teams(lv, mode, first_block, blocks, jobs, octants, cells, transient);
+    if (mode != 3 || refine_lane_tape == 0 || 4 * teams.team_jobs > ctx.max_buffer_bytes())
+        return {teams};
+    Step lanes = plan_refine_lanes(teams);
+    if (scratch.size < 4 * teams.team_jobs) {
         ctx.destroy(scratch);
-        scratch = ctx.create_buffer(need);
+        scratch = ctx.create_buffer(4 * teams.team_jobs);
     }
-    if (max_len <= lane_max) return {lanes};
+    if (max_len <= refine_lane_tape) return {lanes};
     teams.listed = true;
     teams.push.flags |= 8u;
-    teams.push.list_start = lanes.push.list_start;
-    teams.first_team_job = 0;
     teams.shape.jobs = 0;  // the lanes' (one shape, add_shape)
     return {lanes, teams};
 }
 
 // A step's jobs in teams (or wide, plan_wide), or in refinement squads (plan_squads).
 Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
-                        uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient,
-                        uint64_t reserve_bytes) {
+                        uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient) {
     const uint64_t hf = lv.f / 2;
     const auto teams_for = [](uint64_t boxes) { return ceil_div(boxes, kPruneTeam); };
     Step s;
@@ -646,7 +629,7 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
     // in a grid-stride loop). Only teams with jobs hold scratch, so one parent tape as long as
     // the budget allows can be pruned (the root's, the full tree, at level 0) even where a
     // workgroup's 8 teams could not.
-    const uint64_t fit = (ctx.prune_scratch_budget_bytes() - reserve_bytes) / team_bytes;
+    const uint64_t fit = ctx.prune_scratch_budget_bytes() / team_bytes;
     if (fit == 0)
         throw GpuError("Vulkan: pruning a tape of " + std::to_string(max_len) + " words needs " +
                        std::to_string(team_bytes) +
@@ -685,7 +668,6 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
     s.shape.longest_walk_words = s.team_jobs == 0 ? 0 : ceil_div(s.team_jobs, s.teams) * s.job_walk;
     s.wide = false;
     uint64_t scratch_bytes = s.teams * team_bytes;
-    s.scratch_words = scratch_bytes / 4;
     if (wide_override != 0 && ctx.can_run(KernelId::kPruneWide)) plan_wide(s, scratch_bytes);
     if (scratch.size < scratch_bytes) {
         ctx.destroy(scratch);
@@ -717,48 +699,39 @@ PrunePush Pruner::push_for(const Level& lv, uint32_t mode, uint32_t threads, uin
                      0};
 }
 
-// A step's lane pass (prune_lanes.comp; refinement, prune_refine_lanes.comp): a lane per box
-// (a cell, an octant; in refinement a listed cell), as many lanes as the device runs at once
-// in a grid-stride loop, each walking its box's parent tape alone where that tape has at most
-// `lane_max` words, and listing its job for the teams (squads) after it where not. Under a loop
-// limit (lavapipe), as many boxes per lane and dispatch as its loops allow: per box, the tape
-// staged and evaluated, swept and written (refinement: one walk per sub-box).
-Step Pruner::plan_lanes(const Step& teams, uint32_t lane_max) const {
-    Step s = teams;
-    const bool refine = teams.push.mode == 3;
-    const uint64_t len = std::min<uint64_t>(max_len, lane_max);
+// Refinement's lane pass (prune_refine_lanes.comp): a lane per listed cell, as many lanes as
+// the device runs at once in a grid-stride loop, each refining its cell alone where its tape
+// has at most refine_lane_tape words, and listing it for the squads where not (from scratch
+// word 0: the squads use no other scratch). Under a loop limit (lavapipe), as many cells per
+// lane and dispatch as its loops allow: per cell, the tape staged, one walk per sub-box, the
+// sweep and the write.
+Step Pruner::plan_refine_lanes(const Step& squads) const {
+    Step s = squads;
+    const uint64_t len = std::min<uint64_t>(max_len, refine_lane_tape);
     const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
-    const uint64_t per_team_job = refine ? 1 : kPruneTeam;  // boxes
-    const uint64_t boxes = s.team_jobs * per_team_job;
-    const uint64_t walk = refine ? subs * len : 3 * len;
-    const uint64_t per_box = walk + 2 * len + 8 + (refine ? subs : 0);
+    const uint64_t walk = subs * len;
+    const uint64_t per_cell = walk + 3 * len + 8;
+    const uint64_t cells = s.team_jobs;
     const uint64_t lanes =
-        std::min({std::max<uint64_t>(boxes, 1), uint64_t(ctx.max_workgroups()) * kWorkgroupSize,
+        std::min({std::max<uint64_t>(cells, 1), uint64_t(ctx.max_workgroups()) * kWorkgroupSize,
                   std::max<uint64_t>(ctx.resident_threads(), 1)});
-    s.kernel = refine ? KernelId::kPruneRefineLanes : KernelId::kPruneLanes;
+    s.kernel = KernelId::kPruneRefineLanes;
     s.lane_pass = true;
     s.listed = false;
-    s.wide = false;
     s.teams = lanes;
     s.threads = uint32_t(ceil_div(lanes, kWorkgroupSize) * kWorkgroupSize);
     s.groups = uint32_t(s.threads / kWorkgroupSize);
-    s.rounds = 1;
     s.per_dispatch =
         ctx.loop_limited()
-            ? std::max<uint64_t>(
-                  1, s.threads * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / per_box) /
-                         per_team_job)
-            : std::max<uint64_t>(s.team_jobs, 1);
+            ? s.threads * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / per_cell)
+            : std::max<uint64_t>(cells, 1);
     s.push.threads = s.threads;
-    s.push.round = 0;
-    s.push.budget = 0;
-    s.push.flags &= ~8u;
-    s.push.lane_tape = lane_max;
+    s.push.list_start = 0;
+    s.push.lane_tape = refine_lane_tape;
     s.job_walk = walk;
-    s.shape.wide = false;
     s.shape.lanes_per_tape = 1;
     s.shape.lanes = lanes;
-    s.shape.longest_walk_words = ceil_div(boxes, lanes) * walk;
+    s.shape.longest_walk_words = ceil_div(cells, lanes) * walk;
     return s;
 }
 
@@ -790,7 +763,6 @@ void Pruner::plan_squads(const Level& lv, Step& s) {
     s.push = push_for(lv, 3, s.threads, flags, 0);
     s.job_walk = batches * walked;
     s.wide = false;
-    s.scratch_words = 0;
     s.shape.level = lv.index;
     s.shape.mode = 3;
     s.shape.jobs = s.team_jobs;  // until the device's count is read back

@@ -18,9 +18,6 @@ namespace {
 const uint32_t kPruneSpv[] = {
 #include "prune.spv.inc"
 };
-const uint32_t kPruneLanesSpv[] = {
-#include "prune_lanes.spv.inc"
-};
 const uint32_t kPruneRefineLanesSpv[] = {
 #include "prune_refine_lanes.spv.inc"
 };
@@ -58,7 +55,6 @@ struct KernelCode {
 // Binding counts must match the shaders' layouts (shaders/gpu/*.comp).
 const KernelCode kKernels[] = {
     {"prune", kPruneSpv, sizeof(kPruneSpv), 13},
-    {"prune_lanes", kPruneLanesSpv, sizeof(kPruneLanesSpv), 13},
     {"prune_refine_lanes", kPruneRefineLanesSpv, sizeof(kPruneRefineLanesSpv), 13},
     {"prune_refine", kPruneRefineSpv, sizeof(kPruneRefineSpv), 13},
     {"prune_wide", kPruneWideSpv, sizeof(kPruneWideSpv), 13, uint32_t(kPruneWide)},

@@ -23,7 +23,6 @@ inline constexpr uint32_t kWorkgroupSize = 64;
 // The kernels, one per compute shader in shaders/gpu/.
 enum class KernelId : uint32_t {
     kPrune,
-    kPruneLanes,        // a step's lane pass: a lane per box with a short parent tape
     kPruneRefineLanes,  // refinement's (mode 3) lane pass: a lane per cell with a short tape
     kPruneRefine,       // refinement: a squad of lanes per cell
     kPruneWide,

@@ -296,7 +296,7 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                      std::printf(
                          "    level %u %-18s %s%u dispatches, %llu workgroups, %llu jobs "
                          "on %llu lanes (%u to a tape), longest walk <= %llu words, %.2f ms "
-                         "(lane pass %.2f ms, %llu jobs left to teams)\n",
+                         "(lane pass %.2f ms, %llu cells left to squads)\n",
                          st.level, kModes[std::min(st.mode, 3u)], st.wide ? "wide: " : "",
                          st.dispatches, (unsigned long long)st.workgroups,
                          (unsigned long long)st.jobs, (unsigned long long)st.lanes,
