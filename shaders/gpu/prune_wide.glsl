@@ -17,8 +17,8 @@
 // a lane is at least twice the tape's number of distinct heights. But a run of rounds of one
 // operator each (a chain's: for the reference molecule, a left-deep chain of 1,000 smooth
 // unions, every round above the primitives') needs no barrier between its rounds: lane b
-// walks box b of all of them alone (evaluate_run, sweep_run), its loads read ahead, then one
-// barrier. gpu_prune.cpp picks this kernel by tape length and scene height, and sizes its
+// walks box b of all of them alone (evaluate_run, sweep_run), from shared memory, where the
+// whole workgroup stages a chunk of the run before it is walked: a barrier per chunk. gpu_prune.cpp picks this kernel by tape length and scene height, and sizes its
 // dispatches under lavapipe's loop limit (a job is never resumed: it ends in the dispatch
 // that starts it).
 // PRUNE_WIDE_SUBGROUPS (prune_wide_subgroups.comp, for devices with subgroup arithmetic and
@@ -148,121 +148,127 @@ uvec3 run_record(uint rbase, uint q, uint third) {
     return uvec3(scratch[at + kRunEntry], scratch[at + kRunLeft], scratch[at + third]);
 }
 
-// From a run round's record: its operator node, and its operands' values and ranges at box b.
-void read_operator(uvec3 rec, uint vbase, uint b, out Node nd, out vec3 left, out vec3 right) {
-    nd = nodes[tape_node(rec.z)];
-    left = item_range(item_at(vbase, rec.y, b));
-    right = item_range(item_at(vbase, rec.x - 1u, b));
+// A run is walked kRunChunk rounds at a time. Before each chunk, every lane of the workgroup
+// stages what the walk reads into shared memory, in parallel: per round its record and node
+// and, for each of its operands, which round of the chunk it is the entry of, if any; per round
+// and box what scratch holds of it. Then lanes 0 to kTeam − 1 walk the chunk, box b each, from
+// shared memory alone, and a barrier ends it. What the walk itself makes within the chunk (an
+// operand's value, an entry's flags) it keeps in shared memory too, per round and box, and
+// reads from there; what earlier chunks made is in scratch before the chunk is staged.
+const uint kRunChunk = 32u;  // gpu_prune.cpp: kPruneWideRunChunk
+const uint kNotInChunk = 0xffu;
+// Per round: entry, left operand, tape word (evaluation) or signs (sweep), and the chunk's
+// rounds whose entries its operands are (bits 0-7 the left's, 8-15 the right's; kNotInChunk).
+shared uvec4 s_run_rec[kRunChunk];
+shared Node s_run_node[kRunChunk];  // (evaluation)
+// Per round and box (item (q − c0) · kTeam + b): evaluation, its operands' values and ranges
+// as staged and its own result; the sweep, its entry's flags and its operands' decisions.
+shared vec4 s_run_left[kRunChunk * kTeam];
+shared vec4 s_run_right[kRunChunk * kTeam];
+shared uvec4 s_run_own[kRunChunk * kTeam];
+
+// Stages a chunk's records (`third`: kRunWord or kRunSigns) and where its operands are made.
+void stage_run_records(uint c0, uint c1, uint rbase, uint third, bool with_nodes) {
+    uint id = gl_LocalInvocationID.x;
+    for (uint q = c0 + id; q < c1; q += kWide) {
+        uvec3 rec = run_record(rbase, q, third);
+        s_run_rec[q - c0] = uvec4(rec, 0u);
+        if (with_nodes) s_run_node[q - c0] = nodes[tape_node(rec.z)];
+    }
+    sync_all();
+    for (uint q = c0 + id; q < c1; q += kWide) {
+        uvec4 rec = s_run_rec[q - c0];
+        uint jl = kNotInChunk, jr = kNotInChunk;
+        for (uint j = c0; j < c1; ++j) {
+            uint e = s_run_rec[j - c0].x;
+            if (e == rec.y) jl = j - c0;
+            if (e == rec.x - 1u) jr = j - c0;
+        }
+        s_run_rec[q - c0].w = jl | (jr << 8);
+    }
+    sync_all();
 }
 
-// Stage 2 over a run of rounds [r0, end), one operator each, for box b: one lane walks it
-// alone, with no barrier between its rounds (each operand is this lane's from earlier in the
-// run, or from before it). So that a round waits for no load, the loads run ahead: at round q,
-// round q + 3's record, and round q + 2's node and operands (from its record). Those operands
-// are read before rounds q and q + 1 store their results, so an operand that is one of those
-// two rounds' entries (in a chain, the left one) comes from registers instead.
-void evaluate_run(uint r0, uint end, uint rbase, uint vbase, uint b, float spread_r,
-                  bool interval) {
-    // Per round ahead: its record (entry, left operand, tape word), its node and operands.
-    uvec3 rec0 = run_record(rbase, r0, kRunWord);
-    uvec3 rec1 = r0 + 1u < end ? run_record(rbase, r0 + 1u, kRunWord) : uvec3(0u);
-    uvec3 rec2 = r0 + 2u < end ? run_record(rbase, r0 + 2u, kRunWord) : uvec3(0u);
-    Node nd0, nd1;
-    vec3 left0, right0, left1, right1;
-    read_operator(rec0, vbase, b, nd0, left0, right0);
-    if (r0 + 1u < end) read_operator(rec1, vbase, b, nd1, left1, right1);
-    // The two rounds before this one: their entries and results at box b.
-    uint e_back1 = 0xffffffffu, e_back2 = 0xffffffffu;
-    vec3 x_back1 = vec3(0.0), x_back2 = vec3(0.0);
-    for (uint q = r0; q < end; ++q) {
-        uvec3 rec3 = q + 3u < end ? run_record(rbase, q + 3u, kRunWord) : uvec3(0u);
-        Node nd2;
-        vec3 left2, right2;
-        if (q + 2u < end) read_operator(rec2, vbase, b, nd2, left2, right2);
-        // Operands stored by the two rounds before, after they were read ahead.
-        if (rec0.y == e_back1) left0 = x_back1;
-        else if (rec0.y == e_back2) left0 = x_back2;
-        if (rec0.x - 1u == e_back1) right0 = x_back1;
-        else if (rec0.x - 1u == e_back2) right0 = x_back2;
-        uint decision;
-        vec3 x = combine_operator(nd0, spread_r, interval, false, left0, right0, decision);
-        if (tape_negated(rec0.z)) x = negate_range(x);
-        store_item(item_at(vbase, rec0.x, b), x, decision);
-        e_back2 = e_back1;
-        x_back2 = x_back1;
-        e_back1 = rec0.x;
-        x_back1 = x;
-        rec0 = rec1;
-        rec1 = rec2;
-        rec2 = rec3;
-        nd0 = nd1;
-        nd1 = nd2;
-        left0 = left1;
-        left1 = left2;
-        right0 = right1;
-        right1 = right2;
+// Stage 2 over a run of rounds [r0, end), one operator each, for every box; every lane of the
+// workgroup calls it.
+void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, bool interval) {
+    uint id = gl_LocalInvocationID.x, b = id;
+    for (uint c0 = r0; c0 < end; c0 += kRunChunk) {
+        uint c1 = min(c0 + kRunChunk, end);
+        stage_run_records(c0, c1, rbase, kRunWord, true);
+        for (uint k = id; k < (c1 - c0) * kTeam; k += kWide) {
+            uvec4 rec = s_run_rec[k / kTeam];
+            uint box = k % kTeam;
+            if ((rec.w & 0xffu) == kNotInChunk)
+                s_run_left[k] = vec4(item_range(item_at(vbase, rec.y, box)), 0.0);
+            if ((rec.w >> 8) == kNotInChunk)
+                s_run_right[k] = vec4(item_range(item_at(vbase, rec.x - 1u, box)), 0.0);
+        }
+        sync_all();
+        if (id < kTeam)
+            for (uint q = 0u; q < c1 - c0; ++q) {
+                uvec4 rec = s_run_rec[q];
+                uint jl = rec.w & 0xffu, jr = rec.w >> 8;
+                vec3 left = jl == kNotInChunk ? s_run_left[q * kTeam + b].xyz
+                                              : uintBitsToFloat(s_run_own[jl * kTeam + b].xyz);
+                vec3 right = jr == kNotInChunk ? s_run_right[q * kTeam + b].xyz
+                                               : uintBitsToFloat(s_run_own[jr * kTeam + b].xyz);
+                uint decision;
+                vec3 x = combine_operator(s_run_node[q], spread_r, interval, false, left, right,
+                                          decision);
+                if (tape_negated(rec.z)) x = negate_range(x);
+                store_item(item_at(vbase, rec.x, b), x, decision);
+                s_run_own[q * kTeam + b] = uvec4(floatBitsToUint(x), 0u);
+            }
+        sync_all();
     }
 }
 
-// From a run round's record: the flags at box b of its entry, of its left operand and of its
-// right one.
-uvec3 read_flags(uvec3 rec, uint vbase, uint b) {
-    return uvec3(scratch[item_at(vbase, rec.x, b) + 3u], scratch[item_at(vbase, rec.y, b) + 3u],
-                 scratch[item_at(vbase, rec.x - 1u, b) + 3u]);
-}
-
-// Flags that a round of sweep_run has just set on entry x (its value v), taken over where x
-// is the entry of one of the next two rounds (e1, e2), whose flags were read ahead.
-void take_over(uint x, uint v, uint e1, uint e2, inout uint fl1, inout uint fl2) {
-    if (x == e1) fl1 = v;
-    if (x == e2) fl2 = v;
-}
-
-// Stage 4 over a run of rounds [r0, end), one operator each, for box b (whose tape is being
-// compacted): one lane walks it from its highest round down, with no barrier between rounds
-// (an entry's flags are set by its parent, this lane's at an earlier round of the run, or a
-// round above it). The loads run ahead as in evaluate_run: at round q, round q − 3's record,
-// and round q − 2's flags and its operands' decisions (the low two bits of their flags, which
-// do not change in this stage). Flags that rounds q and q − 1 set on a later round's entry
-// (in a chain, on its left operand) are taken over in registers.
-void sweep_run(uint r0, uint end, uint rbase, uint vbase, uint b) {
-    uint steps = end - r0;  // step i: round end − 1 − i
-    // Per step ahead: its record (entry, left operand, its operands' tape signs), its flags
-    // and its operands' decisions.
-    uvec3 rec0 = run_record(rbase, end - 1u, kRunSigns);
-    uvec3 rec1 = 1u < steps ? run_record(rbase, end - 2u, kRunSigns) : uvec3(0u);
-    uvec3 rec2 = 2u < steps ? run_record(rbase, end - 3u, kRunSigns) : uvec3(0u);
-    uvec3 fl0 = read_flags(rec0, vbase, b);
-    uvec3 fl1 = 1u < steps ? read_flags(rec1, vbase, b) : uvec3(0u);
-    for (uint i = 0u; i < steps; ++i) {
-        uvec3 rec3 = i + 3u < steps ? run_record(rbase, end - 4u - i, kRunSigns) : uvec3(0u);
-        uvec3 fl2 = i + 2u < steps ? read_flags(rec2, vbase, b) : uvec3(0u);
-        uint e = rec0.x, l = rec0.y, r = e - 1u, fl = fl0.x;
-        if (((fl >> 2) & 3u) == 1u) {
-            uint d = fl & 3u;
-            uint nl = rec0.z & 1u, nr = (rec0.z >> 1) & 1u;
-            if (d == kKeepBoth) {
-                uint set_l = (fl0.y & 3u) | (1u << 2) | (nl << 4);
-                uint set_r = (fl0.z & 3u) | (1u << 2) | (nr << 4);
-                scratch[item_at(vbase, l, b) + 3u] = set_l;
-                scratch[item_at(vbase, r, b) + 3u] = set_r;
-                take_over(l, set_l, rec1.x, rec2.x, fl1.x, fl2.x);
-                take_over(r, set_r, rec1.x, rec2.x, fl1.x, fl2.x);
-            } else {
-                bool left = d == kLeftWins;
-                uint wn = left ? l : r;
-                uint neg = ((fl >> 4) & 1u) ^ (left ? nl : nr);
-                scratch[item_at(vbase, e, b) + 3u] = (fl & 3u) | (2u << 2) | (fl & 16u);
-                uint set_w = ((left ? fl0.y : fl0.z) & 3u) | (1u << 2) | (neg << 4);
-                scratch[item_at(vbase, wn, b) + 3u] = set_w;
-                take_over(wn, set_w, rec1.x, rec2.x, fl1.x, fl2.x);
-            }
+// Stage 4 over a run of rounds [r0, end), one operator each, for every box whose tape is being
+// compacted (s_state 1), from the highest round down; every lane of the workgroup calls it. The
+// flags an entry of the chunk gets from a round above it in the chunk are kept in its item;
+// its operands' decisions (the low two bits of their flags) do not change in this stage.
+void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
+    uint id = gl_LocalInvocationID.x, b = id;
+    for (uint c1 = end; c1 > r0;) {
+        uint c0 = c1 - min(kRunChunk, c1 - r0);
+        stage_run_records(c0, c1, rbase, kRunSigns, false);
+        for (uint k = id; k < (c1 - c0) * kTeam; k += kWide) {
+            uvec4 rec = s_run_rec[k / kTeam];
+            uint box = k % kTeam;
+            s_run_own[k] = uvec4(scratch[item_at(vbase, rec.x, box) + 3u],
+                                 scratch[item_at(vbase, rec.y, box) + 3u] & 3u,
+                                 scratch[item_at(vbase, rec.x - 1u, box) + 3u] & 3u, 0u);
         }
-        rec0 = rec1;
-        rec1 = rec2;
-        rec2 = rec3;
-        fl0 = fl1;
-        fl1 = fl2;
+        sync_all();
+        if (id < kTeam && s_state[b] == 1u)
+            for (uint q = c1 - c0; q > 0u; --q) {
+                uvec4 rec = s_run_rec[q - 1u];
+                uvec4 own = s_run_own[(q - 1u) * kTeam + b];
+                uint e = rec.x, l = rec.y, r = e - 1u, fl = own.x;
+                if (((fl >> 2) & 3u) != 1u) continue;
+                uint d = fl & 3u;
+                uint nl = rec.z & 1u, nr = (rec.z >> 1) & 1u;
+                uint jl = rec.w & 0xffu, jr = rec.w >> 8;
+                if (d == kKeepBoth) {
+                    uint set_l = own.y | (1u << 2) | (nl << 4);
+                    uint set_r = own.z | (1u << 2) | (nr << 4);
+                    scratch[item_at(vbase, l, b) + 3u] = set_l;
+                    scratch[item_at(vbase, r, b) + 3u] = set_r;
+                    if (jl != kNotInChunk) s_run_own[jl * kTeam + b].x = set_l;
+                    if (jr != kNotInChunk) s_run_own[jr * kTeam + b].x = set_r;
+                } else {
+                    bool left = d == kLeftWins;
+                    uint wn = left ? l : r, jw = left ? jl : jr;
+                    uint neg = ((fl >> 4) & 1u) ^ (left ? nl : nr);
+                    scratch[item_at(vbase, e, b) + 3u] = (fl & 3u) | (2u << 2) | (fl & 16u);
+                    uint set_w = (left ? own.y : own.z) | (1u << 2) | (neg << 4);
+                    scratch[item_at(vbase, wn, b) + 3u] = set_w;
+                    if (jw != kNotInChunk) s_run_own[jw * kTeam + b].x = set_w;
+                }
+            }
+        sync_all();
+        c1 = c0;
     }
 }
 
@@ -397,9 +403,7 @@ void main() {
             uint at = rbase + kRoundWords * r;
             uint first_place = scratch[at], count = scratch[at + 1u], next = scratch[at + 3u];
             if (next > r + 1u) {
-                if (id < kTeam)
-                    evaluate_run(r, next, rbase, vbase, box, spread_r, interval);
-                sync_all();
+                evaluate_run(r, next, rbase, vbase, spread_r, interval);
                 r = next;
                 continue;
             }
@@ -456,9 +460,7 @@ void main() {
             uint at = rbase + kRoundWords * r;
             uint first_place = scratch[at], count = scratch[at + 1u], start = scratch[at + 2u];
             if (start < r) {
-                if (id < kTeam && s_state[box] == 1u)
-                    sweep_run(start, r + 1u, rbase, vbase, box);
-                sync_all();
+                sweep_run(start, r + 1u, rbase, vbase);
                 r = start - 1u;
                 continue;
             }

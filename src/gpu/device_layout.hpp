@@ -61,7 +61,8 @@ inline constexpr uint32_t kRefineLaneTape = 16;
 inline constexpr uint64_t kPruneWide = 256;
 inline constexpr uint64_t kPruneWideEntryWords = 4;
 inline constexpr uint64_t kPruneWideHeightWords = 12;
-struct PrunePush {  // prune.comp and prune_wide.comp: Push
+inline constexpr uint64_t kPruneWideRunChunk = 32;  // prune_wide.glsl: kRunChunk
+struct PrunePush {                                  // prune.comp and prune_wide.comp: Push
     vec4 origin, csize;
     uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
     uint32_t round, budget, refine, octant_start, list_start, lane_tape;

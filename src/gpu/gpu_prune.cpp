@@ -778,9 +778,10 @@ void Pruner::plan_squads(const Level& lv, Step& s) {
 // most one more than an even share per round: a round per height the tape has, no more than
 // its operators plus one), and the compaction's two passes over a slice. A run of rounds of
 // one operator each (a chain) is walked by kPruneTeam lanes, a step a round as before, but
-// with no barrier between its rounds: the walk is the same, its barriers fewer (how many, only
-// the tapes on the device say). Its loops add the heights cleared and summed, the rounds (and
-// the runs found among them) themselves and the prefix sums' steps: a job ends in the dispatch
+// with no barrier between its rounds, kPruneWideRunChunk rounds at a time, each chunk staged in
+// shared memory by the whole workgroup first (and a search of the chunk's rounds for its
+// operands' entries). Its loops add the heights cleared and summed, the rounds (and the runs
+// found among them) themselves and the prefix sums' steps: a job ends in the dispatch
 // that starts it, within lavapipe's loop limit; only where twice that count fits (a deep chain
 // near the limit came out wrong on lavapipe: the count is taken as approximate).
 void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
@@ -791,6 +792,7 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
                               2 * ceil_div(len, kPruneWide / kPruneTeam);
     const uint64_t per_job = walk_job + 3 * ceil_div(heights, kPruneWide) +
                              ceil_div(rounds, kPruneWide) + 2 * rounds +
+                             2 * ceil_div(rounds, kPruneWideRunChunk) * (kPruneWideRunChunk + 4) +
                              4 * std::bit_width(kPruneWide);
     const uint64_t group_bytes =
         (len * (2 + kPruneWideEntryWords * kPruneTeam) + kPruneWideHeightWords * heights) * 4;
