@@ -286,7 +286,7 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(PrunePush, first_job), SDFPRUNE_MEMBER(PrunePush, round),
              SDFPRUNE_MEMBER(PrunePush, budget), SDFPRUNE_MEMBER(PrunePush, refine),
              SDFPRUNE_MEMBER(PrunePush, octant_start), SDFPRUNE_MEMBER(PrunePush, list_start),
-             SDFPRUNE_MEMBER(PrunePush, lane_tape)},
+             SDFPRUNE_MEMBER(PrunePush, lane_tape), SDFPRUNE_MEMBER(PrunePush, wide_split)},
             Scope::kPush),
         mirror<ExpandPush>(
             "Push", {"expand"},

@@ -399,7 +399,9 @@ TEST(Gpu, RefinementTakesTheNearFieldCellsOnly) {
 }
 
 // By default the top levels' steps, few jobs over long parent tapes, run wide: a workgroup
-// per parent tape, and its busiest lane walks less than a team's would.
+// per parent tape (or, with fewer jobs than the device holds workgroups, up to 8 workgroups a
+// tape, a share of its boxes each), and its busiest lane walks less than a team's would. Every
+// split of a job's boxes among workgroups makes the same cells.
 TEST(Gpu, TopLevelsRunWide) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = builtin_scene("demo");  // 617 nodes
@@ -418,14 +420,38 @@ TEST(Gpu, TopLevelsRunWide) {
         EXPECT_FALSE(team.wide);
         if (!st.wide) continue;
         EXPECT_LT(st.mode, 3u);
-        EXPECT_EQ(st.lanes_per_tape, 256u);
+        EXPECT_EQ(st.lanes_per_tape % 256u, 0u);
+        EXPECT_LE(st.lanes_per_tape, 8u * 256u);
         EXPECT_EQ(st.lanes % 256u, 0u);
-        EXPECT_LE(st.lanes, (st.jobs + 7) / 8 * 256);
+        EXPECT_LE(st.lanes, (st.jobs + 7) / 8 * st.lanes_per_tape);
         EXPECT_LT(st.longest_walk_words, team.longest_walk_words);
     }
     EXPECT_TRUE(steps[0].wide);  // the root's octants, from the full tape
     EXPECT_TRUE(steps[1].wide);
     expect_matches_cpu(sc, prune(sc, o), gpu, *dev, "demo 64³");
+    // Every step wide (at 32³), its jobs' boxes on 1, 2 or 8 workgroups.
+    PruneOptions small = o;
+    small.resolution = 32;
+    std::optional<gpu::Grid> whole;
+    for (const char* split : {"1", "2", "8"}) {
+        ::setenv("SDFPRUNE_VULKAN_WIDE", "1", 1);
+        ::setenv("SDFPRUNE_VULKAN_WIDE_SPLIT", split, 1);
+        gpu::Grid shared = gpu::prune(*dev, sc, small);
+        ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+        ::unsetenv("SDFPRUNE_VULKAN_WIDE_SPLIT");
+        const std::string what = std::string("wide, split ") + split;
+        for (const gpu::GpuStepShape& st : shared.stats().steps)
+            if (st.wide) {
+                EXPECT_EQ(st.lanes_per_tape, 256u * uint32_t(std::atoi(split))) << what;
+            }
+        if (!whole) {
+            expect_matches_cpu(sc, prune(sc, small), shared, *dev, what);
+            whole.emplace(std::move(shared));
+            continue;
+        }
+        expect_same_stats(whole->stats(), shared.stats(), what);
+        expect_same_device_cells(*whole, shared, what);
+    }
 }
 
 // Steps of many jobs run wide too where the teams would be held back by scratch: with a small

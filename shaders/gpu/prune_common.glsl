@@ -70,6 +70,7 @@ layout(push_constant) uniform Push {
     uint octant_start;  // octant pool words in use before this step
     uint list_start;    // mode 3: where the long list starts in scratch
     uint lane_tape;     // mode 3: the longest tape a lane refines alone
+    uint wide_split;    // prune_wide.comp: workgroups per job (a share of its kTeam boxes each)
 } pc;
 
 // The step's counters (near_jobs, near_words, max_len, max_depth), summed and maxed first in

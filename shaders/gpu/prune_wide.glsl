@@ -61,8 +61,7 @@ uint wide_words() {
     return pc.max_len * (2u + kWideEntryWords * kTeam) + kWideHeightWords * (pc.max_stack + 1u);
 }
 
-// Lanes per box in the compaction (kWide / kTeam), and the workgroup's prefix sums.
-const uint kSlices = kWide / kTeam;
+// The workgroup's prefix sums.
 shared uvec4 s_scan[kWide];
 // Per box: 0 done, 1 near (swept and compacted), 2 writing its new tape; the new tape's place,
 // its length, primitives and deepest stack, the box's value at its centre.
@@ -155,6 +154,10 @@ uvec3 run_record(uint rbase, uint q, uint third) {
 // shared memory alone, and a barrier ends it. What the walk itself makes within the chunk (an
 // operand's value, an entry's flags) it keeps in shared memory too, per round and box, and
 // reads from there; what earlier chunks made is in scratch before the chunk is staged.
+// The boxes of its job a workgroup takes: [g_b0, g_b0 + g_boxes) (pc.wide_split workgroups per
+// job, kTeam / pc.wide_split boxes each).
+uint g_b0, g_boxes;
+
 const uint kRunChunk = 32u;  // gpu_prune.cpp: kPruneWideRunChunk
 const uint kNotInChunk = 0xffu;
 // Per round: entry, left operand, tape word (evaluation) or signs (sweep), and the chunk's
@@ -192,20 +195,20 @@ void stage_run_records(uint c0, uint c1, uint rbase, uint third, bool with_nodes
 // Stage 2 over a run of rounds [r0, end), one operator each, for every box; every lane of the
 // workgroup calls it.
 void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, bool interval) {
-    uint id = gl_LocalInvocationID.x, b = id;
+    uint id = gl_LocalInvocationID.x, b = g_b0 + id;
     for (uint c0 = r0; c0 < end; c0 += kRunChunk) {
         uint c1 = min(c0 + kRunChunk, end);
         stage_run_records(c0, c1, rbase, kRunWord, true);
-        for (uint k = id; k < (c1 - c0) * kTeam; k += kWide) {
-            uvec4 rec = s_run_rec[k / kTeam];
-            uint box = k % kTeam;
+        for (uint k = id; k < (c1 - c0) * g_boxes; k += kWide) {
+            uvec4 rec = s_run_rec[k / g_boxes];
+            uint box = g_b0 + k % g_boxes, at = (k / g_boxes) * kTeam + box;
             if ((rec.w & 0xffu) == kNotInChunk)
-                s_run_left[k] = vec4(item_range(item_at(vbase, rec.y, box)), 0.0);
+                s_run_left[at] = vec4(item_range(item_at(vbase, rec.y, box)), 0.0);
             if ((rec.w >> 8) == kNotInChunk)
-                s_run_right[k] = vec4(item_range(item_at(vbase, rec.x - 1u, box)), 0.0);
+                s_run_right[at] = vec4(item_range(item_at(vbase, rec.x - 1u, box)), 0.0);
         }
         sync_all();
-        if (id < kTeam)
+        if (id < g_boxes)
             for (uint q = 0u; q < c1 - c0; ++q) {
                 uvec4 rec = s_run_rec[q];
                 uint jl = rec.w & 0xffu, jr = rec.w >> 8;
@@ -229,19 +232,19 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
 // flags an entry of the chunk gets from a round above it in the chunk are kept in its item;
 // its operands' decisions (the low two bits of their flags) do not change in this stage.
 void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
-    uint id = gl_LocalInvocationID.x, b = id;
+    uint id = gl_LocalInvocationID.x, b = g_b0 + id;
     for (uint c1 = end; c1 > r0;) {
         uint c0 = c1 - min(kRunChunk, c1 - r0);
         stage_run_records(c0, c1, rbase, kRunSigns, false);
-        for (uint k = id; k < (c1 - c0) * kTeam; k += kWide) {
-            uvec4 rec = s_run_rec[k / kTeam];
-            uint box = k % kTeam;
-            s_run_own[k] = uvec4(scratch[item_at(vbase, rec.x, box) + 3u],
+        for (uint k = id; k < (c1 - c0) * g_boxes; k += kWide) {
+            uvec4 rec = s_run_rec[k / g_boxes];
+            uint box = g_b0 + k % g_boxes;
+            s_run_own[(k / g_boxes) * kTeam + box] = uvec4(scratch[item_at(vbase, rec.x, box) + 3u],
                                  scratch[item_at(vbase, rec.y, box) + 3u] & 3u,
                                  scratch[item_at(vbase, rec.x - 1u, box) + 3u] & 3u, 0u);
         }
         sync_all();
-        if (id < kTeam && s_state[b] == 1u)
+        if (id < g_boxes && s_state[b] == 1u)
             for (uint q = c1 - c0; q > 0u; --q) {
                 uvec4 rec = s_run_rec[q - 1u];
                 uvec4 own = s_run_own[(q - 1u) * kTeam + b];
@@ -283,8 +286,11 @@ void main() {
     memoryBarrierShared();
     barrier();
 #endif
-    uint box = id % kTeam;  // the box of this lane in stages 1–4
     uint groups = pc.threads / kWide;
+    uint split = pc.wide_split;
+    g_boxes = kTeam / split;
+    // The lanes' slices of a box's tape in the compaction.
+    uint slices = kWide / g_boxes;
     uint base = gl_WorkGroupID.x * wide_words();
     uint lbase = base;                      // entry e's left operand
     uint obase = lbase + pc.max_len;        // the height order: entries
@@ -295,8 +301,12 @@ void main() {
     bool interval = (pc.flags & 2u) != 0u;
     bool transient = pc.mode == 1u || (pc.flags & 4u) != 0u;
 
-    // Every lane of a workgroup sees the same trip count and the same job.
-    for (uint job = pc.first_job + gl_WorkGroupID.x; job < pc.jobs; job += groups) {
+    // Every lane of a workgroup sees the same trip count and the same job (and boxes).
+    for (uint part = pc.first_job * split + gl_WorkGroupID.x; part < pc.jobs * split;
+         part += groups) {
+        uint job = part / split;
+        g_b0 = (part % split) * g_boxes;
+        uint box = g_b0 + id % g_boxes;  // the box of this lane in stages 1–4
         vec3 centre, half_size;
         float R;
         uint parent, dest;
@@ -396,8 +406,8 @@ void main() {
         sync_all();
 
         // Stage 2: values and ranges at the boxes' centres, decisions (evaluate_cell), round by
-        // round. Item k of a round: its entry k / kTeam, box k % kTeam (this lane's box). A run
-        // of rounds (one operator each) takes lanes 0 to kTeam − 1 alone, and one barrier.
+        // round. Item k of a round: its entry k / g_boxes, box g_b0 + k % g_boxes (this lane's
+        // box). A run of rounds (one operator each) is walked by a lane a box (evaluate_run).
         float spread_r = R;
         for (uint r = 0u; r < rounds;) {
             uint at = rbase + kRoundWords * r;
@@ -407,8 +417,8 @@ void main() {
                 r = next;
                 continue;
             }
-            for (uint k = id; k < count * kTeam; k += kWide) {
-                uint e = scratch[obase + first_place + k / kTeam];
+            for (uint k = id; k < count * g_boxes; k += kWide) {
+                uint e = scratch[obase + first_place + k / g_boxes];
                 uint w = tape_read(parent, 2u + e);
                 Node nd = nodes[tape_node(w)];
                 uint kind = nd.kind;
@@ -429,7 +439,7 @@ void main() {
         }
 
         // Stage 3: the far-field test on each box's root range (is_near_field).
-        if (id < kTeam) {
+        if (id < g_boxes) {
             uint s0 = vbase + ((len - 1u) * kTeam + box) * kWideEntryWords;
             float v = uintBitsToFloat(scratch[s0]);
             float L = nodes[tape_node(root_word)].lipschitz;
@@ -455,7 +465,7 @@ void main() {
 
         // Stage 4: the top-down pass (compact_tape), from the highest operators down: an
         // entry's flags are final when its round is reached. (Round 0: the primitives.)
-        // A run takes lanes 0 to kTeam − 1 alone, from its highest round down.
+        // A run is walked by a lane a box, from its highest round down (sweep_run).
         for (uint r = rounds - 1u; r >= 1u;) {
             uint at = rbase + kRoundWords * r;
             uint first_place = scratch[at], count = scratch[at + 1u], start = scratch[at + 2u];
@@ -464,9 +474,9 @@ void main() {
                 r = start - 1u;
                 continue;
             }
-            for (uint k = id; k < count * kTeam; k += kWide) {
+            for (uint k = id; k < count * g_boxes; k += kWide) {
                 if (s_state[box] != 1u) continue;
-                uint e = scratch[obase + first_place + k / kTeam];
+                uint e = scratch[obase + first_place + k / g_boxes];
                 uint fe = vbase + (e * kTeam + box) * kWideEntryWords + 3u;
                 uint fl = scratch[fe];
                 if (((fl >> 2) & 3u) != 1u) continue;
@@ -491,11 +501,11 @@ void main() {
             --r;
         }
 
-        // Stage 5: compaction. Box b's kept entries in kSlices slices of the tape, one a lane
-        // (lanes b · kSlices ...): counted (entries, primitives, the stack's change and its
-        // highest point in the slice), placed by a prefix sum, then written.
-        uint cbox = id / kSlices, slice = id % kSlices;
-        uint per = (len + kSlices - 1u) / kSlices;
+        // Stage 5: compaction. Box g_b0 + b's kept entries in `slices` slices of the tape, one
+        // a lane (lanes b · slices ...): counted (entries, primitives, the stack's change and
+        // its highest point in the slice), placed by a prefix sum, then written.
+        uint cbox = g_b0 + id / slices, slice = id % slices;
+        uint per = (len + slices - 1u) / slices;
         uint e0 = min(slice * per, len), e1 = min(e0 + per, len);
         bool mine = s_state[cbox] == 1u;
         uint kept = 0u, kept_prims = 0u;
@@ -511,8 +521,9 @@ void main() {
         }
         // (The stack's changes sum as uints: two's complement.)
         uvec4 before = wg_exclusive_scan(uvec4(kept, kept_prims, uint(depth), 0u));
-        uvec4 box_first = cbox == 0u ? uvec4(0u) : s_scan[cbox * kSlices - 1u];
-        uvec4 box_total = s_scan[cbox * kSlices + kSlices - 1u] - box_first;
+        uint cfirst = (id / slices) * slices;  // the box's first lane
+        uvec4 box_first = cfirst == 0u ? uvec4(0u) : s_scan[cfirst - 1u];
+        uvec4 box_total = s_scan[cfirst + slices - 1u] - box_first;
         before -= box_first;
         // The stack depth at the slice's start plus its highest point within it.
         uint peak = kept == 0u ? 0u : uint(int(before.z) + depth_peak);
@@ -524,7 +535,7 @@ void main() {
         sync_all();
         if (mine) atomicMax(s_depth[cbox], peak);
         sync_all();
-        if (id < kTeam && s_state[box] == 1u) {
+        if (id < g_boxes && s_state[box] == 1u) {
             uint out_len = s_len[box];
             note_len(out_len);
             if (out_len == len && transient) {
@@ -573,7 +584,7 @@ void main() {
             }
         }
         sync_all();
-        if (id < kTeam && s_state[box] == 2u) {
+        if (id < g_boxes && s_state[box] == 2u) {
             note_depth(s_depth[box]);
             store(dest, true, s_value[box], 0.0, s_at[box], s_len[box], Cell(0u, 0u, 0.0, 0.0));
         }

@@ -65,7 +65,7 @@ inline constexpr uint64_t kPruneWideRunChunk = 32;  // prune_wide.glsl: kRunChun
 struct PrunePush {                                  // prune.comp and prune_wide.comp: Push
     vec4 origin, csize;
     uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
-    uint32_t round, budget, refine, octant_start, list_start, lane_tape;
+    uint32_t round, budget, refine, octant_start, list_start, lane_tape, wide_split;
 };
 struct ExpandPush {  // expand.comp: Push
     uint32_t factor, cells_count, next_factor, bound_only;

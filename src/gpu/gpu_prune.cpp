@@ -163,6 +163,7 @@ class Pruner {
     // buffer, or SDFPRUNE_VULKAN_PRESIZE_WORDS).
     uint64_t room_cap = 0;
     int wide_override = -1;
+    uint32_t wide_split = 0;  // SDFPRUNE_VULKAN_WIDE_SPLIT (1, 2, 4 or 8); 0: plan_wide's choice
     // The longest tape refinement's lane pass takes (prune_refine_lanes.comp);
     // SDFPRUNE_VULKAN_REFINE_LANE_TAPE.
     uint32_t refine_lane_tape = kRefineLaneTape;
@@ -249,6 +250,11 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
         room_cap = presize_cap = std::strtoull(env, nullptr, 10);
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE"); env && *env)
         wide_override = std::atoi(env) != 0;
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_SPLIT"); env && *env) {
+        const unsigned long split = std::strtoul(env, nullptr, 10);
+        if (split > 0 && split <= kPruneTeam && (split & (split - 1)) == 0)
+            wide_split = uint32_t(split);
+    }
     // The longest tape refinement's lane pass takes, at most its arrays' (0: no lane pass,
     // squads for every cell; for tests and measurements).
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE"); env && *env)
@@ -696,7 +702,8 @@ PrunePush Pruner::push_for(const Level& lv, uint32_t mode, uint32_t threads, uin
                      opt.refine,
                      0,
                      0,
-                     0};
+                     0,
+                     1};
 }
 
 // Refinement's lane pass (prune_refine_lanes.comp): a lane per listed cell, as many lanes as
@@ -787,9 +794,18 @@ void Pruner::plan_squads(const Level& lv, Step& s) {
 void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
     const uint64_t len = max_len, heights = uint64_t(scene_height) + 1;
     const uint64_t rounds = std::min<uint64_t>(heights, len / 2 + 1);
+    // Workgroups per job (wide_split): where the device holds more workgroups than the step has
+    // jobs (the top levels: one job at level 0), a job's boxes are shared out among up to
+    // kPruneTeam workgroups, each walking the tape for its share (all of them sort it).
+    const uint64_t resident_groups = std::max<uint64_t>(ctx.resident_threads() / kPruneWide, 1);
+    uint64_t split = 1;
+    while (split < kPruneTeam && std::max<uint64_t>(s.team_jobs, 1) * split * 2 <= resident_groups)
+        split *= 2;
+    if (wide_split > 0) split = wide_split;
+    const uint64_t boxes = kPruneTeam / split;
     const uint64_t walk_job = ceil_div(len, kPruneWide) * (2 + std::bit_width(len)) +
-                              2 * (rounds + ceil_div(len * kPruneTeam, kPruneWide)) +
-                              2 * ceil_div(len, kPruneWide / kPruneTeam);
+                              2 * (rounds + ceil_div(len * boxes, kPruneWide)) +
+                              2 * ceil_div(len, kPruneWide / boxes);
     const uint64_t per_job = walk_job + 3 * ceil_div(heights, kPruneWide) +
                              ceil_div(rounds, kPruneWide) + 2 * rounds +
                              2 * ceil_div(rounds, kPruneWideRunChunk) * (kPruneWideRunChunk + 4) +
@@ -799,11 +815,11 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
     const uint64_t fit_groups = ctx.prune_scratch_budget_bytes() / group_bytes;
     const bool limited = ctx.loop_limited();
     if (fit_groups == 0 || (limited && 2 * per_job + 1024 > Context::kLoopLimit)) return;
+    const uint64_t parts = s.team_jobs * split;
     const uint64_t unlimited_groups =
-        std::min({std::max<uint64_t>(s.team_jobs, 1), uint64_t(ctx.max_workgroups()),
-                  std::max<uint64_t>(ctx.resident_threads() / kPruneWide, 1)});
+        std::min({std::max<uint64_t>(parts, 1), uint64_t(ctx.max_workgroups()), resident_groups});
     const uint64_t groups = std::min(unlimited_groups, fit_groups);
-    const uint64_t group_jobs = ceil_div(s.team_jobs, groups);
+    const uint64_t group_jobs = ceil_div(parts, groups);
     const uint64_t walk = s.team_jobs == 0 ? 0 : group_jobs * walk_job;
     const uint64_t cost = walk + group_jobs * 2 * (kWideRoundCost - 1) * rounds;
     const bool pick =
@@ -815,14 +831,18 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
     s.threads = uint32_t(groups * kPruneWide);
     s.rounds = 1;
     s.per_dispatch =
-        limited ? groups * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / (2 * per_job))
-                : std::max<uint64_t>(s.team_jobs, 1);
+        limited
+            ? std::max<uint64_t>(
+                  1, groups * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / (2 * per_job)) /
+                         split)
+            : std::max<uint64_t>(s.team_jobs, 1);
     s.push.threads = s.threads;
     s.push.max_stack = scene_height;
     s.push.budget = 0;
+    s.push.wide_split = uint32_t(split);
     s.shape.wide = true;
-    s.shape.lanes_per_tape = uint32_t(kPruneWide);
-    s.shape.lanes = std::min<uint64_t>(s.team_jobs, groups) * kPruneWide;
+    s.shape.lanes_per_tape = uint32_t(kPruneWide * split);
+    s.shape.lanes = std::min<uint64_t>(parts, groups) * kPruneWide;
     s.shape.longest_walk_words = walk;
     scratch_bytes = groups * group_bytes;
 }
