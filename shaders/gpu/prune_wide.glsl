@@ -159,6 +159,8 @@ uvec3 run_record(uint rbase, uint q, uint third) {
 uint g_b0, g_boxes;
 
 const uint kRunChunk = 32u;  // gpu_prune.cpp: kPruneWideRunChunk
+// A run shorter than this is walked from scratch as it is: staging costs two barriers more.
+const uint kRunStaged = 8u;
 const uint kNotInChunk = 0xffu;
 // Per round: entry, left operand, tape word (evaluation) or signs (sweep), and the chunk's
 // rounds whose entries its operands are (bits 0-7 the left's, 8-15 the right's; kNotInChunk).
@@ -196,6 +198,21 @@ void stage_run_records(uint c0, uint c1, uint rbase, uint third, bool with_nodes
 // workgroup calls it.
 void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, bool interval) {
     uint id = gl_LocalInvocationID.x, b = g_b0 + id;
+    if (end - r0 < kRunStaged) {
+        // Each operand from scratch: made before the run, or by this lane earlier in it.
+        if (id < g_boxes)
+            for (uint q = r0; q < end; ++q) {
+                uvec3 rec = run_record(rbase, q, kRunWord);
+                uint decision;
+                vec3 x = combine_operator(nodes[tape_node(rec.z)], spread_r, interval, false,
+                                          item_range(item_at(vbase, rec.y, b)),
+                                          item_range(item_at(vbase, rec.x - 1u, b)), decision);
+                if (tape_negated(rec.z)) x = negate_range(x);
+                store_item(item_at(vbase, rec.x, b), x, decision);
+            }
+        sync_all();
+        return;
+    }
     for (uint c0 = r0; c0 < end; c0 += kRunChunk) {
         uint c1 = min(c0 + kRunChunk, end);
         stage_run_records(c0, c1, rbase, kRunWord, true);
@@ -233,6 +250,31 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
 // its operands' decisions (the low two bits of their flags) do not change in this stage.
 void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
     uint id = gl_LocalInvocationID.x, b = g_b0 + id;
+    if (end - r0 < kRunStaged) {
+        // Each entry's flags from scratch: set above the run, or by this lane earlier in it.
+        if (id < g_boxes && s_state[b] == 1u)
+            for (uint q = end; q > r0; --q) {
+                uvec3 rec = run_record(rbase, q - 1u, kRunSigns);
+                uint e = rec.x, l = rec.y, r = e - 1u;
+                uint fl = scratch[item_at(vbase, e, b) + 3u];
+                if (((fl >> 2) & 3u) != 1u) continue;
+                uint d = fl & 3u;
+                uint nl = rec.z & 1u, nr = (rec.z >> 1) & 1u;
+                uint fl_l = item_at(vbase, l, b) + 3u, fl_r = item_at(vbase, r, b) + 3u;
+                if (d == kKeepBoth) {
+                    scratch[fl_l] = (scratch[fl_l] & 3u) | (1u << 2) | (nl << 4);
+                    scratch[fl_r] = (scratch[fl_r] & 3u) | (1u << 2) | (nr << 4);
+                } else {
+                    bool left = d == kLeftWins;
+                    uint fl_w = left ? fl_l : fl_r;
+                    uint neg = ((fl >> 4) & 1u) ^ (left ? nl : nr);
+                    scratch[item_at(vbase, e, b) + 3u] = (fl & 3u) | (2u << 2) | (fl & 16u);
+                    scratch[fl_w] = (scratch[fl_w] & 3u) | (1u << 2) | (neg << 4);
+                }
+            }
+        sync_all();
+        return;
+    }
     for (uint c1 = end; c1 > r0;) {
         uint c0 = c1 - min(kRunChunk, c1 - r0);
         stage_run_records(c0, c1, rbase, kRunSigns, false);
