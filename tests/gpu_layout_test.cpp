@@ -207,13 +207,14 @@ Mirror mirror(std::string name, std::vector<std::string> kernels, std::vector<Me
 const std::vector<Mirror>& mirrors() {
     using namespace gpu;
     using math::PrimitiveParams;
-    const std::vector<std::string> all = {"prune",        "prune_lanes", "prune_refine_lanes",
-                                          "prune_refine", "prune_wide",  "prune_wide_subgroups",
-                                          "expand",       "cell_info",   "trace",
-                                          "discretize"};
-    const std::vector<std::string> scene = {"prune",        "prune_lanes", "prune_refine_lanes",
-                                            "prune_refine", "prune_wide",  "prune_wide_subgroups",
-                                            "trace",        "discretize"};
+    const std::vector<std::string> all = {"prune",           "prune_lanes", "prune_refine_lanes",
+                                          "prune_refine",    "prune_wide",  "prune_wide_subgroups",
+                                          "prune_wide_runs", "expand",      "cell_info",
+                                          "trace",           "discretize"};
+    const std::vector<std::string> scene = {
+        "prune",           "prune_lanes", "prune_refine_lanes",
+        "prune_refine",    "prune_wide",  "prune_wide_subgroups",
+        "prune_wide_runs", "trace",       "discretize"};
     const std::vector<std::string> grid = {"trace", "discretize"};
     static const std::vector<Mirror> table = {
         mirror<GpuNode>("Node", scene,
@@ -234,7 +235,7 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(PrunedCell, value), SDFPRUNE_MEMBER(PrunedCell, bound)}),
         mirror<GpuBlock>("Block",
                          {"prune", "prune_refine_lanes", "prune_refine", "prune_wide",
-                          "prune_wide_subgroups", "expand"},
+                          "prune_wide_subgroups", "prune_wide_runs", "expand"},
                          {SDFPRUNE_MEMBER(GpuBlock, x), SDFPRUNE_MEMBER(GpuBlock, y),
                           SDFPRUNE_MEMBER(GpuBlock, z), SDFPRUNE_MEMBER(GpuBlock, tape)}),
         mirror<GpuLevel>("Level", grid,
@@ -247,7 +248,8 @@ const std::vector<Mirror>& mirrors() {
         // GpuCounters' trailing pad is the host's only.
         mirror<GpuCounters>(
             "Counters",
-            {"prune", "prune_refine_lanes", "prune_refine", "prune_wide", "prune_wide_subgroups"},
+            {"prune", "prune_refine_lanes", "prune_refine", "prune_wide", "prune_wide_subgroups",
+             "prune_wide_runs"},
             {SDFPRUNE_MEMBER(GpuCounters, pool_used), SDFPRUNE_MEMBER(GpuCounters, pool_capacity),
              SDFPRUNE_MEMBER(GpuCounters, overflow), SDFPRUNE_MEMBER(GpuCounters, max_len),
              SDFPRUNE_MEMBER(GpuCounters, near_jobs), SDFPRUNE_MEMBER(GpuCounters, next_blocks),
@@ -277,7 +279,8 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(DiscretizeParams, pad2)}),
         mirror<PrunePush>(
             "Push",
-            {"prune", "prune_refine_lanes", "prune_refine", "prune_wide", "prune_wide_subgroups"},
+            {"prune", "prune_refine_lanes", "prune_refine", "prune_wide", "prune_wide_subgroups",
+             "prune_wide_runs"},
             {SDFPRUNE_MEMBER(PrunePush, origin), SDFPRUNE_MEMBER(PrunePush, csize),
              SDFPRUNE_MEMBER(PrunePush, mode), SDFPRUNE_MEMBER(PrunePush, factor),
              SDFPRUNE_MEMBER(PrunePush, jobs), SDFPRUNE_MEMBER(PrunePush, threads),
@@ -399,6 +402,9 @@ constexpr uint32_t kPruneWideSpv[] = {
 constexpr uint32_t kPruneWideSubgroupsSpv[] = {
 #include "prune_wide_subgroups.reflect.spv.inc"
 };
+constexpr uint32_t kPruneWideRunsSpv[] = {
+#include "prune_wide_runs.reflect.spv.inc"
+};
 constexpr uint32_t kExpandSpv[] = {
 #include "expand.reflect.spv.inc"
 };
@@ -411,15 +417,17 @@ constexpr uint32_t kTraceSpv[] = {
 constexpr uint32_t kDiscretizeSpv[] = {
 #include "discretize.reflect.spv.inc"
 };
-const EmbeddedKernel kKernels[] = {{"prune", kPruneSpv},
-                                   {"prune_refine_lanes", kPruneRefineLanesSpv},
-                                   {"prune_refine", kPruneRefineSpv},
-                                   {"prune_wide", kPruneWideSpv},
-                                   {"prune_wide_subgroups", kPruneWideSubgroupsSpv},
-                                   {"expand", kExpandSpv},
-                                   {"cell_info", kCellInfoSpv},
-                                   {"trace", kTraceSpv},
-                                   {"discretize", kDiscretizeSpv}};
+const EmbeddedKernel kKernels[] = {
+    {"prune", kPruneSpv},
+    {"prune_refine_lanes", kPruneRefineLanesSpv},
+    {"prune_refine", kPruneRefineSpv},
+    {"prune_wide", kPruneWideSpv},
+    {"prune_wide_subgroups", kPruneWideSubgroupsSpv},
+    {"prune_wide_runs", kPruneWideRunsSpv},
+    {"expand", kExpandSpv},
+    {"cell_info", kCellInfoSpv},
+    {"trace", kTraceSpv},
+    {"discretize", kDiscretizeSpv}};
 #else
 const std::vector<EmbeddedKernel> kKernels;
 #endif
@@ -495,6 +503,9 @@ TEST(GpuLayout, PruneWide) {
 }
 TEST(GpuLayout, PruneWideSubgroups) {
     check_kernel("prune_wide_subgroups");
+}
+TEST(GpuLayout, PruneWideRuns) {
+    check_kernel("prune_wide_runs");
 }
 TEST(GpuLayout, Expand) {
     check_kernel("expand");

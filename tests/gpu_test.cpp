@@ -745,13 +745,20 @@ TEST(Gpu, WideKernelWalksChainsSerially) {
         PruneOptions o;
         o.resolution = 32;
         const PrunedGrid cpu = prune(sc, o);
-        ::setenv("SDFPRUNE_VULKAN_WIDE", "1", 1);
-        const gpu::Grid gpu = gpu::prune(*dev, sc, o);
-        ::unsetenv("SDFPRUNE_VULKAN_WIDE");
-        EXPECT_TRUE(gpu.stats().steps[0].wide) << name;
-        EXPECT_TRUE(gpu.stats().steps[1].wide) << name;
-        expect_matches_cpu(sc, cpu, gpu, *dev, name + ", wide");
-        expect_valid_cells(sc, gpu, name + ", wide");
+        // Runs walked from scratch (prune_wide_subgroups.comp), and long runs from shared
+        // memory (prune_wide_runs.comp), in chunks of 32 rounds.
+        for (const char* runs : {"0", "1"}) {
+            const std::string what = name + ", wide, runs kernel " + runs;
+            ::setenv("SDFPRUNE_VULKAN_WIDE", "1", 1);
+            ::setenv("SDFPRUNE_VULKAN_WIDE_RUNS", runs, 1);
+            const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+            ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+            ::unsetenv("SDFPRUNE_VULKAN_WIDE_RUNS");
+            EXPECT_TRUE(gpu.stats().steps[0].wide) << what;
+            EXPECT_TRUE(gpu.stats().steps[1].wide) << what;
+            expect_matches_cpu(sc, cpu, gpu, *dev, what);
+            expect_valid_cells(sc, gpu, what);
+        }
     }
 }
 

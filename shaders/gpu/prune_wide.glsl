@@ -17,13 +17,13 @@
 // a lane is at least twice the tape's number of distinct heights. But a run of rounds of one
 // operator each (a chain's: for the reference molecule, a left-deep chain of 1,000 smooth
 // unions, every round above the primitives') needs no barrier between its rounds: lane b
-// walks box b of all of them alone (evaluate_run, sweep_run), from shared memory, where the
-// whole workgroup stages a chunk of the run before it is walked: a barrier per chunk. gpu_prune.cpp picks this kernel by tape length and scene height, and sizes its
+// walks box b of all of them alone (evaluate_run, sweep_run), then one barrier. gpu_prune.cpp picks this kernel by tape length and scene height, and sizes its
 // dispatches under lavapipe's loop limit (a job is never resumed: it ends in the dispatch
 // that starts it).
 // PRUNE_WIDE_SUBGROUPS (prune_wide_subgroups.comp, for devices with subgroup arithmetic and
 // ballot in compute shaders): the prefix sums and the pool appends on subgroup operations,
-// else on shared memory and an atomic per box.
+// else on shared memory and an atomic per box. PRUNE_WIDE_RUNS (prune_wide_runs.comp): long
+// runs walked from shared memory (below).
 #include "scene.glsl"
 #ifdef PRUNE_WIDE_SUBGROUPS
 #extension GL_KHR_shader_subgroup_basic : require
@@ -147,17 +147,20 @@ uvec3 run_record(uint rbase, uint q, uint third) {
     return uvec3(scratch[at + kRunEntry], scratch[at + kRunLeft], scratch[at + third]);
 }
 
-// A run is walked kRunChunk rounds at a time. Before each chunk, every lane of the workgroup
-// stages what the walk reads into shared memory, in parallel: per round its record and node
-// and, for each of its operands, which round of the chunk it is the entry of, if any; per round
-// and box what scratch holds of it. Then lanes 0 to kTeam − 1 walk the chunk, box b each, from
-// shared memory alone, and a barrier ends it. What the walk itself makes within the chunk (an
-// operand's value, an entry's flags) it keeps in shared memory too, per round and box, and
-// reads from there; what earlier chunks made is in scratch before the chunk is staged.
 // The boxes of its job a workgroup takes: [g_b0, g_b0 + g_boxes) (pc.wide_split workgroups per
 // job, kTeam / pc.wide_split boxes each).
 uint g_b0, g_boxes;
 
+// A run is walked by a lane a box (g_b0 + lane), each operand from scratch, made before the run
+// or by the lane earlier in it. PRUNE_WIDE_RUNS (prune_wide_runs.comp): a run of kRunStaged
+// rounds or more is walked kRunChunk rounds at a time. Before each chunk, every lane of the
+// workgroup stages what the walk reads into shared memory, in parallel: per round its record
+// and node and, for each of its operands, which round of the chunk it is the entry of, if any;
+// per round and box what scratch holds of it. Then the walking lanes take the chunk from shared
+// memory alone, and a barrier ends it. What the walk itself makes within the chunk (an
+// operand's value, an entry's flags) it keeps in shared memory too, per round and box, and
+// reads from there; what earlier chunks made is in scratch before the chunk is staged.
+#ifdef PRUNE_WIDE_RUNS
 const uint kRunChunk = 32u;  // gpu_prune.cpp: kPruneWideRunChunk
 // A run shorter than this is walked from scratch as it is: staging costs two barriers more.
 const uint kRunStaged = 8u;
@@ -194,11 +197,18 @@ void stage_run_records(uint c0, uint c1, uint rbase, uint third, bool with_nodes
     sync_all();
 }
 
+#endif
+
 // Stage 2 over a run of rounds [r0, end), one operator each, for every box; every lane of the
 // workgroup calls it.
 void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, bool interval) {
     uint id = gl_LocalInvocationID.x, b = g_b0 + id;
-    if (end - r0 < kRunStaged) {
+#ifdef PRUNE_WIDE_RUNS
+    bool direct = end - r0 < kRunStaged;
+#else
+    bool direct = true;
+#endif
+    if (direct) {
         // Each operand from scratch: made before the run, or by this lane earlier in it.
         if (id < g_boxes)
             for (uint q = r0; q < end; ++q) {
@@ -213,6 +223,7 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
         sync_all();
         return;
     }
+#ifdef PRUNE_WIDE_RUNS
     for (uint c0 = r0; c0 < end; c0 += kRunChunk) {
         uint c1 = min(c0 + kRunChunk, end);
         stage_run_records(c0, c1, rbase, kRunWord, true);
@@ -242,6 +253,7 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
             }
         sync_all();
     }
+#endif
 }
 
 // Stage 4 over a run of rounds [r0, end), one operator each, for every box whose tape is being
@@ -250,7 +262,12 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
 // its operands' decisions (the low two bits of their flags) do not change in this stage.
 void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
     uint id = gl_LocalInvocationID.x, b = g_b0 + id;
-    if (end - r0 < kRunStaged) {
+#ifdef PRUNE_WIDE_RUNS
+    bool direct = end - r0 < kRunStaged;
+#else
+    bool direct = true;
+#endif
+    if (direct) {
         // Each entry's flags from scratch: set above the run, or by this lane earlier in it.
         if (id < g_boxes && s_state[b] == 1u)
             for (uint q = end; q > r0; --q) {
@@ -275,6 +292,7 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
         sync_all();
         return;
     }
+#ifdef PRUNE_WIDE_RUNS
     for (uint c1 = end; c1 > r0;) {
         uint c0 = c1 - min(kRunChunk, c1 - r0);
         stage_run_records(c0, c1, rbase, kRunSigns, false);
@@ -315,6 +333,7 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
         sync_all();
         c1 = c0;
     }
+#endif
 }
 
 void main() {

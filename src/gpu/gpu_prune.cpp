@@ -56,6 +56,11 @@ namespace {
 // the kernel fits (for tests).
 constexpr uint64_t kWideMinTape = 128, kWideRoundCost = 4;
 constexpr uint64_t kWideSplitGroups = 64;  // plan_wide
+// Wide steps of at most kWideRunsJobs jobs over tapes of kWideRunsRounds heights or more run
+// prune_wide_runs.comp (long runs walked from shared memory): on an H200 molecule's four top
+// steps went from 3.18 to 2.14 ms, but its staging arrays slowed the steps of many jobs and
+// short runs that shared the kernel (monument's level-2 cells 1.24 -> 1.97 ms; stop 28).
+constexpr uint64_t kWideRunsJobs = 512, kWideRunsRounds = 64;
 
 uint64_t ceil_div(uint64_t a, uint64_t b) {
     return (a + b - 1) / b;
@@ -78,6 +83,7 @@ struct Step {
     // Refinement's lane pass (prune_refine_lanes.comp), or the squads after it that take the
     // cells it listed (`listed`: its jobs are the long list's entries).
     bool lane_pass = false, listed = false;
+    bool wide_runs = false;  // wide, on prune_wide_runs.comp (plan_wide)
     GpuStepShape shape;
     uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
 };
@@ -165,6 +171,8 @@ class Pruner {
     uint64_t room_cap = 0;
     int wide_override = -1;
     uint32_t wide_split = 0;  // SDFPRUNE_VULKAN_WIDE_SPLIT (1, 2, 4 or 8); 0: plan_wide's choice
+    int wide_runs_override =
+        -1;  // SDFPRUNE_VULKAN_WIDE_RUNS=0|1: prune_wide_runs.comp never, always
     // The longest tape refinement's lane pass takes (prune_refine_lanes.comp);
     // SDFPRUNE_VULKAN_REFINE_LANE_TAPE.
     uint32_t refine_lane_tape = kRefineLaneTape;
@@ -251,6 +259,8 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
         room_cap = presize_cap = std::strtoull(env, nullptr, 10);
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE"); env && *env)
         wide_override = std::atoi(env) != 0;
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_RUNS"); env && *env)
+        wide_runs_override = std::atoi(env) != 0;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_SPLIT"); env && *env) {
         const unsigned long split = std::strtoul(env, nullptr, 10);
         if (split > 0 && split <= kPruneTeam && (split & (split - 1)) == 0)
@@ -844,6 +854,9 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
     s.push.max_stack = scene_height;
     s.push.budget = 0;
     s.push.wide_split = uint32_t(split);
+    s.wide_runs =
+        wide_runs_override == 1 ||
+        (wide_runs_override != 0 && s.team_jobs <= kWideRunsJobs && rounds >= kWideRunsRounds);
     s.shape.wide = true;
     s.shape.lanes_per_tape = uint32_t(kPruneWide * split);
     s.shape.lanes = std::min<uint64_t>(parts, groups) * kPruneWide;
@@ -865,8 +878,9 @@ void Pruner::record_step(Step& s) {
             push.round = round;
             if (s.wide)
                 ctx.dispatch(
-                    ctx.can_run(KernelId::kPruneWideSubgroups) ? KernelId::kPruneWideSubgroups
-                                                               : KernelId::kPruneWide,
+                    s.wide_runs && ctx.can_run(KernelId::kPruneWideRuns) ? KernelId::kPruneWideRuns
+                    : ctx.can_run(KernelId::kPruneWideSubgroups) ? KernelId::kPruneWideSubgroups
+                                                                 : KernelId::kPruneWide,
                     {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants, s.cells,
                      &counters, &scratch, &octant_pool, &refine_list, &g.pool, &node_spans},
                     &push, sizeof(push), s.groups);

@@ -30,6 +30,9 @@ const uint32_t kPruneWideSpv[] = {
 const uint32_t kPruneWideSubgroupsSpv[] = {
 #include "prune_wide_subgroups.spv.inc"
 };
+const uint32_t kPruneWideRunsSpv[] = {
+#include "prune_wide_runs.spv.inc"
+};
 const uint32_t kExpandSpv[] = {
 #include "expand.spv.inc"
 };
@@ -60,6 +63,8 @@ const KernelCode kKernels[] = {
     {"prune_wide", kPruneWideSpv, sizeof(kPruneWideSpv), 13, uint32_t(kPruneWide)},
     {"prune_wide_subgroups", kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 13,
      uint32_t(kPruneWide), true},
+    {"prune_wide_runs", kPruneWideRunsSpv, sizeof(kPruneWideRunsSpv), 13, uint32_t(kPruneWide),
+     true},
     {"expand", kExpandSpv, sizeof(kExpandSpv), 4},
     {"cell_info", kCellInfoSpv, sizeof(kCellInfoSpv), 3},
     {"trace", kTraceSpv, sizeof(kTraceSpv), 10},

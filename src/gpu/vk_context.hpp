@@ -27,6 +27,7 @@ enum class KernelId : uint32_t {
     kPruneRefine,       // refinement: a squad of lanes per cell
     kPruneWide,
     kPruneWideSubgroups,  // needs subgroups() (else not built)
+    kPruneWideRuns,       // the same, its long runs walked from shared memory
     kExpand,
     kCellInfo,
     kTrace,
