@@ -12,7 +12,7 @@
 # SDFPRUNE_GPU_FLUID_COUNTS (e.g. "100000 1000000") adds generated fluids of that many spheres
 # (scenes fluid-N: pruning only, GPU and CPU, each within SDFPRUNE_GPU_TIMEOUT seconds, default
 # 300). Each object also holds prune_steps: the GPU pruning's steps (level, mode, wide, jobs,
-# lanes, longest_walk_words, gpu_ms), where its time goes.
+# lanes, lanes_ms, long_jobs, longest_walk_words, gpu_ms), where its time goes.
 set -euo pipefail
 build=${1:-build}
 here=$(cd "$(dirname "$0")" && pwd)
@@ -105,7 +105,7 @@ for name, r in runs.items():
         "trace_ms": t and t["trace_ms"], "prune_trace_ms": t and t["prune_ms"] + t["trace_ms"],
         "discretize_ms": d and d["eval_ms"], "prune_peak_bytes": g and g["prune_peak_bytes"],
         "cpu_prune_ms": c and c["prune_ms"], "cpu_threads": int(threads), "stats_equal": same,
-        "prune_steps": g and [{k: st.get(k) for k in ("level", "mode", "wide", "jobs", "lanes",
+        "prune_steps": g and [{k: st.get(k) for k in ("level", "mode", "wide", "jobs", "lanes", "lanes_ms", "long_jobs",
                                                       "longest_walk_words", "gpu_ms")}
                               for st in g.get("gpu_steps", [])]})
 with open(results_path, "w") as f:
