@@ -199,16 +199,20 @@ void stage_run_records(uint c0, uint c1, uint rbase, uint third, bool with_nodes
 
 #endif
 
+// Whether the run of rounds [r0, end) is walked from scratch as it is (not staged).
+bool run_walked_as_is(uint r0, uint end) {
+#ifdef PRUNE_WIDE_RUNS
+    return end - r0 < kRunStaged;
+#else
+    return true;
+#endif
+}
+
 // Stage 2 over a run of rounds [r0, end), one operator each, for every box; every lane of the
 // workgroup calls it.
 void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, bool interval) {
     uint id = gl_LocalInvocationID.x, b = g_b0 + id;
-#ifdef PRUNE_WIDE_RUNS
-    bool direct = end - r0 < kRunStaged;
-#else
-    bool direct = true;
-#endif
-    if (direct) {
+    if (run_walked_as_is(r0, end)) {
         // Each operand from scratch: made before the run, or by this lane earlier in it.
         if (id < g_boxes)
             for (uint q = r0; q < end; ++q) {
@@ -262,12 +266,7 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
 // its operands' decisions (the low two bits of their flags) do not change in this stage.
 void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
     uint id = gl_LocalInvocationID.x, b = g_b0 + id;
-#ifdef PRUNE_WIDE_RUNS
-    bool direct = end - r0 < kRunStaged;
-#else
-    bool direct = true;
-#endif
-    if (direct) {
+    if (run_walked_as_is(r0, end)) {
         // Each entry's flags from scratch: set above the run, or by this lane earlier in it.
         if (id < g_boxes && s_state[b] == 1u)
             for (uint q = end; q > r0; --q) {
