@@ -1,17 +1,18 @@
 // gpu_prune.cpp — hierarchical pruning on the device (gpu.hpp): the host walks the levels as
-// src/prune/prune.cpp does. A level's steps (prune.comp: the octants, the cells; then
-// prune_refine.comp: the finest cells' refinement) each run over all their jobs in teams of
-// lanes that share a parent tape (in refinement, a squad of lanes per cell, a lane per
-// sub-box), then expand.comp makes the next level's blocks. Steps with few
-// jobs and long parent tapes (the top levels) run prune_wide.comp instead: a workgroup per
-// parent tape. Each level's tapes go to a pool of their own; before each run (the octants, the
-// cells, the refinement) a pool is made room for what its parents' tapes bound, and one that
-// overflows all the same grows and the run is redone. Statistics are read back at the end.
+// src/prune/prune.cpp does. A level's steps (prune.comp: the octants, the cells; then the
+// finest cells' refinement, prune_refine_lanes.comp and prune_refine.comp) each run over all
+// their jobs in teams of lanes that share a parent tape (in refinement, a lane per cell with a
+// short tape, then a squad of lanes per cell, a lane per sub-box), then expand.comp makes the
+// next level's blocks. Steps with few jobs and long parent tapes (the top levels) run
+// prune_wide.comp instead: a workgroup per parent tape. Each level's tapes go to a pool of
+// their own; before each run (the octants, the cells, the refinement) a pool is made room for
+// what its parents' tapes bound, and one that overflows all the same grows and the run is
+// redone. Statistics are read back at the end.
 //
 // Reading order: Pruner::run (the levels), prune_level (a level: its pools and buffers),
 // prune_slices (its blocks, a slice at a time, and the steps of a slice), run_steps (one
-// submission), plan_step / plan_wide / plan_refine (a step's shape: teams, wide or squads) and
-// record_step (its dispatches).
+// submission) and record_step (its dispatches); a step's shape (teams, wide, lanes or squads)
+// is planned in gpu_prune_plan.cpp.
 #include <algorithm>
 #include <bit>
 #include <chrono>
@@ -22,7 +23,7 @@
 #include <limits>
 #include <optional>
 
-#include "device_grid.hpp"
+#include "gpu_prune.hpp"
 
 namespace sdfprune::gpu {
 DeviceGrid::~DeviceGrid() {
@@ -42,146 +43,7 @@ GpuGridParams DeviceGrid::grid_params() const {
     return g;
 }
 
-namespace {
-
-// Which steps run wide (prune_wide.comp): those with parent tapes of kWideMinTape words or
-// more where the modelled cost is less than twice a team's longest walk. The cost is the wide
-// walk with every round (a height of the tape, a workgroup barrier and a chain of global loads)
-// counted kWideRoundCost times. Both constants fit the per-step GPU times measured on an NVIDIA
-// H200 (stop 23: 18 steps of six scenes at levels 2 and 3, where the two kernels were timed
-// against each other): a team's word costs up to twice a wide lane's, its scratch per lane
-// being larger, and a round costs about four words. Any number of team jobs may run wide (a
-// workgroup each, in a grid-stride loop): the generated fluid's level-2 octants, 3,518 team
-// jobs, take 3.0 ms wide against 12.5 ms in teams. SDFPRUNE_VULKAN_WIDE=0 never, =1 wherever
-// the kernel fits (for tests).
-constexpr uint64_t kWideMinTape = 128, kWideRoundCost = 4;
-constexpr uint64_t kWideSplitGroups = 64;  // plan_wide
-// Wide steps of at most kWideRunsJobs jobs over tapes of kWideRunsRounds heights or more run
-// prune_wide_runs.comp (long runs walked from shared memory): on an H200 molecule's four top
-// steps went from 3.18 to 2.14 ms, but its staging arrays slowed the steps of many jobs and
-// short runs that shared the kernel (monument's level-2 cells 1.24 -> 1.97 ms; stop 28).
-constexpr uint64_t kWideRunsJobs = 512, kWideRunsRounds = 64;
-
-uint64_t ceil_div(uint64_t a, uint64_t b) {
-    return (a + b - 1) / b;
-}
-
-// A step of a level (prune.comp): `jobs` cells or octants from their parents' tapes into
-// `octants`/`cells`, run as team jobs that each walk one parent tape with kPruneTeam lanes,
-// sized by the parents' longest tape and deepest stack (a child's tape is never longer or
-// deeper than its parent's); or wide (prune_wide.comp), a workgroup a team job.
-struct Step {
-    PrunePush push;
-    const Buffer *octants, *cells;
-    // Its team jobs are [first_team_job, first_team_job + team_jobs): those of a slice of the
-    // level's blocks (refinement: of its list, from 0; its slice's cells start at first_cell).
-    uint64_t first_team_job, team_jobs, teams, rounds, per_dispatch, first_cell = 0;
-    uint64_t job_walk;         // in teams, the tape words a lane reads per job, at most
-    uint32_t threads, groups;  // lanes that take jobs, and their workgroups
-    bool wide;
-    KernelId kernel = KernelId::kPrune;  // (wide steps: record_step's choice)
-    // Refinement's lane pass (prune_refine_lanes.comp), or the squads after it that take the
-    // cells it listed (`listed`: its jobs are the long list's entries).
-    bool lane_pass = false, listed = false;
-    bool wide_runs = false;  // wide, on prune_wide_runs.comp (plan_wide)
-    GpuStepShape shape;
-    uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
-};
-
-// A level as it is made: its blocks' shape and its buffers (held by the pruner's LocalBuffers).
-struct Level {
-    uint32_t index = 0;
-    uint32_t f = 0;                     // cells per axis of a block
-    uint32_t nf = 0;                    // of the next level's blocks (0 at the finest)
-    uint64_t per_block = 0, total = 0;  // cells of a block, of the level
-    vec3 csize;
-    bool finest = false, refine = false;
-    bool split = false;  // octants first (as prune.cpp)
-    Buffer *cells = nullptr, *octants = nullptr, *refined = nullptr, *next = nullptr;
-    size_t first_shape = 0;     // the level's steps' shapes in the statistics
-    uint32_t listed_cells = 0;  // refinement's list, from the run that made the cells
-};
-
-class Pruner {
-  public:
-    Pruner(Device& device, const Scene& sc, const PruneOptions& opt, DeviceGrid& g);
-    // All levels, then the cells of all levels in one buffer (timed: prune_ms, wall_ms).
-    void run();
-    // The statistics, read back (not timed).
-    void read_statistics();
-
-  private:
-    void prune_level(uint32_t li);
-    GpuCounters prune_slices(Level& lv);
-    // (bound: the finest level's final cells, whose near-field cells' bounds give near_box)
-    std::optional<GpuCounters> run_steps(Level& lv, std::vector<Step>& steps, bool expand,
-                                         uint64_t octant_keep, bool may_slice,
-                                         Buffer* bound = nullptr);
-    void add_shape(const Level& lv, const GpuStepShape& shape);
-    std::vector<Step> plan_step(const Level& lv, uint32_t mode, uint64_t first_block,
-                                uint64_t blocks, uint64_t jobs, const Buffer& octants,
-                                const Buffer& cells, bool transient);
-    Step plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
-                    uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient);
-    Step plan_refine_lanes(const Step& squads) const;
-    void plan_squads(const Level& lv, Step& s);
-    PrunePush push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
-                       uint32_t budget) const;
-    void plan_wide(Step& s, uint64_t& scratch_bytes);
-    void record_step(Step& s);
-    void resize(Buffer& pool, uint64_t& cap, uint64_t words, uint64_t keep);
-    void grow(Buffer& pool, uint64_t& cap, uint64_t need, uint64_t keep);
-    void presize(Buffer& pool, uint64_t& cap, uint64_t used, uint64_t bound);
-    void gather_cells();
-
-    Context& ctx;
-    const Scene& sc;
-    const PruneOptions& opt;
-    DeviceGrid& g;
-    DevicePruneStats& st;
-    const std::vector<uint32_t> res;
-    // Temporaries: what is left of them is freed on return, or when an error is thrown.
-    LocalBuffers local;
-    const uint64_t max_pool_words;
-    std::vector<uint32_t> head;                        // the full tape with its header
-    uint32_t scene_height = 0;                         // the root's height (prune_wide.comp)
-    uint64_t capacity = 0, octant_capacity = 1 << 16;  // of g.pool and octant_pool, in words
-    Buffer& node_spans;
-    Buffer& counters;
-    GpuCounters* counter;
-    Buffer& blocks;  // the current level's blocks
-    Buffer& scratch;
-    // The octants' tapes of the current level (prune.comp: OctantPool), reused level by level.
-    Buffer& octant_pool;
-    // Refinement's jobs: the finest near-field cells (prune_common.glsl: RefineList), listed by
-    // the step that makes them; sized at the finest level.
-    Buffer& refine_list;
-    Buffer* parent_pool = nullptr;  // the last level's pool (binding 3); the level's own: g.pool
-    uint64_t block_count = 1;
-    uint64_t parent_words = 0;  // the parents' tapes, headers included
-    // The share of the main pool's bound (see presize) the last level used.
-    double main_ratio = 1;
-    uint32_t max_len = 0;    // longest tape of the current parents
-    uint32_t max_depth = 0;  // deepest evaluation stack of the current parents
-    double gpu_ms = 0;
-    uint32_t level_index = 0;  // the level being made (for the steps' shapes and errors)
-    uint64_t presize_cap = uint64_t(64) << 20;
-    // At most the room made for the cells from their octants' words (the device's largest
-    // buffer, or SDFPRUNE_VULKAN_PRESIZE_WORDS).
-    uint64_t room_cap = 0;
-    int wide_override = -1;
-    uint32_t wide_split = 0;  // SDFPRUNE_VULKAN_WIDE_SPLIT (1, 2, 4 or 8); 0: plan_wide's choice
-    int wide_runs_override =
-        -1;  // SDFPRUNE_VULKAN_WIDE_RUNS=0|1: prune_wide_runs.comp never, always
-    // The longest tape refinement's lane pass takes (prune_refine_lanes.comp);
-    // SDFPRUNE_VULKAN_REFINE_LANE_TAPE.
-    uint32_t refine_lane_tape = kRefineLaneTape;
-    vec3 origin, extent;
-    float L = 1;
-    uint32_t flags = 0;  // the push constants' (prune_common.glsl)
-    std::vector<Buffer*> level_cells;
-    uint64_t cell_total = 0;  // of all levels
-};
+namespace pruning {
 
 Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, DeviceGrid& grid)
     : ctx(device.context()),
@@ -585,285 +447,6 @@ void Pruner::add_shape(const Level& lv, const GpuStepShape& shape) {
     same->long_jobs += shape.long_jobs;
 }
 
-// A step over the blocks [first_block, first_block + blocks), `jobs` cells or octants (or in
-// refinement, mode 3, cells), `transient`: new tapes go to the octant pool (the finest cells'
-// tapes before refinement): in teams (or wide). Refinement runs first a lane per cell
-// (plan_refine_lanes), then, unless the cells' longest tape is short enough for the lanes, the
-// squads over the cells the lanes listed (the long list, in scratch); without a lane pass
-// (its setting 0, or no room for the list), squads alone.
-std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block,
-                                    uint64_t blocks, uint64_t jobs, const Buffer& octants,
-                                    const Buffer& cells, bool transient) {
-    Step teams = plan_teams(lv, mode, first_block, blocks, jobs, octants, cells, transient);
-    if (mode != 3 || refine_lane_tape == 0 || 4 * teams.team_jobs > ctx.max_buffer_bytes())
-        return {teams};
-    Step lanes = plan_refine_lanes(teams);
-    if (scratch.size < 4 * teams.team_jobs) {
-        ctx.destroy(scratch);
-        scratch = ctx.create_buffer(4 * teams.team_jobs);
-    }
-    if (max_len <= refine_lane_tape) return {lanes};
-    teams.listed = true;
-    teams.push.flags |= 8u;
-    teams.shape.jobs = 0;  // the lanes' (one shape, add_shape)
-    return {lanes, teams};
-}
-
-// A step's jobs in teams (or wide, plan_wide), or in refinement squads (plan_squads).
-Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
-                        uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient) {
-    const uint64_t hf = lv.f / 2;
-    const auto teams_for = [](uint64_t boxes) { return ceil_div(boxes, kPruneTeam); };
-    Step s;
-    s.octants = &octants;
-    s.cells = &cells;
-    // Team jobs run block by block in every mode (prune_common.glsl: job_box).
-    const uint64_t per_block_jobs = mode == 0   ? teams_for(lv.per_block)
-                                    : mode == 1 ? 1
-                                    : mode == 2 ? 8 * teams_for(hf * hf * hf)
-                                                : lv.per_block;
-    s.first_team_job = first_block * per_block_jobs;
-    s.team_jobs = blocks * per_block_jobs;
-    if (mode == 3) {
-        // Refinement takes the slice's listed near cells (a list a run, from 0).
-        s.first_cell = s.first_team_job;
-        s.first_team_job = 0;
-    }
-    if (s.first_team_job + s.team_jobs > 0xfffffffeull)
-        throw std::length_error("too many cells in one level");
-    if (mode == 3) {
-        plan_squads(lv, s);
-        return s;
-    }
-    // A team's scratch: its lanes' state, per parent-tape entry a left operand and a word per
-    // lane (decision and sweep flags), per stack slot and lane 4 words.
-    const uint64_t team_bytes =
-        (kPruneStateWords * kPruneTeam + uint64_t(max_len) * (1 + kPruneTeam) +
-         4ull * max_depth * kPruneTeam) *
-        4;
-    // Teams in flight: as many as have jobs, their scratch fits the budget and the device runs
-    // at once (more would only queue, their scratch held for nothing; the teams take the jobs
-    // in a grid-stride loop). Only teams with jobs hold scratch, so one parent tape as long as
-    // the budget allows can be pruned (the root's, the full tree, at level 0) even where a
-    // workgroup's 8 teams could not.
-    const uint64_t fit = ctx.prune_scratch_budget_bytes() / team_bytes;
-    if (fit == 0)
-        throw GpuError("Vulkan: pruning a tape of " + std::to_string(max_len) + " words needs " +
-                       std::to_string(team_bytes) +
-                       " bytes of scratch, more than the device's buffers allow; use "
-                       "--backend cpu");
-    const uint64_t unlimited =
-        std::min({std::max<uint64_t>(s.team_jobs, 1),
-                  uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kPruneTeam),
-                  std::max<uint64_t>(ctx.resident_threads() / kPruneTeam, 1)});
-    s.teams = std::min(unlimited, fit);
-    s.threads = uint32_t(s.teams * kPruneTeam);
-    s.groups = uint32_t(ceil_div(s.threads, kWorkgroupSize));
-    // Steps of a job: the evaluation window by window, the sweep and the write window by
-    // window (and one to spare).
-    const uint64_t per_job = 3 * ceil_div(max_len, kPruneWindow) + 2;
-    // Under a loop limit (lavapipe), as many jobs per team and dispatch as fit the limit, or
-    // one job resumed over as many rounds as its steps need; elsewhere one unlimited round. A
-    // step's loops: staging the window, evaluating it, the sweep, the write; each over at most
-    // the longest tape.
-    const bool limited = ctx.loop_limited();
-    const uint64_t step_len = std::min<uint64_t>(max_len, kPruneWindow);
-    const uint64_t step_loops = kPruneWindow / kPruneTeam + 3 * step_len + 8;
-    const uint64_t max_steps = (Context::kLoopLimit - 1024) / step_loops;
-    s.rounds = limited ? ceil_div(per_job, max_steps) : 1;
-    const uint32_t budget = !limited ? 0xffffffffu : uint32_t(s.rounds > 1 ? max_steps : per_job);
-    s.per_dispatch = limited ? s.teams * std::max<uint64_t>(1, max_steps / per_job)
-                             : std::max<uint64_t>(s.team_jobs, 1);
-    s.push = push_for(lv, mode, s.threads, flags | (transient ? 4u : 0u), budget);
-    s.shape.level = lv.index;
-    s.shape.mode = mode;
-    s.shape.jobs = jobs;
-    s.shape.lanes_per_tape = uint32_t(kPruneTeam);
-    s.shape.lanes = std::min<uint64_t>(s.team_jobs, s.teams) * kPruneTeam;
-    // A lane's walk per job: the evaluation, the sweep and the write.
-    s.job_walk = 3 * max_len;
-    s.shape.longest_walk_words = s.team_jobs == 0 ? 0 : ceil_div(s.team_jobs, s.teams) * s.job_walk;
-    s.wide = false;
-    uint64_t scratch_bytes = s.teams * team_bytes;
-    if (wide_override != 0 && ctx.can_run(KernelId::kPruneWide)) plan_wide(s, scratch_bytes);
-    if (scratch.size < scratch_bytes) {
-        ctx.destroy(scratch);
-        scratch = ctx.create_buffer(scratch_bytes);
-    }
-    return s;
-}
-
-// A step's push constants (prune_common.glsl: Push): the level's, the parents' longest tape and
-// deepest stack; record_step sets the pools' starts and each dispatch's jobs.
-PrunePush Pruner::push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
-                           uint32_t budget) const {
-    return PrunePush{vec4(origin.x, origin.y, origin.z, L),
-                     vec4(lv.csize.x, lv.csize.y, lv.csize.z, opt.far_field_c),
-                     mode,
-                     lv.f,
-                     0,
-                     threads,
-                     max_len,
-                     max_depth,
-                     step_flags,
-                     0,
-                     0,
-                     0,
-                     budget,
-                     opt.refine,
-                     0,
-                     0,
-                     0,
-                     1};
-}
-
-// Refinement's lane pass (prune_refine_lanes.comp): a lane per listed cell, as many lanes as
-// the device runs at once in a grid-stride loop, each refining its cell alone where its tape
-// has at most refine_lane_tape words, and listing it for the squads where not (from scratch
-// word 0: the squads use no other scratch). Under a loop limit (lavapipe), as many cells per
-// lane and dispatch as its loops allow: per cell, the tape staged, one walk per sub-box, the
-// sweep and the write.
-Step Pruner::plan_refine_lanes(const Step& squads) const {
-    Step s = squads;
-    const uint64_t len = std::min<uint64_t>(max_len, refine_lane_tape);
-    const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
-    const uint64_t walk = subs * len;
-    const uint64_t per_cell = walk + 3 * len + 8;
-    const uint64_t cells = s.team_jobs;
-    const uint64_t lanes =
-        std::min({std::max<uint64_t>(cells, 1), uint64_t(ctx.max_workgroups()) * kWorkgroupSize,
-                  std::max<uint64_t>(ctx.resident_threads(), 1)});
-    s.kernel = KernelId::kPruneRefineLanes;
-    s.lane_pass = true;
-    s.listed = false;
-    s.teams = lanes;
-    s.threads = uint32_t(ceil_div(lanes, kWorkgroupSize) * kWorkgroupSize);
-    s.groups = uint32_t(s.threads / kWorkgroupSize);
-    s.per_dispatch =
-        ctx.loop_limited()
-            ? s.threads * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / per_cell)
-            : std::max<uint64_t>(cells, 1);
-    s.push.threads = s.threads;
-    s.push.list_start = 0;
-    s.push.lane_tape = refine_lane_tape;
-    s.job_walk = walk;
-    s.shape.lanes_per_tape = 1;
-    s.shape.lanes = lanes;
-    s.shape.longest_walk_words = ceil_div(cells, lanes) * walk;
-    return s;
-}
-
-// Refinement's squads (prune_refine.comp): a squad of kRefineSquad lanes a listed cell, its
-// sub-boxes a lane each, as many squads as the device runs at once, in a grid-stride loop over
-// the list. Its jobs' count is the device's (refine_cells, or after a lane pass long_jobs):
-// the dispatches are recorded for all the slice's cells. A lane's loops per job: staging the
-// tape, one walk per batch of kRefineSquad sub-boxes over at most kRefineMaxTape words, the
-// far-field test over the squad, the sweep and the write (one lane), or a chunk of a copied
-// tape and the chunks' depths.
-void Pruner::plan_squads(const Level& lv, Step& s) {
-    const uint64_t len = max_len, walked = std::min<uint64_t>(len, math::kRefineMaxTape);
-    const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
-    const uint64_t batches = ceil_div(subs, kRefineSquad);
-    const uint64_t per_job =
-        2 * ceil_div(len, kRefineSquad) + batches * walked + 2 * walked + 2 * kRefineSquad + 8;
-    const uint64_t squads =
-        std::min({std::max<uint64_t>(s.team_jobs, 1),
-                  uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kRefineSquad),
-                  std::max<uint64_t>(ctx.resident_threads() / kRefineSquad, 1)});
-    s.kernel = KernelId::kPruneRefine;
-    s.teams = squads;
-    s.threads = uint32_t(squads * kRefineSquad);
-    s.groups = uint32_t(ceil_div(s.threads, kWorkgroupSize));
-    s.rounds = 1;
-    s.per_dispatch = ctx.loop_limited()
-                         ? squads * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / per_job)
-                         : std::max<uint64_t>(s.team_jobs, 1);
-    s.push = push_for(lv, 3, s.threads, flags, 0);
-    s.job_walk = batches * walked;
-    s.wide = false;
-    s.shape.level = lv.index;
-    s.shape.mode = 3;
-    s.shape.jobs = s.team_jobs;  // until the device's count is read back
-    s.shape.lanes_per_tape = uint32_t(kRefineSquad);
-    s.shape.lanes = std::min<uint64_t>(s.team_jobs, squads) * kRefineSquad;
-    s.shape.longest_walk_words = ceil_div(s.team_jobs, squads) * s.job_walk;
-}
-
-// The wide kernel instead of teams, where it fits and its modelled cost wins (kWideRoundCost).
-// Per job the tape entries a lane takes one after another (prune_wide.comp): its share of the
-// entries counted, then placed (with a binary search for an operator's left operand), in the
-// evaluation and the top-down pass its share of each round's entries and kPruneTeam boxes (at
-// most one more than an even share per round: a round per height the tape has, no more than
-// its operators plus one), and the compaction's two passes over a slice. A run of rounds of
-// one operator each (a chain) is walked by kPruneTeam lanes, a step a round as before, but
-// with no barrier between its rounds, kPruneWideRunChunk rounds at a time, each chunk staged in
-// shared memory by the whole workgroup first (and a search of the chunk's rounds for its
-// operands' entries). Its loops add the heights cleared and summed, the rounds (and the runs
-// found among them) themselves and the prefix sums' steps: a job ends in the dispatch
-// that starts it, within lavapipe's loop limit; only where twice that count fits (a deep chain
-// near the limit came out wrong on lavapipe: the count is taken as approximate).
-void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
-    const uint64_t len = max_len, heights = uint64_t(scene_height) + 1;
-    const uint64_t rounds = std::min<uint64_t>(heights, len / 2 + 1);
-    // Workgroups per job (wide_split): where a step has very few jobs (level 0: one, the root's
-    // octants, then 8), a job's boxes are shared out among up to kPruneTeam workgroups, each
-    // walking the tape for its share (all of them sort it), up to kWideSplitGroups workgroups
-    // in all. On an H200, level 0 of the generated fluid went from 2.47 + 3.32 ms to 0.74 +
-    // 1.11 ms; level 1's steps (63 and 504 jobs) ran slower split than not (stop 28).
-    const uint64_t resident_groups = std::max<uint64_t>(ctx.resident_threads() / kPruneWide, 1);
-    uint64_t split = 1;
-    while (split < kPruneTeam && std::max<uint64_t>(s.team_jobs, 1) * split * 2 <=
-                                     std::min(kWideSplitGroups, resident_groups))
-        split *= 2;
-    if (wide_split > 0) split = wide_split;
-    const uint64_t boxes = kPruneTeam / split;
-    const uint64_t walk_job = ceil_div(len, kPruneWide) * (2 + std::bit_width(len)) +
-                              2 * (rounds + ceil_div(len * boxes, kPruneWide)) +
-                              2 * ceil_div(len, kPruneWide / boxes);
-    const uint64_t per_job = walk_job + 3 * ceil_div(heights, kPruneWide) +
-                             ceil_div(rounds, kPruneWide) + 2 * rounds +
-                             2 * ceil_div(rounds, kPruneWideRunChunk) * (kPruneWideRunChunk + 4) +
-                             4 * std::bit_width(kPruneWide);
-    const uint64_t group_bytes =
-        (len * (2 + kPruneWideEntryWords * kPruneTeam) + kPruneWideHeightWords * heights) * 4;
-    const uint64_t fit_groups = ctx.prune_scratch_budget_bytes() / group_bytes;
-    const bool limited = ctx.loop_limited();
-    if (fit_groups == 0 || (limited && 2 * per_job + 1024 > Context::kLoopLimit)) return;
-    const uint64_t parts = s.team_jobs * split;
-    const uint64_t unlimited_groups =
-        std::min({std::max<uint64_t>(parts, 1), uint64_t(ctx.max_workgroups()), resident_groups});
-    const uint64_t groups = std::min(unlimited_groups, fit_groups);
-    const uint64_t group_jobs = ceil_div(parts, groups);
-    const uint64_t walk = s.team_jobs == 0 ? 0 : group_jobs * walk_job;
-    const uint64_t cost = walk + group_jobs * 2 * (kWideRoundCost - 1) * rounds;
-    const bool pick =
-        wide_override == 1 || (len >= kWideMinTape && cost < 2 * s.shape.longest_walk_words);
-    if (!pick) return;
-    s.wide = true;
-    s.teams = groups;
-    s.groups = uint32_t(groups);
-    s.threads = uint32_t(groups * kPruneWide);
-    s.rounds = 1;
-    s.per_dispatch =
-        limited
-            ? std::max<uint64_t>(
-                  1, groups * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / (2 * per_job)) /
-                         split)
-            : std::max<uint64_t>(s.team_jobs, 1);
-    s.push.threads = s.threads;
-    s.push.max_stack = scene_height;
-    s.push.budget = 0;
-    s.push.wide_split = uint32_t(split);
-    s.wide_runs =
-        wide_runs_override == 1 ||
-        (wide_runs_override != 0 && s.team_jobs <= kWideRunsJobs && rounds >= kWideRunsRounds);
-    s.shape.wide = true;
-    s.shape.lanes_per_tape = uint32_t(kPruneWide * split);
-    s.shape.lanes = std::min<uint64_t>(parts, groups) * kPruneWide;
-    s.shape.longest_walk_words = walk;
-    scratch_bytes = groups * group_bytes;
-}
-
 // Records a step's dispatches; the pools' words in use before the level start them.
 void Pruner::record_step(Step& s) {
     s.first_stamp = ctx.stamp();
@@ -1032,7 +615,7 @@ void Pruner::read_statistics() {
     st.tape_bytes = uint64_t(g.pool_words) * 4 + cell_total * sizeof(PrunedCell);
 }
 
-}  // namespace
+}  // namespace pruning
 
 Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     const auto t_start = std::chrono::steady_clock::now();
@@ -1045,7 +628,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     grid.impl_ = std::make_unique<DeviceGrid>(ctx, sc);
     DeviceGrid& g = *grid.impl_;
     DevicePruneStats& st = g.stats;
-    Pruner pruner(device, sc, opt, g);
+    pruning::Pruner pruner(device, sc, opt, g);
     pruner.run();
     st.prune_peak_bytes = ctx.bytes_peak() - live_before;
     st.wall_ms =

@@ -1,0 +1,138 @@
+// gpu_prune.hpp — the Vulkan pruner's pieces, shared by gpu_prune.cpp (the levels, their runs and
+// pools, the statistics) and gpu_prune_plan.cpp (each step's shape: teams, wide, refinement's
+// lanes and squads). Internal to src/gpu.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "device_grid.hpp"
+
+namespace sdfprune::gpu::pruning {
+
+inline uint64_t ceil_div(uint64_t a, uint64_t b) {
+    return (a + b - 1) / b;
+}
+
+// A step of a level (prune.comp): `jobs` cells or octants from their parents' tapes into
+// `octants`/`cells`, run as team jobs that each walk one parent tape with kPruneTeam lanes,
+// sized by the parents' longest tape and deepest stack (a child's tape is never longer or
+// deeper than its parent's); or wide (prune_wide.comp), a workgroup a team job; or in
+// refinement (mode 3) a lane a cell (prune_refine_lanes.comp) or a squad a cell
+// (prune_refine.comp). Planned in gpu_prune_plan.cpp.
+struct Step {
+    PrunePush push;
+    const Buffer *octants, *cells;
+    // Its team jobs are [first_team_job, first_team_job + team_jobs): those of a slice of the
+    // level's blocks (refinement: of its list, from 0; its slice's cells start at first_cell).
+    uint64_t first_team_job, team_jobs, teams, rounds, per_dispatch, first_cell = 0;
+    uint64_t job_walk;         // in teams, the tape words a lane reads per job, at most
+    uint32_t threads, groups;  // lanes that take jobs, and their workgroups
+    bool wide;
+    KernelId kernel = KernelId::kPrune;  // (wide steps: record_step's choice)
+    // Refinement's lane pass (prune_refine_lanes.comp), or the squads after it that take the
+    // cells it listed (`listed`: its jobs are the long list's entries).
+    bool lane_pass = false, listed = false;
+    bool wide_runs = false;  // wide, on prune_wide_runs.comp (plan_wide)
+    GpuStepShape shape;
+    uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
+};
+
+// A level as it is made: its blocks' shape and its buffers (held by the pruner's LocalBuffers).
+struct Level {
+    uint32_t index = 0;
+    uint32_t f = 0;                     // cells per axis of a block
+    uint32_t nf = 0;                    // of the next level's blocks (0 at the finest)
+    uint64_t per_block = 0, total = 0;  // cells of a block, of the level
+    vec3 csize;
+    bool finest = false, refine = false;
+    bool split = false;  // octants first (as prune.cpp)
+    Buffer *cells = nullptr, *octants = nullptr, *refined = nullptr, *next = nullptr;
+    size_t first_shape = 0;     // the level's steps' shapes in the statistics
+    uint32_t listed_cells = 0;  // refinement's list, from the run that made the cells
+};
+
+class Pruner {
+  public:
+    Pruner(Device& device, const Scene& sc, const PruneOptions& opt, DeviceGrid& g);
+    // All levels, then the cells of all levels in one buffer (timed: prune_ms, wall_ms).
+    void run();
+    // The statistics, read back (not timed).
+    void read_statistics();
+
+  private:
+    void prune_level(uint32_t li);
+    GpuCounters prune_slices(Level& lv);
+    // (bound: the finest level's final cells, whose near-field cells' bounds give near_box)
+    std::optional<GpuCounters> run_steps(Level& lv, std::vector<Step>& steps, bool expand,
+                                         uint64_t octant_keep, bool may_slice,
+                                         Buffer* bound = nullptr);
+    void add_shape(const Level& lv, const GpuStepShape& shape);
+    std::vector<Step> plan_step(const Level& lv, uint32_t mode, uint64_t first_block,
+                                uint64_t blocks, uint64_t jobs, const Buffer& octants,
+                                const Buffer& cells, bool transient);
+    Step plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
+                    uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient);
+    Step plan_refine_lanes(const Step& squads) const;
+    void plan_squads(const Level& lv, Step& s);
+    PrunePush push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
+                       uint32_t budget) const;
+    void plan_wide(Step& s, uint64_t& scratch_bytes);
+    void record_step(Step& s);
+    void resize(Buffer& pool, uint64_t& cap, uint64_t words, uint64_t keep);
+    void grow(Buffer& pool, uint64_t& cap, uint64_t need, uint64_t keep);
+    void presize(Buffer& pool, uint64_t& cap, uint64_t used, uint64_t bound);
+    void gather_cells();
+
+    Context& ctx;
+    const Scene& sc;
+    const PruneOptions& opt;
+    DeviceGrid& g;
+    DevicePruneStats& st;
+    const std::vector<uint32_t> res;
+    // Temporaries: what is left of them is freed on return, or when an error is thrown.
+    LocalBuffers local;
+    const uint64_t max_pool_words;
+    std::vector<uint32_t> head;                        // the full tape with its header
+    uint32_t scene_height = 0;                         // the root's height (prune_wide.comp)
+    uint64_t capacity = 0, octant_capacity = 1 << 16;  // of g.pool and octant_pool, in words
+    Buffer& node_spans;
+    Buffer& counters;
+    GpuCounters* counter;
+    Buffer& blocks;  // the current level's blocks
+    Buffer& scratch;
+    // The octants' tapes of the current level (prune.comp: OctantPool), reused level by level.
+    Buffer& octant_pool;
+    // Refinement's jobs: the finest near-field cells (prune_common.glsl: RefineList), listed by
+    // the step that makes them; sized at the finest level.
+    Buffer& refine_list;
+    Buffer* parent_pool = nullptr;  // the last level's pool (binding 3); the level's own: g.pool
+    uint64_t block_count = 1;
+    uint64_t parent_words = 0;  // the parents' tapes, headers included
+    // The share of the main pool's bound (see presize) the last level used.
+    double main_ratio = 1;
+    uint32_t max_len = 0;    // longest tape of the current parents
+    uint32_t max_depth = 0;  // deepest evaluation stack of the current parents
+    double gpu_ms = 0;
+    uint32_t level_index = 0;  // the level being made (for the steps' shapes and errors)
+    uint64_t presize_cap = uint64_t(64) << 20;
+    // At most the room made for the cells from their octants' words (the device's largest
+    // buffer, or SDFPRUNE_VULKAN_PRESIZE_WORDS).
+    uint64_t room_cap = 0;
+    int wide_override = -1;
+    uint32_t wide_split = 0;  // SDFPRUNE_VULKAN_WIDE_SPLIT (1, 2, 4 or 8); 0: plan_wide's choice
+    int wide_runs_override =
+        -1;  // SDFPRUNE_VULKAN_WIDE_RUNS=0|1: prune_wide_runs.comp never, always
+    // The longest tape refinement's lane pass takes (prune_refine_lanes.comp);
+    // SDFPRUNE_VULKAN_REFINE_LANE_TAPE.
+    uint32_t refine_lane_tape = kRefineLaneTape;
+    vec3 origin, extent;
+    float L = 1;
+    uint32_t flags = 0;  // the push constants' (prune_common.glsl)
+    std::vector<Buffer*> level_cells;
+    uint64_t cell_total = 0;  // of all levels
+};
+
+}  // namespace sdfprune::gpu::pruning

@@ -1,0 +1,310 @@
+// gpu_prune_plan.cpp — the shape of each pruning step on the device (gpu_prune.hpp): how many
+// teams, squads, lanes or workgroups take its jobs, their scratch, their push constants and,
+// under lavapipe's loop limit, how many jobs a dispatch takes; and which kernel runs it (teams,
+// wide, refinement's lanes and squads). gpu_prune.cpp runs what is planned here.
+#include <algorithm>
+#include <bit>
+#include <string>
+
+#include "gpu_prune.hpp"
+
+namespace sdfprune::gpu::pruning {
+
+// Which steps run wide (prune_wide.comp): those with parent tapes of kWideMinTape words or
+// more where the modelled cost is less than twice a team's longest walk. The cost is the wide
+// walk with every round (a height of the tape, a workgroup barrier and a chain of global loads)
+// counted kWideRoundCost times. Both constants fit the per-step GPU times measured on an NVIDIA
+// H200 (stop 23: 18 steps of six scenes at levels 2 and 3, where the two kernels were timed
+// against each other): a team's word costs up to twice a wide lane's, its scratch per lane
+// being larger, and a round costs about four words. Any number of team jobs may run wide (a
+// workgroup each, in a grid-stride loop): the generated fluid's level-2 octants, 3,518 team
+// jobs, take 3.0 ms wide against 12.5 ms in teams. SDFPRUNE_VULKAN_WIDE=0 never, =1 wherever
+// the kernel fits (for tests).
+constexpr uint64_t kWideMinTape = 128, kWideRoundCost = 4;
+constexpr uint64_t kWideSplitGroups = 64;  // plan_wide
+// Wide steps of at most kWideRunsJobs jobs over tapes of kWideRunsRounds heights or more run
+// prune_wide_runs.comp (long runs walked from shared memory): on an H200 molecule's four top
+// steps went from 3.18 to 2.14 ms, but its staging arrays slowed the steps of many jobs and
+// short runs that shared the kernel (monument's level-2 cells 1.24 -> 1.97 ms; stop 28).
+constexpr uint64_t kWideRunsJobs = 512, kWideRunsRounds = 64;
+
+// A step over the blocks [first_block, first_block + blocks), `jobs` cells or octants (or in
+// refinement, mode 3, cells), `transient`: new tapes go to the octant pool (the finest cells'
+// tapes before refinement): in teams (or wide). Refinement runs first a lane per cell
+// (plan_refine_lanes), then, unless the cells' longest tape is short enough for the lanes, the
+// squads over the cells the lanes listed (the long list, in scratch); without a lane pass
+// (its setting 0, or no room for the list), squads alone.
+std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block,
+                                    uint64_t blocks, uint64_t jobs, const Buffer& octants,
+                                    const Buffer& cells, bool transient) {
+    Step teams = plan_teams(lv, mode, first_block, blocks, jobs, octants, cells, transient);
+    if (mode != 3 || refine_lane_tape == 0 || 4 * teams.team_jobs > ctx.max_buffer_bytes())
+        return {teams};
+    Step lanes = plan_refine_lanes(teams);
+    if (scratch.size < 4 * teams.team_jobs) {
+        ctx.destroy(scratch);
+        scratch = ctx.create_buffer(4 * teams.team_jobs);
+    }
+    if (max_len <= refine_lane_tape) return {lanes};
+    teams.listed = true;
+    teams.push.flags |= 8u;
+    teams.shape.jobs = 0;  // the lanes' (one shape, add_shape)
+    return {lanes, teams};
+}
+
+// A step's jobs in teams (or wide, plan_wide), or in refinement squads (plan_squads).
+Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
+                        uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient) {
+    const uint64_t hf = lv.f / 2;
+    const auto teams_for = [](uint64_t boxes) { return ceil_div(boxes, kPruneTeam); };
+    Step s;
+    s.octants = &octants;
+    s.cells = &cells;
+    // Team jobs run block by block in every mode (prune_common.glsl: job_box).
+    const uint64_t per_block_jobs = mode == 0   ? teams_for(lv.per_block)
+                                    : mode == 1 ? 1
+                                    : mode == 2 ? 8 * teams_for(hf * hf * hf)
+                                                : lv.per_block;
+    s.first_team_job = first_block * per_block_jobs;
+    s.team_jobs = blocks * per_block_jobs;
+    if (mode == 3) {
+        // Refinement takes the slice's listed near cells (a list a run, from 0).
+        s.first_cell = s.first_team_job;
+        s.first_team_job = 0;
+    }
+    if (s.first_team_job + s.team_jobs > 0xfffffffeull)
+        throw std::length_error("too many cells in one level");
+    if (mode == 3) {
+        plan_squads(lv, s);
+        return s;
+    }
+    // A team's scratch: its lanes' state, per parent-tape entry a left operand and a word per
+    // lane (decision and sweep flags), per stack slot and lane 4 words.
+    const uint64_t team_bytes =
+        (kPruneStateWords * kPruneTeam + uint64_t(max_len) * (1 + kPruneTeam) +
+         4ull * max_depth * kPruneTeam) *
+        4;
+    // Teams in flight: as many as have jobs, their scratch fits the budget and the device runs
+    // at once (more would only queue, their scratch held for nothing; the teams take the jobs
+    // in a grid-stride loop). Only teams with jobs hold scratch, so one parent tape as long as
+    // the budget allows can be pruned (the root's, the full tree, at level 0) even where a
+    // workgroup's 8 teams could not.
+    const uint64_t fit = ctx.prune_scratch_budget_bytes() / team_bytes;
+    if (fit == 0)
+        throw GpuError("Vulkan: pruning a tape of " + std::to_string(max_len) + " words needs " +
+                       std::to_string(team_bytes) +
+                       " bytes of scratch, more than the device's buffers allow; use "
+                       "--backend cpu");
+    const uint64_t unlimited =
+        std::min({std::max<uint64_t>(s.team_jobs, 1),
+                  uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kPruneTeam),
+                  std::max<uint64_t>(ctx.resident_threads() / kPruneTeam, 1)});
+    s.teams = std::min(unlimited, fit);
+    s.threads = uint32_t(s.teams * kPruneTeam);
+    s.groups = uint32_t(ceil_div(s.threads, kWorkgroupSize));
+    // Steps of a job: the evaluation window by window, the sweep and the write window by
+    // window (and one to spare).
+    const uint64_t per_job = 3 * ceil_div(max_len, kPruneWindow) + 2;
+    // Under a loop limit (lavapipe), as many jobs per team and dispatch as fit the limit, or
+    // one job resumed over as many rounds as its steps need; elsewhere one unlimited round. A
+    // step's loops: staging the window, evaluating it, the sweep, the write; each over at most
+    // the longest tape.
+    const bool limited = ctx.loop_limited();
+    const uint64_t step_len = std::min<uint64_t>(max_len, kPruneWindow);
+    const uint64_t step_loops = kPruneWindow / kPruneTeam + 3 * step_len + 8;
+    const uint64_t max_steps = (Context::kLoopLimit - 1024) / step_loops;
+    s.rounds = limited ? ceil_div(per_job, max_steps) : 1;
+    const uint32_t budget = !limited ? 0xffffffffu : uint32_t(s.rounds > 1 ? max_steps : per_job);
+    s.per_dispatch = limited ? s.teams * std::max<uint64_t>(1, max_steps / per_job)
+                             : std::max<uint64_t>(s.team_jobs, 1);
+    s.push = push_for(lv, mode, s.threads, flags | (transient ? 4u : 0u), budget);
+    s.shape.level = lv.index;
+    s.shape.mode = mode;
+    s.shape.jobs = jobs;
+    s.shape.lanes_per_tape = uint32_t(kPruneTeam);
+    s.shape.lanes = std::min<uint64_t>(s.team_jobs, s.teams) * kPruneTeam;
+    // A lane's walk per job: the evaluation, the sweep and the write.
+    s.job_walk = 3 * max_len;
+    s.shape.longest_walk_words = s.team_jobs == 0 ? 0 : ceil_div(s.team_jobs, s.teams) * s.job_walk;
+    s.wide = false;
+    uint64_t scratch_bytes = s.teams * team_bytes;
+    if (wide_override != 0 && ctx.can_run(KernelId::kPruneWide)) plan_wide(s, scratch_bytes);
+    if (scratch.size < scratch_bytes) {
+        ctx.destroy(scratch);
+        scratch = ctx.create_buffer(scratch_bytes);
+    }
+    return s;
+}
+
+// A step's push constants (prune_common.glsl: Push): the level's, the parents' longest tape and
+// deepest stack; record_step sets the pools' starts and each dispatch's jobs.
+PrunePush Pruner::push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
+                           uint32_t budget) const {
+    return PrunePush{vec4(origin.x, origin.y, origin.z, L),
+                     vec4(lv.csize.x, lv.csize.y, lv.csize.z, opt.far_field_c),
+                     mode,
+                     lv.f,
+                     0,
+                     threads,
+                     max_len,
+                     max_depth,
+                     step_flags,
+                     0,
+                     0,
+                     0,
+                     budget,
+                     opt.refine,
+                     0,
+                     0,
+                     0,
+                     1};
+}
+
+// Refinement's lane pass (prune_refine_lanes.comp): a lane per listed cell, as many lanes as
+// the device runs at once in a grid-stride loop, each refining its cell alone where its tape
+// has at most refine_lane_tape words, and listing it for the squads where not (from scratch
+// word 0: the squads use no other scratch). Under a loop limit (lavapipe), as many cells per
+// lane and dispatch as its loops allow: per cell, the tape staged, one walk per sub-box, the
+// sweep and the write.
+Step Pruner::plan_refine_lanes(const Step& squads) const {
+    Step s = squads;
+    const uint64_t len = std::min<uint64_t>(max_len, refine_lane_tape);
+    const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
+    const uint64_t walk = subs * len;
+    const uint64_t per_cell = walk + 3 * len + 8;
+    const uint64_t cells = s.team_jobs;
+    const uint64_t lanes =
+        std::min({std::max<uint64_t>(cells, 1), uint64_t(ctx.max_workgroups()) * kWorkgroupSize,
+                  std::max<uint64_t>(ctx.resident_threads(), 1)});
+    s.kernel = KernelId::kPruneRefineLanes;
+    s.lane_pass = true;
+    s.listed = false;
+    s.teams = lanes;
+    s.threads = uint32_t(ceil_div(lanes, kWorkgroupSize) * kWorkgroupSize);
+    s.groups = uint32_t(s.threads / kWorkgroupSize);
+    s.per_dispatch =
+        ctx.loop_limited()
+            ? s.threads * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / per_cell)
+            : std::max<uint64_t>(cells, 1);
+    s.push.threads = s.threads;
+    s.push.list_start = 0;
+    s.push.lane_tape = refine_lane_tape;
+    s.job_walk = walk;
+    s.shape.lanes_per_tape = 1;
+    s.shape.lanes = lanes;
+    s.shape.longest_walk_words = ceil_div(cells, lanes) * walk;
+    return s;
+}
+
+// Refinement's squads (prune_refine.comp): a squad of kRefineSquad lanes a listed cell, its
+// sub-boxes a lane each, as many squads as the device runs at once, in a grid-stride loop over
+// the list. Its jobs' count is the device's (refine_cells, or after a lane pass long_jobs):
+// the dispatches are recorded for all the slice's cells. A lane's loops per job: staging the
+// tape, one walk per batch of kRefineSquad sub-boxes over at most kRefineMaxTape words, the
+// far-field test over the squad, the sweep and the write (one lane), or a chunk of a copied
+// tape and the chunks' depths.
+void Pruner::plan_squads(const Level& lv, Step& s) {
+    const uint64_t len = max_len, walked = std::min<uint64_t>(len, math::kRefineMaxTape);
+    const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
+    const uint64_t batches = ceil_div(subs, kRefineSquad);
+    const uint64_t per_job =
+        2 * ceil_div(len, kRefineSquad) + batches * walked + 2 * walked + 2 * kRefineSquad + 8;
+    const uint64_t squads =
+        std::min({std::max<uint64_t>(s.team_jobs, 1),
+                  uint64_t(ctx.max_workgroups()) * (kWorkgroupSize / kRefineSquad),
+                  std::max<uint64_t>(ctx.resident_threads() / kRefineSquad, 1)});
+    s.kernel = KernelId::kPruneRefine;
+    s.teams = squads;
+    s.threads = uint32_t(squads * kRefineSquad);
+    s.groups = uint32_t(ceil_div(s.threads, kWorkgroupSize));
+    s.rounds = 1;
+    s.per_dispatch = ctx.loop_limited()
+                         ? squads * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / per_job)
+                         : std::max<uint64_t>(s.team_jobs, 1);
+    s.push = push_for(lv, 3, s.threads, flags, 0);
+    s.job_walk = batches * walked;
+    s.wide = false;
+    s.shape.level = lv.index;
+    s.shape.mode = 3;
+    s.shape.jobs = s.team_jobs;  // until the device's count is read back
+    s.shape.lanes_per_tape = uint32_t(kRefineSquad);
+    s.shape.lanes = std::min<uint64_t>(s.team_jobs, squads) * kRefineSquad;
+    s.shape.longest_walk_words = ceil_div(s.team_jobs, squads) * s.job_walk;
+}
+
+// The wide kernel instead of teams, where it fits and its modelled cost wins (kWideRoundCost).
+// Per job the tape entries a lane takes one after another (prune_wide.comp): its share of the
+// entries counted, then placed (with a binary search for an operator's left operand), in the
+// evaluation and the top-down pass its share of each round's entries and kPruneTeam boxes (at
+// most one more than an even share per round: a round per height the tape has, no more than
+// its operators plus one), and the compaction's two passes over a slice. A run of rounds of
+// one operator each (a chain) is walked by kPruneTeam lanes, a step a round as before, but
+// with no barrier between its rounds, kPruneWideRunChunk rounds at a time, each chunk staged in
+// shared memory by the whole workgroup first (and a search of the chunk's rounds for its
+// operands' entries). Its loops add the heights cleared and summed, the rounds (and the runs
+// found among them) themselves and the prefix sums' steps: a job ends in the dispatch
+// that starts it, within lavapipe's loop limit; only where twice that count fits (a deep chain
+// near the limit came out wrong on lavapipe: the count is taken as approximate).
+void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
+    const uint64_t len = max_len, heights = uint64_t(scene_height) + 1;
+    const uint64_t rounds = std::min<uint64_t>(heights, len / 2 + 1);
+    // Workgroups per job (wide_split): where a step has very few jobs (level 0: one, the root's
+    // octants, then 8), a job's boxes are shared out among up to kPruneTeam workgroups, each
+    // walking the tape for its share (all of them sort it), up to kWideSplitGroups workgroups
+    // in all. On an H200, level 0 of the generated fluid went from 2.47 + 3.32 ms to 0.74 +
+    // 1.11 ms; level 1's steps (63 and 504 jobs) ran slower split than not (stop 28).
+    const uint64_t resident_groups = std::max<uint64_t>(ctx.resident_threads() / kPruneWide, 1);
+    uint64_t split = 1;
+    while (split < kPruneTeam && std::max<uint64_t>(s.team_jobs, 1) * split * 2 <=
+                                     std::min(kWideSplitGroups, resident_groups))
+        split *= 2;
+    if (wide_split > 0) split = wide_split;
+    const uint64_t boxes = kPruneTeam / split;
+    const uint64_t walk_job = ceil_div(len, kPruneWide) * (2 + std::bit_width(len)) +
+                              2 * (rounds + ceil_div(len * boxes, kPruneWide)) +
+                              2 * ceil_div(len, kPruneWide / boxes);
+    const uint64_t per_job = walk_job + 3 * ceil_div(heights, kPruneWide) +
+                             ceil_div(rounds, kPruneWide) + 2 * rounds +
+                             2 * ceil_div(rounds, kPruneWideRunChunk) * (kPruneWideRunChunk + 4) +
+                             4 * std::bit_width(kPruneWide);
+    const uint64_t group_bytes =
+        (len * (2 + kPruneWideEntryWords * kPruneTeam) + kPruneWideHeightWords * heights) * 4;
+    const uint64_t fit_groups = ctx.prune_scratch_budget_bytes() / group_bytes;
+    const bool limited = ctx.loop_limited();
+    if (fit_groups == 0 || (limited && 2 * per_job + 1024 > Context::kLoopLimit)) return;
+    const uint64_t parts = s.team_jobs * split;
+    const uint64_t unlimited_groups =
+        std::min({std::max<uint64_t>(parts, 1), uint64_t(ctx.max_workgroups()), resident_groups});
+    const uint64_t groups = std::min(unlimited_groups, fit_groups);
+    const uint64_t group_jobs = ceil_div(parts, groups);
+    const uint64_t walk = s.team_jobs == 0 ? 0 : group_jobs * walk_job;
+    const uint64_t cost = walk + group_jobs * 2 * (kWideRoundCost - 1) * rounds;
+    const bool pick =
+        wide_override == 1 || (len >= kWideMinTape && cost < 2 * s.shape.longest_walk_words);
+    if (!pick) return;
+    s.wide = true;
+    s.teams = groups;
+    s.groups = uint32_t(groups);
+    s.threads = uint32_t(groups * kPruneWide);
+    s.rounds = 1;
+    s.per_dispatch =
+        limited
+            ? std::max<uint64_t>(
+                  1, groups * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / (2 * per_job)) /
+                         split)
+            : std::max<uint64_t>(s.team_jobs, 1);
+    s.push.threads = s.threads;
+    s.push.max_stack = scene_height;
+    s.push.budget = 0;
+    s.push.wide_split = uint32_t(split);
+    s.wide_runs =
+        wide_runs_override == 1 ||
+        (wide_runs_override != 0 && s.team_jobs <= kWideRunsJobs && rounds >= kWideRunsRounds);
+    s.shape.wide = true;
+    s.shape.lanes_per_tape = uint32_t(kPruneWide * split);
+    s.shape.lanes = std::min<uint64_t>(parts, groups) * kPruneWide;
+    s.shape.longest_walk_words = walk;
+    scratch_bytes = groups * group_bytes;
+}
+
+}  // namespace sdfprune::gpu::pruning
