@@ -2,9 +2,8 @@
 // one parent tape, one lane per child box), prune_wide.comp (a whole workgroup takes one parent
 // tape, its nodes spread over the lanes), prune_refine_lanes.comp (a lane per finest cell with a
 // short tape) and prune_refine.comp (a squad of lanes per finest cell, a lane per sub-box): the
-// step's buffers
-// (bindings 4–11) and push constants, the tape pools, the boxes of a job (modes 0–2) and the
-// store of a box's result.
+// step's buffers (bindings 4–11) and push constants, the tape pools, the boxes of a job
+// (modes 0–2) and the store of a box's result.
 // Include after scene.glsl and cells.glsl.
 
 const uint kTeam = 8u;  // boxes per job: lanes per team (gpu_prune.cpp: kPruneTeam)

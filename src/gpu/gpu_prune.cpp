@@ -417,7 +417,7 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
             s.shape.longest_walk_words = ceil_div(jobs, s.teams) * s.job_walk;
         }
         s.shape.gpu_ms = ctx.stamp_ms(s.last_stamp) - ctx.stamp_ms(s.first_stamp);
-        if (s.lane_pass) {
+        if (s.kernel == KernelId::kPruneRefineLanes) {
             s.shape.long_jobs = counter->long_jobs;
             s.shape.lanes_ms = s.shape.gpu_ms;
         }
@@ -459,20 +459,12 @@ void Pruner::record_step(Step& s) {
             push.first_job = uint32_t(first);
             push.jobs = uint32_t(std::min<uint64_t>(end, first + s.per_dispatch));
             push.round = round;
-            if (s.wide)
-                ctx.dispatch(
-                    s.wide_runs && ctx.can_run(KernelId::kPruneWideRuns) ? KernelId::kPruneWideRuns
-                    : ctx.can_run(KernelId::kPruneWideSubgroups) ? KernelId::kPruneWideSubgroups
-                                                                 : KernelId::kPruneWide,
-                    {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants, s.cells,
-                     &counters, &scratch, &octant_pool, &refine_list, &g.pool, &node_spans},
-                    &push, sizeof(push), s.groups);
-            else
-                ctx.dispatch(
-                    s.kernel,
-                    {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants, s.cells,
-                     &counters, &scratch, &octant_pool, &refine_list, &g.pool, &scratch},
-                    &push, sizeof(push), s.groups);
+            // Binding 12: the wide kernels' node spans, the others' second view of scratch.
+            ctx.dispatch(s.kernel,
+                         {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants, s.cells,
+                          &counters, &scratch, &octant_pool, &refine_list, &g.pool,
+                          s.wide ? &node_spans : &scratch},
+                         &push, sizeof(push), s.groups);
             ++s.shape.dispatches;
             s.shape.workgroups += s.groups;
         }

@@ -31,11 +31,10 @@ struct Step {
     uint64_t job_walk;         // in teams, the tape words a lane reads per job, at most
     uint32_t threads, groups;  // lanes that take jobs, and their workgroups
     bool wide;
-    KernelId kernel = KernelId::kPrune;  // (wide steps: record_step's choice)
-    // Refinement's lane pass (prune_refine_lanes.comp), or the squads after it that take the
-    // cells it listed (`listed`: its jobs are the long list's entries).
-    bool lane_pass = false, listed = false;
-    bool wide_runs = false;  // wide, on prune_wide_runs.comp (plan_wide)
+    KernelId kernel = KernelId::kPrune;
+    // Refinement's squads after its lane pass (prune_refine_lanes.comp), taking the cells it
+    // listed: its jobs are the long list's entries.
+    bool listed = false;
     GpuStepShape shape;
     uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
 };

@@ -177,7 +177,6 @@ Step Pruner::plan_refine_lanes(const Step& squads) const {
         std::min({std::max<uint64_t>(cells, 1), uint64_t(ctx.max_workgroups()) * kWorkgroupSize,
                   std::max<uint64_t>(ctx.resident_threads(), 1)});
     s.kernel = KernelId::kPruneRefineLanes;
-    s.lane_pass = true;
     s.listed = false;
     s.teams = lanes;
     s.threads = uint32_t(ceil_div(lanes, kWorkgroupSize) * kWorkgroupSize);
@@ -297,9 +296,12 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
     s.push.max_stack = scene_height;
     s.push.budget = 0;
     s.push.wide_split = uint32_t(split);
-    s.wide_runs =
+    const bool runs =
         wide_runs_override == 1 ||
         (wide_runs_override != 0 && s.team_jobs <= kWideRunsJobs && rounds >= kWideRunsRounds);
+    s.kernel = runs && ctx.can_run(KernelId::kPruneWideRuns) ? KernelId::kPruneWideRuns
+               : ctx.can_run(KernelId::kPruneWideSubgroups)  ? KernelId::kPruneWideSubgroups
+                                                             : KernelId::kPruneWide;
     s.shape.wide = true;
     s.shape.lanes_per_tape = uint32_t(kPruneWide * split);
     s.shape.lanes = std::min<uint64_t>(parts, groups) * kPruneWide;

@@ -292,16 +292,19 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                      (unsigned long long)ds.host_submissions, ds.host_submit_ms);
                  static const char* const kModes[] = {"cells", "octants", "cells from octants",
                                                       "refinement"};
-                 for (const gpu::GpuStepShape& st : device_grid->stats().steps)
+                 for (const gpu::GpuStepShape& st : device_grid->stats().steps) {
                      std::printf(
                          "    level %u %-18s %s%u dispatches, %llu workgroups, %llu jobs "
-                         "on %llu lanes (%u to a tape), longest walk <= %llu words, %.2f ms "
-                         "(lane pass %.2f ms, %llu cells left to squads)\n",
+                         "on %llu lanes (%u to a tape), longest walk <= %llu words, %.2f ms",
                          st.level, kModes[std::min(st.mode, 3u)], st.wide ? "wide: " : "",
                          st.dispatches, (unsigned long long)st.workgroups,
                          (unsigned long long)st.jobs, (unsigned long long)st.lanes,
-                         st.lanes_per_tape, (unsigned long long)st.longest_walk_words, st.gpu_ms,
-                         st.lanes_ms, (unsigned long long)st.long_jobs);
+                         st.lanes_per_tape, (unsigned long long)st.longest_walk_words, st.gpu_ms);
+                     if (st.mode == 3)  // refinement: its lane pass
+                         std::printf(" (lane pass %.2f ms, %llu cells left to squads)", st.lanes_ms,
+                                     (unsigned long long)st.long_jobs);
+                     std::printf("\n");
+                 }
              } else
                  std::printf(
                      "  pruning                   %.1f ms, peak %.1f MB in pruning buffers\n",
