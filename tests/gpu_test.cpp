@@ -576,6 +576,40 @@ TEST(Gpu, RepeatedPruneReusesBuffers) {
     first.reset();
 }
 
+// Small buffers share slabs of device memory (Context::Slab): a first pruning, which makes
+// dozens of buffers, allocates device memory a few times only, and the grid is the one made
+// with every buffer allocating its own (SDFPRUNE_VULKAN_SLABS=0). With no idle cache, a slab
+// emptied by one call is taken again by the next, which allocates no more than the first.
+TEST(Gpu, SmallBuffersShareSlabs) {
+    if (!gpu::built_with_vulkan()) GTEST_SKIP() << "built without the Vulkan backend";
+    const Scene sc = builtin_scene("demo");
+    PruneOptions o;
+    o.resolution = 32;
+    const std::unique_ptr<gpu::Device> own = device_with_env("SDFPRUNE_VULKAN_SLABS", "0");
+    const std::unique_ptr<gpu::Device> slabs = device_with_env("SDFPRUNE_VULKAN_SLABS", "1");
+    ASSERT_TRUE(own && slabs);
+    const gpu::Grid a = gpu::prune(*own, sc, o);
+    const gpu::Grid b = gpu::prune(*slabs, sc, o);
+    EXPECT_EQ(a.stats().host_allocations, a.stats().host_buffers);
+    EXPECT_EQ(b.stats().host_buffers, a.stats().host_buffers);
+    EXPECT_GE(b.stats().host_buffers, 10u);
+    EXPECT_LE(b.stats().host_allocations * 3, b.stats().host_buffers);
+    EXPECT_GT(b.stats().host_allocations, 0u);
+    expect_same_stats(a.stats(), b.stats(), "slabs");
+    expect_same_device_cells(a, b, "slabs");
+    EXPECT_EQ(own->memory_in_use(), slabs->memory_in_use());
+
+    const std::unique_ptr<gpu::Device> uncached =
+        device_with_env("SDFPRUNE_VULKAN_CACHE_BYTES", "0");
+    ASSERT_TRUE(uncached);
+    const gpu::Grid first = gpu::prune(*uncached, sc, o);
+    const gpu::Grid second = gpu::prune(*uncached, sc, o);
+    EXPECT_EQ(second.stats().host_buffers_reused, 0u);
+    EXPECT_LE(second.stats().host_allocations, first.stats().host_allocations);
+    expect_same_device_cells(first, second, "a slab taken again");
+    uncached->release_cached_memory();
+}
+
 // The idle cache keeps to its budget (SDFPRUNE_VULKAN_CACHE_BYTES), buffers cached longest
 // going first; with no budget nothing is kept or reused; release_cached_memory empties it.
 // Grids are the same whatever the cache holds.

@@ -109,12 +109,14 @@ struct DevicePruneStats : PruneStats {
     // Slices of blocks over all levels (one a level, unless a level's octant pool would outgrow
     // the device's largest buffer: its blocks are then pruned a slice at a time).
     uint32_t slices = 0;
-    // The host's share of wall_ms: buffers newly allocated (device memory allocated; staging
-    // buffers of uploads and readbacks too), buffers taken instead from the device's idle
-    // cache (those a previous level or call gave back), the time of both; and every
+    // The host's share of wall_ms: buffers newly made (staging buffers of uploads and
+    // readbacks too), buffers taken instead from the device's idle cache (those a previous
+    // level or call gave back), the time of both; the device memory allocations among the new
+    // buffers (buffers up to 1 MiB, host-visible up to 128 KiB, share slabs of 16 MiB and
+    // 2 MiB allocated once: SDFPRUNE_VULKAN_SLABS=0 gives every buffer its own); and every
     // submission's (uploads and readbacks included) from the end of its recording to its
     // results being back, which holds the GPU's time.
-    uint64_t host_buffers = 0, host_buffers_reused = 0, host_submissions = 0;
+    uint64_t host_buffers = 0, host_buffers_reused = 0, host_allocations = 0, host_submissions = 0;
     double host_buffer_ms = 0, host_submit_ms = 0;
     // Whether the wide steps used subgroup operations (the device has them and
     // SDFPRUNE_VULKAN_SUBGROUPS is not 0), else shared memory.

@@ -72,15 +72,10 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
         extras[p] = {vec4(b.centre.x, b.centre.y, b.centre.z, b.scale), vec4(b.f0, b.rho, 0, 0),
                      vec4(sc.color[p].x, sc.color[p].y, sc.color[p].z, 1)};
     }
-    const auto upload_vector = [&](const auto& v) {
-        const uint64_t bytes = v.size() * sizeof(v[0]);
-        Buffer b = ctx.create_buffer(bytes);
-        ctx.upload(b, v.data(), bytes);
-        return b;
-    };
-    g.nodes = upload_vector(nodes);
-    g.params = upload_vector(sc.params);
-    g.extras = upload_vector(extras);
+    const auto bytes_of = [](const auto& v) { return uint64_t(v.size() * sizeof(v[0])); };
+    g.nodes = ctx.create_buffer(bytes_of(nodes));
+    g.params = ctx.create_buffer(bytes_of(sc.params));
+    g.extras = ctx.create_buffer(bytes_of(extras));
     // For prune_wide.comp: per node the first node of its subtree and its height (post-order:
     // operands first, so one pass), and the highest, the root's.
     std::vector<uint32_t> spans(2 * uint64_t(sc.size()));
@@ -92,7 +87,6 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
     }
     scene_height = spans[2 * sc.root() + 1];
     node_spans = ctx.create_buffer(spans.size() * 4);
-    ctx.upload(node_spans, spans.data(), spans.size() * 4);
 
     // Each level's tapes go to a pool of its own (g.pool while the level is made; it grows on
     // overflow), read as the parents' by the next level and then freed: a level never holds
@@ -105,12 +99,17 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
         throw GpuError("scene too large for the device's largest storage buffer");
     capacity = head.size();
     g.pool = ctx.create_buffer(capacity * 4);
-    ctx.upload(g.pool, head.data(), head.size() * 4);
     g.pool_words = uint32_t(head.size());
     parent_words = head.size();
 
+    // All of it in one submission.
     const GpuBlock root_block{0, 0, 0, 0};
-    ctx.upload(blocks, &root_block, sizeof(root_block));
+    ctx.upload({{&g.nodes, nodes.data(), bytes_of(nodes)},
+                {&g.params, sc.params.data(), bytes_of(sc.params)},
+                {&g.extras, extras.data(), bytes_of(extras)},
+                {&node_spans, spans.data(), bytes_of(spans)},
+                {&g.pool, head.data(), bytes_of(head)},
+                {&blocks, &root_block, sizeof(root_block)}});
     max_len = sc.size();
     max_depth = sc.max_stack;
     // Before a level: room for what its parents' tapes can give, within 64 Mi words more than
@@ -629,6 +628,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     const Context::HostTime& host = ctx.host_time();
     st.host_buffers = host.buffers - host_before.buffers;
     st.host_buffers_reused = host.buffers_reused - host_before.buffers_reused;
+    st.host_allocations = host.allocations - host_before.allocations;
     st.host_submissions = host.submissions - host_before.submissions;
     st.host_buffer_ms = host.buffer_ms - host_before.buffer_ms;
     st.host_submit_ms = host.submit_ms - host_before.submit_ms;

@@ -230,6 +230,9 @@ Context::Context() {
     const VkPhysicalDeviceProperties& props = candidates[pick].props;
     device_name_ = props.deviceName;
     max_range_ = props.limits.maxStorageBufferRange;
+    host_log_ = std::getenv("SDFPRUNE_VULKAN_HOST_LOG") != nullptr;
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_SLABS"); env && *env)
+        use_slabs_ = std::atoi(env) != 0;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_MAX_BUFFER"))  // a smaller device, for tests
         max_range_ = std::min<uint64_t>(max_range_, std::strtoull(env, nullptr, 10));
     max_range_ &= ~uint64_t(15);  // buffer sizes round up to 16
@@ -420,6 +423,8 @@ Context::~Context() {
     if (device_) {
         vkDeviceWaitIdle(device_);
         trim(0);
+        for (Slab& slab : slabs_)  // (with buffers still bound, if a grid outlived its device)
+            if (slab.memory) vkFreeMemory(device_, slab.memory, nullptr);
         for (Kernel& k : kernels_) {
             vkDestroyPipeline(device_, k.pipeline, nullptr);
             vkDestroyPipelineLayout(device_, k.layout, nullptr);
@@ -459,6 +464,19 @@ struct HostTally {
     }
 };
 
+}  // namespace
+
+// SDFPRUNE_VULKAN_HOST_LOG: a line on stderr per buffer allocated (not those taken from the idle
+// cache) and per submission, with the host's time in it and the time since the context was
+// made, so that the gaps between them show the host's other work.
+void Context::log_host(const char* what, uint64_t bytes, double host_ms, double gpu_ms) const {
+    const double since =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - made_).count();
+    std::fprintf(stderr, "vulkan host %10.3f ms: %s %llu bytes, host %.3f ms, gpu %.3f ms\n", since,
+                 what, static_cast<unsigned long long>(bytes), host_ms, gpu_ms);
+}
+
+namespace {
 // The capacity class of a buffer of `bytes` (a multiple of 16): up to 64 bytes the size
 // itself; above, the next multiple of a quarter of the power of two below it (2^k times 1.25,
 // 1.5, 1.75 or 2), so at most 25 % more than asked.
@@ -509,9 +527,16 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
     check(vkCreateBuffer(device_, &bci, nullptr, &b.buffer), "vkCreateBuffer");
     VkMemoryRequirements req;
     vkGetBufferMemoryRequirements(device_, b.buffer, &req);
+    const uint32_t type = memory_type(req.memoryTypeBits, host_visible);
+    if (use_slabs_ && req.size <= kSlabBufferMax[host_visible] &&
+        bind_to_slab(b, req, type, host_visible)) {
+        ++host_.buffers;
+        return hand_out(b);
+    }
     auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
     mai.allocationSize = req.size;
-    mai.memoryTypeIndex = memory_type(req.memoryTypeBits, host_visible);
+    mai.memoryTypeIndex = type;
+    ++host_.allocations;
     VkResult r = vkAllocateMemory(device_, &mai, nullptr, &b.memory);
     if (r != VK_SUCCESS && !idle_.empty()) {  // the idle buffers may be what is in the way
         trim(0);
@@ -534,6 +559,11 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
         }
     }
     ++host_.buffers;
+    if (host_log_)
+        log_host(host_visible ? "host-visible buffer" : "device buffer", capacity,
+                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                     .count(),
+                 0);
     return hand_out(b);
 }
 
@@ -551,10 +581,78 @@ void Context::destroy(Buffer& b) {
 }
 
 void Context::free_buffer(Buffer& b) {
-    if (b.mapped) vkUnmapMemory(device_, b.memory);
     vkDestroyBuffer(device_, b.buffer, nullptr);
-    vkFreeMemory(device_, b.memory, nullptr);
+    if (b.slab >= 0) {
+        Slab& slab = slabs_[size_t(b.slab)];
+        if (--slab.buffers == 0) slab.used = 0;
+    } else {
+        if (b.mapped) vkUnmapMemory(device_, b.memory);
+        vkFreeMemory(device_, b.memory, nullptr);
+    }
     b = Buffer{};
+}
+
+bool Context::bind_to_slab(Buffer& b, const VkMemoryRequirements& req, uint32_t type,
+                           bool host_visible) {
+    const auto offset_in = [&](const Slab& s) {
+        return (s.used + req.alignment - 1) / req.alignment * req.alignment;
+    };
+    // The most recent slab of the type with room (a slab never holds buffers of two types).
+    size_t pick = slabs_.size();
+    for (size_t i = slabs_.size(); i-- > 0;)
+        if (slabs_[i].memory && slabs_[i].type == type && slabs_[i].host_visible == host_visible &&
+            offset_in(slabs_[i]) + req.size <= slabs_[i].size) {
+            pick = i;
+            break;
+        }
+    if (pick == slabs_.size()) {
+        Slab slab;
+        slab.size = kSlabBytes[host_visible];
+        slab.type = type;
+        slab.host_visible = host_visible;
+        auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
+        mai.allocationSize = slab.size;
+        mai.memoryTypeIndex = type;
+        const auto start = std::chrono::steady_clock::now();
+        ++host_.allocations;
+        if (vkAllocateMemory(device_, &mai, nullptr, &slab.memory) != VK_SUCCESS) return false;
+        void* mapped = nullptr;
+        if (host_visible &&
+            vkMapMemory(device_, slab.memory, 0, slab.size, 0, &mapped) != VK_SUCCESS) {
+            vkFreeMemory(device_, slab.memory, nullptr);
+            return false;
+        }
+        slab.mapped = static_cast<uint8_t*>(mapped);
+        if (host_log_)
+            log_host(
+                host_visible ? "host-visible slab" : "device slab", slab.size,
+                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                    .count(),
+                0);
+        // (a freed slab's place is taken first)
+        for (pick = 0; pick < slabs_.size() && slabs_[pick].memory; ++pick) {
+        }
+        if (pick == slabs_.size()) slabs_.emplace_back();
+        slabs_[pick] = slab;
+    }
+    Slab& slab = slabs_[pick];
+    const uint64_t offset = offset_in(slab);
+    vkBindBufferMemory(device_, b.buffer, slab.memory, offset);
+    b.memory = slab.memory;
+    b.mapped = slab.mapped ? slab.mapped + offset : nullptr;
+    b.slab = int32_t(pick);
+    slab.used = offset + req.size;
+    ++slab.buffers;
+    return true;
+}
+
+void Context::free_empty_slabs() {
+    for (Slab& slab : slabs_)
+        if (slab.memory && slab.buffers == 0) {
+            if (slab.mapped) vkUnmapMemory(device_, slab.memory);
+            vkFreeMemory(device_, slab.memory, nullptr);
+            slab = Slab{};
+        }
 }
 
 void Context::trim(uint64_t keep_bytes) {
@@ -564,6 +662,7 @@ void Context::trim(uint64_t keep_bytes) {
         free_buffer(idle_[n++]);
     }
     idle_.erase(idle_.begin(), idle_.begin() + ptrdiff_t(n));
+    if (keep_bytes == 0) free_empty_slabs();
 }
 
 void Context::set_cache_budget(uint64_t bytes) {
@@ -753,6 +852,12 @@ double Context::submit_part() {
     };
     for (size_t j = 0; j < part_stamps_.size(); ++j)
         stamps_ms_[part_stamps_[j]] = carried_ms_ + ms(ticks[2 + j]);
+    if (host_log_)
+        log_host("submission", 0,
+                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() -
+                                                           tally.start)
+                     .count(),
+                 ms(ticks[1]));
     return ms(ticks[1]);
 }
 
@@ -762,6 +867,25 @@ void Context::upload(const Buffer& dst, const void* data, uint64_t bytes, uint64
     std::memcpy(staging.mapped, data, bytes);
     begin();
     copy(staging, dst, bytes, 0, dst_offset);
+    submit();
+    destroy(staging);
+}
+
+void Context::upload(std::initializer_list<Upload> uploads) {
+    // Each piece at a multiple of 16 bytes in the staging buffer.
+    const auto padded = [](uint64_t bytes) { return (bytes + 15) & ~uint64_t(15); };
+    uint64_t total = 0;
+    for (const Upload& u : uploads) total += padded(u.bytes);
+    if (total == 0) return;
+    Buffer staging = create_buffer(total, true);
+    begin();
+    uint64_t at = 0;
+    for (const Upload& u : uploads) {
+        if (u.bytes == 0) continue;
+        std::memcpy(static_cast<uint8_t*>(staging.mapped) + at, u.data, u.bytes);
+        copy(staging, *u.dst, u.bytes, at, 0);
+        at += padded(u.bytes);
+    }
     submit();
     destroy(staging);
 }
