@@ -458,7 +458,10 @@ TEST(Gpu, TopLevelsRunWide) {
 // scratch budget (SDFPRUNE_VULKAN_SCRATCH_BYTES, standing in for a large scene's long tapes),
 // a generated fluid's finer levels have more than 1,024 jobs over tapes of hundreds of words;
 // some such step runs wide, its busiest lane walking less than in teams under the same budget,
-// and the grid is still the CPU's.
+// and the grid is still the CPU's. Where scratch holds a wide step to fewer workgroups than it
+// could run, its jobs are split (a workgroup takes fewer of a job's 8 boxes, and needs less
+// scratch): more lanes work than with every job on one workgroup (SDFPRUNE_VULKAN_WIDE_SPLIT=1),
+// and the grid is the same.
 TEST(Gpu, ScratchLimitedStepsRunWide) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = generate_scene("fluid", 1, 1000);
@@ -468,8 +471,21 @@ TEST(Gpu, ScratchLimitedStepsRunWide) {
     ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
     const gpu::Grid teams = gpu::prune(*dev, sc, o);
     ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+    ::setenv("SDFPRUNE_VULKAN_WIDE_SPLIT", "1", 1);
+    const gpu::Grid unsplit = gpu::prune(*dev, sc, o);
+    ::unsetenv("SDFPRUNE_VULKAN_WIDE_SPLIT");
     const gpu::Grid gpu = gpu::prune(*dev, sc, o);
     ::unsetenv("SDFPRUNE_VULKAN_SCRATCH_BYTES");
+    ASSERT_EQ(unsplit.stats().steps.size(), gpu.stats().steps.size());
+    bool split_wider = false;
+    for (size_t i = 0; i < gpu.stats().steps.size(); ++i) {
+        const gpu::GpuStepShape &st = gpu.stats().steps[i], &one = unsplit.stats().steps[i];
+        if (st.wide && one.wide && st.level > 0 && st.lanes_per_tape > one.lanes_per_tape &&
+            st.lanes > one.lanes)
+            split_wider = true;
+    }
+    EXPECT_TRUE(split_wider) << "no scratch-limited wide step was split over more lanes";
+    expect_same_device_cells(unsplit, gpu, "scratch-limited steps split");
     const std::vector<gpu::GpuStepShape>& steps = gpu.stats().steps;
     ASSERT_EQ(steps.size(), teams.stats().steps.size());
     bool many_wide = false;

@@ -44,8 +44,8 @@ layout(std430, binding = 12) readonly buffer NodeSpans { uvec2 node_span[]; };
 // A workgroup's scratch (wide_words): per parent-tape entry its left operand and its place in
 // the height order, per height its count, its entries placed so far and its first place, per
 // round (a height the tape has) kRoundWords (below), the rounds in no run (breaks) in order,
-// then per entry and box the value, range and flags (kWideEntryWords, item
-// (e · kTeam + b)).
+// then per entry and box of the workgroup's the value, range and flags (kWideEntryWords, item
+// (e · g_boxes + b − g_b0)).
 const uint kWideEntryWords = 4u;
 // Per round: its first place in the height order, its count of entries, and where it is in a
 // run (rounds 1 and up of one entry each: a chain's operators), the run's first round and the
@@ -58,7 +58,8 @@ const uint kRunEntry = 4u, kRunLeft = 5u, kRunWord = 6u, kRunSigns = 7u;
 // (device_layout.hpp: kPruneWideHeightWords).
 const uint kWideHeightWords = 3u + kRoundWords + 1u;
 uint wide_words() {
-    return pc.max_len * (2u + kWideEntryWords * kTeam) + kWideHeightWords * (pc.max_stack + 1u);
+    return pc.max_len * (2u + kWideEntryWords * (kTeam / pc.wide_split)) +
+           kWideHeightWords * (pc.max_stack + 1u);
 }
 
 // The workgroup's prefix sums.
@@ -129,8 +130,16 @@ void sync_all() {
     barrier();
 }
 
-// Entry e's value, range (lo, hi) and decision at box b: item (e · kTeam + b) of scratch.
-uint item_at(uint vbase, uint e, uint b) { return vbase + (e * kTeam + b) * kWideEntryWords; }
+// The boxes of its job a workgroup takes: [g_b0, g_b0 + g_boxes) (pc.wide_split workgroups per
+// job, kTeam / pc.wide_split boxes each).
+uint g_b0, g_boxes;
+
+// Entry e's value, range (lo, hi) and decision at box b (of the workgroup's, g_b0 and up):
+// item (e · g_boxes + b − g_b0) of scratch. A workgroup holds items for its own boxes only, so a
+// job split over more workgroups takes less scratch in each.
+uint item_at(uint vbase, uint e, uint b) {
+    return vbase + (e * g_boxes + (b - g_b0)) * kWideEntryWords;
+}
 vec3 item_range(uint at) {
     return vec3(uintBitsToFloat(scratch[at]), uintBitsToFloat(scratch[at + 1u]),
                 uintBitsToFloat(scratch[at + 2u]));
@@ -146,10 +155,6 @@ uvec3 run_record(uint rbase, uint q, uint third) {
     uint at = rbase + kRoundWords * q;
     return uvec3(scratch[at + kRunEntry], scratch[at + kRunLeft], scratch[at + third]);
 }
-
-// The boxes of its job a workgroup takes: [g_b0, g_b0 + g_boxes) (pc.wide_split workgroups per
-// job, kTeam / pc.wide_split boxes each).
-uint g_b0, g_boxes;
 
 // A run is walked by a lane a box (g_b0 + lane), each operand from scratch, made before the run
 // or by the lane earlier in it. PRUNE_WIDE_RUNS (prune_wide_runs.comp): a run of kRunStaged
@@ -357,7 +362,7 @@ void main() {
     uint hbase = obase + pc.max_len;        // per height: count, placed, first place
     uint rbase = hbase + 3u * (pc.max_stack + 1u);  // per round: kRoundWords
     uint bbase = rbase + kRoundWords * (pc.max_stack + 1u);  // the rounds in no run, in order
-    uint vbase = bbase + (pc.max_stack + 1u);  // item (e · kTeam + b): v, lo, hi, flags
+    uint vbase = bbase + (pc.max_stack + 1u);  // items (item_at): v, lo, hi, flags
     bool interval = (pc.flags & 2u) != 0u;
     bool transient = pc.mode == 1u || (pc.flags & 4u) != 0u;
 
@@ -500,7 +505,7 @@ void main() {
 
         // Stage 3: the far-field test on each box's root range (is_near_field).
         if (id < g_boxes) {
-            uint s0 = vbase + ((len - 1u) * kTeam + box) * kWideEntryWords;
+            uint s0 = item_at(vbase, len - 1u, box);
             float v = uintBitsToFloat(scratch[s0]);
             float L = nodes[tape_node(root_word)].lipschitz;
             float clearance = far_field_clearance(pc.csize.w, L, R);
@@ -537,7 +542,7 @@ void main() {
             for (uint k = id; k < count * g_boxes; k += kWide) {
                 if (s_state[box] != 1u) continue;
                 uint e = scratch[obase + first_place + k / g_boxes];
-                uint fe = vbase + (e * kTeam + box) * kWideEntryWords + 3u;
+                uint fe = item_at(vbase, e, box) + 3u;
                 uint fl = scratch[fe];
                 if (((fl >> 2) & 3u) != 1u) continue;
                 uint l = scratch[lbase + e], r = e - 1u;
@@ -545,8 +550,8 @@ void main() {
                 if (d == kKeepBoth) {
                     uint nl = tape_negated(tape_read(parent, 2u + l)) ? 1u : 0u;
                     uint nr = tape_negated(tape_read(parent, 2u + r)) ? 1u : 0u;
-                    uint fl_l = vbase + (l * kTeam + box) * kWideEntryWords + 3u;
-                    uint fl_r = vbase + (r * kTeam + box) * kWideEntryWords + 3u;
+                    uint fl_l = item_at(vbase, l, box) + 3u;
+                    uint fl_r = item_at(vbase, r, box) + 3u;
                     scratch[fl_l] = (scratch[fl_l] & 3u) | (1u << 2) | (nl << 4);
                     scratch[fl_r] = (scratch[fl_r] & 3u) | (1u << 2) | (nr << 4);
                     continue;
@@ -554,7 +559,7 @@ void main() {
                 uint wn = d == kLeftWins ? l : r;
                 uint neg = ((fl >> 4) & 1u) ^ (tape_negated(tape_read(parent, 2u + wn)) ? 1u : 0u);
                 scratch[fe] = (fl & 3u) | (2u << 2) | (fl & 16u);
-                uint fl_w = vbase + (wn * kTeam + box) * kWideEntryWords + 3u;
+                uint fl_w = item_at(vbase, wn, box) + 3u;
                 scratch[fl_w] = (scratch[fl_w] & 3u) | (1u << 2) | (neg << 4);
             }
             sync_all();
@@ -571,7 +576,7 @@ void main() {
         uint kept = 0u, kept_prims = 0u;
         int depth = 0, depth_peak = 0;  // the stack's change from the slice's start, its peak
         for (uint e = e0; mine && e < e1; ++e) {
-            uint fl = scratch[vbase + (e * kTeam + cbox) * kWideEntryWords + 3u];
+            uint fl = scratch[item_at(vbase, e, cbox) + 3u];
             if (((fl >> 2) & 3u) != 1u) continue;
             bool prim = is_primitive(tape_node(tape_read(parent, 2u + e)));
             if (prim) ++kept_prims;
@@ -637,7 +642,7 @@ void main() {
         if (s_state[cbox] == 2u) {
             uint to = s_at[cbox] + 2u + before.x;
             for (uint e = e0; e < e1; ++e) {
-                uint fl = scratch[vbase + (e * kTeam + cbox) * kWideEntryWords + 3u];
+                uint fl = scratch[item_at(vbase, e, cbox) + 3u];
                 if (((fl >> 2) & 3u) != 1u) continue;
                 uint node = tape_node(tape_read(parent, 2u + e));
                 tape_write(to++, tape_word(node, ((fl >> 4) & 1u) != 0u));

@@ -257,6 +257,22 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
     while (split < kPruneTeam && std::max<uint64_t>(s.team_jobs, 1) * split * 2 <=
                                      std::min(kWideSplitGroups, resident_groups))
         split *= 2;
+    // A workgroup's scratch: per tape entry two words, and the items of its own boxes.
+    const auto group_bytes_for = [&](uint64_t sp) {
+        return (len * (2 + kPruneWideEntryWords * (kPruneTeam / sp)) +
+                kPruneWideHeightWords * heights) *
+               4;
+    };
+    const auto fitting = [&](uint64_t sp) {
+        return ctx.prune_scratch_budget_bytes() / group_bytes_for(sp);
+    };
+    // Where scratch holds the step to fewer workgroups than it has jobs and the device runs
+    // (the million-sphere fluid's top levels: parent tapes of a million words and more), the
+    // jobs are split further, as long as more workgroups then fit: a workgroup of 1 box in 8
+    // needs 6 words an entry instead of 34.
+    while (split < kPruneTeam && fitting(split) < std::min(s.team_jobs * split, resident_groups) &&
+           fitting(2 * split) > fitting(split))
+        split *= 2;
     if (wide_split > 0) split = wide_split;
     const uint64_t boxes = kPruneTeam / split;
     const uint64_t walk_job = ceil_div(len, kPruneWide) * (2 + std::bit_width(len)) +
@@ -266,9 +282,8 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
                              ceil_div(rounds, kPruneWide) + 2 * rounds +
                              2 * ceil_div(rounds, kPruneWideRunChunk) * (kPruneWideRunChunk + 4) +
                              4 * std::bit_width(kPruneWide);
-    const uint64_t group_bytes =
-        (len * (2 + kPruneWideEntryWords * kPruneTeam) + kPruneWideHeightWords * heights) * 4;
-    const uint64_t fit_groups = ctx.prune_scratch_budget_bytes() / group_bytes;
+    const uint64_t group_bytes = group_bytes_for(split);
+    const uint64_t fit_groups = fitting(split);
     const bool limited = ctx.loop_limited();
     if (fit_groups == 0 || (limited && 2 * per_job + 1024 > Context::kLoopLimit)) return;
     const uint64_t parts = s.team_jobs * split;
