@@ -289,7 +289,8 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(PrunePush, first_job), SDFPRUNE_MEMBER(PrunePush, round),
              SDFPRUNE_MEMBER(PrunePush, budget), SDFPRUNE_MEMBER(PrunePush, refine),
              SDFPRUNE_MEMBER(PrunePush, octant_start), SDFPRUNE_MEMBER(PrunePush, list_start),
-             SDFPRUNE_MEMBER(PrunePush, lane_tape), SDFPRUNE_MEMBER(PrunePush, wide_split)},
+             SDFPRUNE_MEMBER(PrunePush, lane_tape), SDFPRUNE_MEMBER(PrunePush, wide_split),
+             SDFPRUNE_MEMBER(PrunePush, group_base)},
             Scope::kPush),
         mirror<ExpandPush>(
             "Push", {"expand"},
@@ -417,17 +418,16 @@ constexpr uint32_t kTraceSpv[] = {
 constexpr uint32_t kDiscretizeSpv[] = {
 #include "discretize.reflect.spv.inc"
 };
-const EmbeddedKernel kKernels[] = {
-    {"prune", kPruneSpv},
-    {"prune_refine_lanes", kPruneRefineLanesSpv},
-    {"prune_refine", kPruneRefineSpv},
-    {"prune_wide", kPruneWideSpv},
-    {"prune_wide_subgroups", kPruneWideSubgroupsSpv},
-    {"prune_wide_runs", kPruneWideRunsSpv},
-    {"expand", kExpandSpv},
-    {"cell_info", kCellInfoSpv},
-    {"trace", kTraceSpv},
-    {"discretize", kDiscretizeSpv}};
+const EmbeddedKernel kKernels[] = {{"prune", kPruneSpv},
+                                   {"prune_refine_lanes", kPruneRefineLanesSpv},
+                                   {"prune_refine", kPruneRefineSpv},
+                                   {"prune_wide", kPruneWideSpv},
+                                   {"prune_wide_subgroups", kPruneWideSubgroupsSpv},
+                                   {"prune_wide_runs", kPruneWideRunsSpv},
+                                   {"expand", kExpandSpv},
+                                   {"cell_info", kCellInfoSpv},
+                                   {"trace", kTraceSpv},
+                                   {"discretize", kDiscretizeSpv}};
 #else
 const std::vector<EmbeddedKernel> kKernels;
 #endif

@@ -461,13 +461,17 @@ TEST(Gpu, TopLevelsRunWide) {
 // and the grid is still the CPU's. Where scratch holds a wide step to fewer workgroups than it
 // could run, its jobs are split (a workgroup takes fewer of a job's 8 boxes, and needs less
 // scratch): more lanes work than with every job on one workgroup (SDFPRUNE_VULKAN_WIDE_SPLIT=1),
-// and the grid is the same.
+// and the grid is the same. With scratch spread over several buffers (a dispatch a buffer,
+// side by side), more workgroups run at once again, and the grid is still the same.
 TEST(Gpu, ScratchLimitedStepsRunWide) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = generate_scene("fluid", 1, 1000);
     PruneOptions o;
     o.resolution = 64;
     ::setenv("SDFPRUNE_VULKAN_SCRATCH_BYTES", "1048576", 1);
+    ::setenv("SDFPRUNE_VULKAN_SCRATCH_BUFFERS", "4", 1);
+    const gpu::Grid spread = gpu::prune(*dev, sc, o);
+    ::setenv("SDFPRUNE_VULKAN_SCRATCH_BUFFERS", "1", 1);
     ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
     const gpu::Grid teams = gpu::prune(*dev, sc, o);
     ::unsetenv("SDFPRUNE_VULKAN_WIDE");
@@ -476,7 +480,17 @@ TEST(Gpu, ScratchLimitedStepsRunWide) {
     ::unsetenv("SDFPRUNE_VULKAN_WIDE_SPLIT");
     const gpu::Grid gpu = gpu::prune(*dev, sc, o);
     ::unsetenv("SDFPRUNE_VULKAN_SCRATCH_BYTES");
+    ::unsetenv("SDFPRUNE_VULKAN_SCRATCH_BUFFERS");
     ASSERT_EQ(unsplit.stats().steps.size(), gpu.stats().steps.size());
+    ASSERT_EQ(spread.stats().steps.size(), gpu.stats().steps.size());
+    bool spread_wider = false;
+    for (size_t i = 0; i < gpu.stats().steps.size(); ++i) {
+        const gpu::GpuStepShape &st = spread.stats().steps[i], &one = gpu.stats().steps[i];
+        if (st.wide && one.wide && st.lanes > one.lanes && st.dispatches > one.dispatches)
+            spread_wider = true;
+    }
+    EXPECT_TRUE(spread_wider) << "no wide step spread its scratch over more buffers";
+    expect_same_device_cells(gpu, spread, "scratch spread over 4 buffers");
     bool split_wider = false;
     for (size_t i = 0; i < gpu.stats().steps.size(); ++i) {
         const gpu::GpuStepShape &st = gpu.stats().steps[i], &one = unsplit.stats().steps[i];

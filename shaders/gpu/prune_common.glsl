@@ -70,6 +70,7 @@ layout(push_constant) uniform Push {
     uint list_start;    // mode 3: where the long list starts in scratch
     uint lane_tape;     // mode 3: the longest tape a lane refines alone
     uint wide_split;    // prune_wide.comp: workgroups per job (a share of its kTeam boxes each)
+    uint group_base;    // prune_wide.comp: the dispatch's first workgroup among the step's
 } pc;
 
 // The step's counters (near_jobs, near_words, max_len, max_depth), summed and maxed first in

@@ -367,8 +367,11 @@ void main() {
     bool transient = pc.mode == 1u || (pc.flags & 4u) != 0u;
 
     // Every lane of a workgroup sees the same trip count and the same job (and boxes).
-    for (uint part = pc.first_job * split + gl_WorkGroupID.x; part < pc.jobs * split;
-         part += groups) {
+    // (A step whose scratch is spread over several buffers runs as several dispatches side by
+    // side, one a buffer: the dispatch's workgroups are the step's from pc.group_base on, its
+    // scratch its own buffer's.)
+    for (uint part = pc.first_job * split + pc.group_base + gl_WorkGroupID.x;
+         part < pc.jobs * split; part += groups) {
         uint job = part / split;
         g_b0 = (part % split) * g_boxes;
         uint box = g_b0 + id % g_boxes;  // the box of this lane in stages 1–4

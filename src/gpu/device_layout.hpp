@@ -66,6 +66,7 @@ struct PrunePush {                                  // prune.comp and prune_wide
     vec4 origin, csize;
     uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
     uint32_t round, budget, refine, octant_start, list_start, lane_tape, wide_split;
+    uint32_t group_base;
 };
 struct ExpandPush {  // expand.comp: Push
     uint32_t factor, cells_count, next_factor, bound_only;

@@ -145,6 +145,7 @@ void Pruner::run() {
     for (uint32_t li = 0; li < res.size(); ++li) prune_level(li);
     ctx.destroy(blocks);
     ctx.destroy(scratch);
+    for (Buffer* b : more_scratch) ctx.destroy(*b);
     ctx.destroy(octant_pool);
     ctx.destroy(refine_list);
     g.finest_stack_depth = max_depth;  // the last level's: the finest cells' (refined)
@@ -458,14 +459,19 @@ void Pruner::record_step(Step& s) {
             push.first_job = uint32_t(first);
             push.jobs = uint32_t(std::min<uint64_t>(end, first + s.per_dispatch));
             push.round = round;
-            // Binding 12: the wide kernels' node spans, the others' second view of scratch.
-            ctx.dispatch(s.kernel,
-                         {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants, s.cells,
-                          &counters, &scratch, &octant_pool, &refine_list, &g.pool,
-                          s.wide ? &node_spans : &scratch},
-                         &push, sizeof(push), s.groups);
-            ++s.shape.dispatches;
-            s.shape.workgroups += s.groups;
+            // Binding 12: the wide kernels' node spans, the others' second view of scratch. A
+            // wide step spread over several scratch buffers: a dispatch a buffer, side by side.
+            for (uint32_t b = 0; b < s.scratch_buffers; ++b) {
+                const Buffer* scratch_b = b == 0 ? &scratch : more_scratch[b - 1];
+                push.group_base = b * s.groups;
+                ctx.dispatch(s.kernel,
+                             {&g.nodes, &g.params, &g.extras, parent_pool, &blocks, s.octants,
+                              s.cells, &counters, scratch_b, &octant_pool, &refine_list, &g.pool,
+                              s.wide ? &node_spans : scratch_b},
+                             &push, sizeof(push), s.groups, b + 1 == s.scratch_buffers);
+                ++s.shape.dispatches;
+                s.shape.workgroups += s.groups;
+            }
         }
     s.last_stamp = ctx.stamp();
 }

@@ -29,7 +29,10 @@ struct Step {
     // level's blocks (refinement: of its list, from 0; its slice's cells start at first_cell).
     uint64_t first_team_job, team_jobs, teams, rounds, per_dispatch, first_cell = 0;
     uint64_t job_walk;         // in teams, the tape words a lane reads per job, at most
-    uint32_t threads, groups;  // lanes that take jobs, and their workgroups
+    uint32_t threads, groups;  // lanes that take jobs, and their workgroups (a dispatch's)
+    // Wide steps: the scratch buffers its workgroups' scratch is spread over, one dispatch of
+    // `groups` workgroups a buffer, side by side (Context::prune_scratch_buffers).
+    uint32_t scratch_buffers = 1;
     bool wide;
     KernelId kernel = KernelId::kPrune;
     // Refinement's squads after its lane pass (prune_refine_lanes.comp), taking the cells it
@@ -102,6 +105,10 @@ class Pruner {
     GpuCounters* counter;
     Buffer& blocks;  // the current level's blocks
     Buffer& scratch;
+    // A wide step's scratch beyond the first buffer's (Step::scratch_buffers), and the most
+    // buffers a step may take (1 after the device had no memory for more).
+    std::vector<Buffer*> more_scratch;
+    uint32_t scratch_buffers_cap = 8;
     // The octants' tapes of the current level (prune.comp: OctantPool), reused level by level.
     Buffer& octant_pool;
     // Refinement's jobs: the finest near-field cells (prune_common.glsl: RefineList), listed by

@@ -128,10 +128,31 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
     s.shape.longest_walk_words = s.team_jobs == 0 ? 0 : ceil_div(s.team_jobs, s.teams) * s.job_walk;
     s.wide = false;
     uint64_t scratch_bytes = s.teams * team_bytes;
+    const Step teams = s;
     if (wide_override != 0 && ctx.can_run(KernelId::kPruneWide)) plan_wide(s, scratch_bytes);
     if (scratch.size < scratch_bytes) {
         ctx.destroy(scratch);
         scratch = ctx.create_buffer(scratch_bytes);
+    }
+    // A wide step's further scratch buffers. Where the device has no memory left for them
+    // (a small GPU, a large scene), the pruning goes on with one buffer from then on.
+    try {
+        while (more_scratch.size() + 1 < s.scratch_buffers) more_scratch.push_back(&local.slot());
+        for (uint32_t b = 1; b < s.scratch_buffers; ++b)
+            if (more_scratch[b - 1]->size < scratch_bytes) {
+                ctx.destroy(*more_scratch[b - 1]);
+                *more_scratch[b - 1] = ctx.create_buffer(scratch_bytes);
+            }
+    } catch (const GpuError&) {
+        for (Buffer* b : more_scratch) ctx.destroy(*b);
+        scratch_buffers_cap = 1;
+        s = teams;
+        scratch_bytes = s.teams * team_bytes;
+        plan_wide(s, scratch_bytes);
+        if (scratch.size < scratch_bytes) {
+            ctx.destroy(scratch);
+            scratch = ctx.create_buffer(scratch_bytes);
+        }
     }
     return s;
 }
@@ -157,7 +178,8 @@ PrunePush Pruner::push_for(const Level& lv, uint32_t mode, uint32_t threads, uin
                      0,
                      0,
                      0,
-                     1};
+                     1,
+                     0};
 }
 
 // Refinement's lane pass (prune_refine_lanes.comp): a lane per listed cell, as many lanes as
@@ -263,8 +285,10 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
                 kPruneWideHeightWords * heights) *
                4;
     };
+    // Workgroups whose scratch fits a buffer, and all the buffers a step may spread over.
+    const uint64_t buffers = std::min(ctx.prune_scratch_buffers(), scratch_buffers_cap);
     const auto fitting = [&](uint64_t sp) {
-        return ctx.prune_scratch_budget_bytes() / group_bytes_for(sp);
+        return buffers * (ctx.prune_scratch_budget_bytes() / group_bytes_for(sp));
     };
     // Where scratch holds the step to fewer workgroups than it has jobs and the device runs
     // (the million-sphere fluid's top levels: parent tapes of a million words and more), the
@@ -283,13 +307,16 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
                              2 * ceil_div(rounds, kPruneWideRunChunk) * (kPruneWideRunChunk + 4) +
                              4 * std::bit_width(kPruneWide);
     const uint64_t group_bytes = group_bytes_for(split);
-    const uint64_t fit_groups = fitting(split);
+    const uint64_t buffer_groups = ctx.prune_scratch_budget_bytes() / group_bytes;
     const bool limited = ctx.loop_limited();
-    if (fit_groups == 0 || (limited && 2 * per_job + 1024 > Context::kLoopLimit)) return;
+    if (buffer_groups == 0 || (limited && 2 * per_job + 1024 > Context::kLoopLimit)) return;
     const uint64_t parts = s.team_jobs * split;
     const uint64_t unlimited_groups =
         std::min({std::max<uint64_t>(parts, 1), uint64_t(ctx.max_workgroups()), resident_groups});
-    const uint64_t groups = std::min(unlimited_groups, fit_groups);
+    // As few buffers as hold the workgroups, as many workgroups in each.
+    const uint64_t spread = std::min(buffers, ceil_div(unlimited_groups, buffer_groups));
+    const uint64_t dispatch_groups = std::min(buffer_groups, ceil_div(unlimited_groups, spread));
+    const uint64_t groups = spread * dispatch_groups;
     const uint64_t group_jobs = ceil_div(parts, groups);
     const uint64_t walk = s.team_jobs == 0 ? 0 : group_jobs * walk_job;
     const uint64_t cost = walk + group_jobs * 2 * (kWideRoundCost - 1) * rounds;
@@ -298,7 +325,8 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
     if (!pick) return;
     s.wide = true;
     s.teams = groups;
-    s.groups = uint32_t(groups);
+    s.groups = uint32_t(dispatch_groups);
+    s.scratch_buffers = uint32_t(spread);
     s.threads = uint32_t(groups * kPruneWide);
     s.rounds = 1;
     s.per_dispatch =
@@ -321,7 +349,7 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
     s.shape.lanes_per_tape = uint32_t(kPruneWide * split);
     s.shape.lanes = std::min<uint64_t>(parts, groups) * kPruneWide;
     s.shape.longest_walk_words = walk;
-    scratch_bytes = groups * group_bytes;
+    scratch_bytes = dispatch_groups * group_bytes;  // in each buffer
 }
 
 }  // namespace sdfprune::gpu::pruning

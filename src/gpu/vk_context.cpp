@@ -691,6 +691,13 @@ uint64_t Context::prune_scratch_budget_bytes() const {
     return std::min(scratch_override(std::max(kScratchBudgetBytes, device_heap_ / 16)), max_range_);
 }
 
+uint32_t Context::prune_scratch_buffers() const {
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_SCRATCH_BUFFERS"); env && *env)
+        return uint32_t(std::clamp<unsigned long>(std::strtoul(env, nullptr, 10), 1, 8));
+    return uint32_t(std::clamp<uint64_t>(
+        std::max(kScratchBudgetBytes, device_heap_ / 4) / prune_scratch_budget_bytes(), 1, 8));
+}
+
 uint32_t Context::threads_for(uint64_t work, uint64_t bytes_per_thread) const {
     const uint64_t budget = scratch_budget_bytes();
     const uint64_t fit = budget / std::max<uint64_t>(bytes_per_thread, 1) / kWorkgroupSize;
@@ -744,7 +751,7 @@ void Context::barrier() {
 }
 
 void Context::dispatch(KernelId id, std::initializer_list<const Buffer*> buffers, const void* push,
-                       uint32_t push_bytes, uint32_t groups) {
+                       uint32_t push_bytes, uint32_t groups, bool then_barrier) {
     const Kernel& k = kernels_[size_t(id)];
     if (buffers.size() != k.bindings || push_bytes > kPushBytes)
         throw std::logic_error("Context::dispatch: bindings do not match the kernel");
@@ -789,7 +796,7 @@ void Context::dispatch(KernelId id, std::initializer_list<const Buffer*> buffers
     vkCmdPushConstants(cmd_, k.layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, kPushBytes, padded);
     if (groups > max_groups_) throw std::logic_error("Context::dispatch: too many workgroups");
     vkCmdDispatch(cmd_, std::max(groups, 1u), 1, 1);
-    barrier();
+    if (then_barrier) barrier();
 }
 
 void Context::copy(const Buffer& src, const Buffer& dst, uint64_t bytes, uint64_t src_offset,

@@ -88,6 +88,11 @@ class Context {
     // teams starved of scratch would walk them one round after another. Both budgets are
     // SDFPRUNE_VULKAN_SCRATCH_BYTES where that is set (read at each call, for tests).
     uint64_t prune_scratch_budget_bytes() const;
+    // How many buffers of prune_scratch_budget_bytes() a wide pruning step may spread its
+    // workgroups' scratch over (one range of each bound per dispatch, the dispatches running
+    // side by side): a quarter of the device-local heap in all, 1 to 8 buffers;
+    // SDFPRUNE_VULKAN_SCRATCH_BUFFERS=N sets it (read at each call, for tests).
+    uint32_t prune_scratch_buffers() const;
     uint32_t max_workgroups() const { return max_groups_; }
     // About how many invocations the device runs at once: more threads in flight only queue
     // behind these, so scratch for more is held for nothing. From VK_NV_shader_sm_builtins
@@ -144,8 +149,11 @@ class Context {
     // Long recordings are submitted in parts on the way (kMaxDispatches at a time).
     static constexpr uint32_t kMaxDispatches = 4096;
     void begin();
+    // A dispatch waits for everything recorded before it, and what follows waits for it,
+    // unless `then_barrier` is false: then the next dispatch may run beside it (they must not
+    // touch the same memory but through atomics).
     void dispatch(KernelId k, std::initializer_list<const Buffer*> buffers, const void* push,
-                  uint32_t push_bytes, uint32_t groups);
+                  uint32_t push_bytes, uint32_t groups, bool then_barrier = true);
     void copy(const Buffer& src, const Buffer& dst, uint64_t bytes, uint64_t src_offset = 0,
               uint64_t dst_offset = 0);
     void fill(const Buffer& dst, uint32_t value);
