@@ -6,7 +6,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <memory>
 #include <optional>
 #include <set>
@@ -1213,6 +1215,35 @@ TEST(GpuCli, BadBackendUseExitsTwo) {
     EXPECT_EQ(std::count(none.err.begin(), none.err.end(), '\n'), 1) << none.err;
     const CliResult cpu = run_cli("stats builtin:sphere --grid 8 --backend cpu");
     EXPECT_EQ(cpu.status, 0) << cpu.err;
+}
+
+// A device that runs out of memory while pruning (SDFPRUNE_VULKAN_MEMORY_LIMIT: one of 4 MB)
+// gets a one-line message and exit status 2, not a crash, and no output file; render and
+// discretize too. With the memory it needs, the same command succeeds.
+TEST(GpuCli, DeviceOutOfMemoryExitsTwo) {
+    if (!gpu::built_with_vulkan()) GTEST_SKIP() << "built without the Vulkan backend";
+    const std::string png = "/tmp/sdfprune_oom_test.png", npy = "/tmp/sdfprune_oom_test.npy";
+    const std::pair<std::string, std::string> commands[] = {
+        {"stats builtin:demo --grid 32 --backend vulkan", ""},
+        {"render builtin:demo --grid 32 --width 32 --height 32 --backend vulkan -o " + png, png},
+        {"discretize builtin:demo --res 32 --grid 32 --backend vulkan -o " + npy, npy}};
+    for (const auto& [command, output] : commands) {
+        SCOPED_TRACE(command);
+        if (!output.empty()) std::remove(output.c_str());
+        const CliResult small = run_cli(command, "SDFPRUNE_VULKAN_MEMORY_LIMIT=4000000");
+        EXPECT_EQ(small.status, 2);
+        EXPECT_NE(small.err.find("out of memory"), std::string::npos) << small.err;
+        EXPECT_EQ(std::count(small.err.begin(), small.err.end(), '\n'), 1) << small.err;
+        if (!output.empty()) {
+            EXPECT_FALSE(std::filesystem::exists(output));
+        }
+        const CliResult enough = run_cli(command);
+        EXPECT_EQ(enough.status, 0) << enough.err;
+        if (!output.empty()) {
+            EXPECT_TRUE(std::filesystem::exists(output));
+            std::remove(output.c_str());
+        }
+    }
 }
 
 }  // namespace

@@ -134,8 +134,12 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
         ctx.destroy(scratch);
         scratch = ctx.create_buffer(scratch_bytes);
     }
-    // A wide step's further scratch buffers. Where the device has no memory left for them
-    // (a small GPU, a large scene), the pruning goes on with one buffer from then on.
+    // A wide step's further scratch buffers (those it does not take are given back: only the
+    // top levels' steps spread, and the finer levels need the memory). Where the device has
+    // no memory left for them (a small GPU, a large scene), the pruning goes on with one
+    // buffer from then on.
+    for (size_t b = s.scratch_buffers; b <= more_scratch.size(); ++b)
+        ctx.destroy(*more_scratch[b - 1]);
     try {
         while (more_scratch.size() + 1 < s.scratch_buffers) more_scratch.push_back(&local.slot());
         for (uint32_t b = 1; b < s.scratch_buffers; ++b)

@@ -235,6 +235,10 @@ Context::Context() {
         use_slabs_ = std::atoi(env) != 0;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_MAX_BUFFER"))  // a smaller device, for tests
         max_range_ = std::min<uint64_t>(max_range_, std::strtoull(env, nullptr, 10));
+    // A device with less memory, for tests: new device-local buffers past this many bytes in
+    // use fail as if the device had run out.
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_MEMORY_LIMIT"); env && *env)
+        memory_limit_ = std::strtoull(env, nullptr, 10);
     max_range_ &= ~uint64_t(15);  // buffer sizes round up to 16
     max_groups_ = props.limits.maxComputeWorkGroupCount[0];
     loop_limited_ = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU &&
@@ -537,10 +541,15 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
     mai.allocationSize = req.size;
     mai.memoryTypeIndex = type;
     ++host_.allocations;
-    VkResult r = vkAllocateMemory(device_, &mai, nullptr, &b.memory);
+    const auto allocate = [&] {
+        return !host_visible && live_ + capacity > memory_limit_
+                   ? VK_ERROR_OUT_OF_DEVICE_MEMORY
+                   : vkAllocateMemory(device_, &mai, nullptr, &b.memory);
+    };
+    VkResult r = allocate();
     if (r != VK_SUCCESS && !idle_.empty()) {  // the idle buffers may be what is in the way
         trim(0);
-        r = vkAllocateMemory(device_, &mai, nullptr, &b.memory);
+        r = allocate();
     }
     if (r != VK_SUCCESS) {
         vkDestroyBuffer(device_, b.buffer, nullptr);

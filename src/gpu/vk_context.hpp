@@ -225,6 +225,7 @@ class Context {
     bool loop_limited_ = false;
     bool subgroups_ = false;
     uint64_t live_ = 0, peak_ = 0;
+    uint64_t memory_limit_ = ~uint64_t(0);  // SDFPRUNE_VULKAN_MEMORY_LIMIT
     // Small buffers' memory. A device allocation costs the host about 0.13 ms however small
     // (and about 0.02 ms per MB beyond; host-visible memory 0.4 ms per MB) on an H100's
     // driver, and a pruning call makes dozens of buffers of a few KB, so buffers up to
