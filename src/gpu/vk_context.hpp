@@ -37,6 +37,14 @@ enum class KernelId : uint32_t {
     kCount
 };
 
+// A zeroed Vulkan info struct with its type set.
+template <class T>
+T vk_struct(VkStructureType type) {
+    T s{};
+    s.sType = type;
+    return s;
+}
+
 struct Buffer {
     VkBuffer buffer = VK_NULL_HANDLE;
     VkDeviceMemory memory = VK_NULL_HANDLE;

@@ -1,0 +1,224 @@
+// vk_memory.cpp — the device memory behind Context's buffers: memory types, the idle cache
+// that recycles buffers by capacity class, and the slabs small buffers share (vk_context.hpp
+// says why each exists).
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <string>
+
+#include "vk_context.hpp"
+
+namespace sdfprune::gpu {
+
+uint32_t Context::memory_type(uint32_t bits, bool host_visible) const {
+    const VkMemoryPropertyFlags want =
+        host_visible ? VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT
+                     : VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT;
+    for (uint32_t i = 0; i < memory_.memoryTypeCount; ++i)
+        if ((bits & (1u << i)) && (memory_.memoryTypes[i].propertyFlags & want) == want) return i;
+    // Devices without a device-local type (some CPU drivers) use any allowed type.
+    for (uint32_t i = 0; i < memory_.memoryTypeCount; ++i)
+        if ((bits & (1u << i)) && !host_visible) return i;
+    throw GpuError("Vulkan: no suitable memory type");
+}
+
+namespace {
+// The capacity class of a buffer of `bytes` (a multiple of 16): up to 64 bytes the size
+// itself; above, the next multiple of a quarter of the power of two below it (2^k times 1.25,
+// 1.5, 1.75 or 2), so at most 25 % more than asked.
+uint64_t capacity_class(uint64_t bytes) {
+    if (bytes <= 64) return bytes;
+    const uint64_t quarter = uint64_t(1) << (std::bit_width(bytes - 1) - 3);
+    return (bytes + quarter - 1) / quarter * quarter;
+}
+}  // namespace
+
+Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
+    const auto start = std::chrono::steady_clock::now();
+    const auto add_time = [&] {
+        host_.buffer_ms +=
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                .count();
+    };
+    const uint64_t size = (std::max<uint64_t>(bytes, 16) + 15) & ~uint64_t(15);
+    // (A buffer as large as the device's largest range is not rounded past it.)
+    const uint64_t capacity = std::max(size, std::min(capacity_class(size), max_range_));
+    const auto hand_out = [&](Buffer b) {
+        b.size = size;
+        if (!host_visible) {
+            live_ += b.capacity;
+            peak_ = std::max(peak_, live_);
+        }
+        add_time();
+        return b;
+    };
+    // The most recently cached buffer of this class and kind (still warm in the driver's and
+    // the device's caches).
+    for (size_t i = idle_.size(); i-- > 0;)
+        if (idle_[i].capacity == capacity && (idle_[i].mapped != nullptr) == host_visible) {
+            const Buffer b = idle_[i];
+            idle_.erase(idle_.begin() + ptrdiff_t(i));
+            cached_ -= b.capacity;
+            ++host_.buffers_reused;
+            return hand_out(b);
+        }
+
+    Buffer b;
+    b.capacity = capacity;
+    auto bci = vk_struct<VkBufferCreateInfo>(VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO);
+    bci.size = capacity;
+    bci.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
+                VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+    bci.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+    check(vkCreateBuffer(device_, &bci, nullptr, &b.buffer), "vkCreateBuffer");
+    VkMemoryRequirements req;
+    vkGetBufferMemoryRequirements(device_, b.buffer, &req);
+    const uint32_t type = memory_type(req.memoryTypeBits, host_visible);
+    if (use_slabs_ && req.size <= kSlabBufferMax[host_visible] &&
+        bind_to_slab(b, req, type, host_visible)) {
+        ++host_.buffers;
+        return hand_out(b);
+    }
+    auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
+    mai.allocationSize = req.size;
+    mai.memoryTypeIndex = type;
+    ++host_.allocations;
+    const auto allocate = [&] {
+        return !host_visible && live_ + capacity > memory_limit_
+                   ? VK_ERROR_OUT_OF_DEVICE_MEMORY
+                   : vkAllocateMemory(device_, &mai, nullptr, &b.memory);
+    };
+    VkResult r = allocate();
+    if (r != VK_SUCCESS && !idle_.empty()) {  // the idle buffers may be what is in the way
+        trim(0);
+        r = allocate();
+    }
+    if (r != VK_SUCCESS) {
+        vkDestroyBuffer(device_, b.buffer, nullptr);
+        add_time();
+        throw GpuError("Vulkan device out of memory: a buffer of " + std::to_string(bytes) +
+                       " bytes did not fit (" + std::to_string(live_) + " bytes in use)");
+    }
+    vkBindBufferMemory(device_, b.buffer, b.memory, 0);
+    if (host_visible) {
+        r = vkMapMemory(device_, b.memory, 0, capacity, 0, &b.mapped);
+        if (r != VK_SUCCESS) {
+            vkDestroyBuffer(device_, b.buffer, nullptr);
+            vkFreeMemory(device_, b.memory, nullptr);
+            add_time();
+            check(r, "vkMapMemory");
+        }
+    }
+    ++host_.buffers;
+    if (host_log_)
+        log_host(host_visible ? "host-visible buffer" : "device buffer", capacity,
+                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                     .count(),
+                 0);
+    return hand_out(b);
+}
+
+void Context::destroy(Buffer& b) {
+    if (!b.buffer) return;
+    if (!b.mapped) live_ -= b.capacity;
+    if (b.capacity > cache_budget_) {
+        free_buffer(b);
+    } else {
+        trim(cache_budget_ - b.capacity);
+        idle_.push_back(b);
+        cached_ += b.capacity;
+    }
+    b = Buffer{};
+}
+
+void Context::free_buffer(Buffer& b) {
+    vkDestroyBuffer(device_, b.buffer, nullptr);
+    if (b.slab >= 0) {
+        Slab& slab = slabs_[size_t(b.slab)];
+        if (--slab.buffers == 0) slab.used = 0;
+    } else {
+        if (b.mapped) vkUnmapMemory(device_, b.memory);
+        vkFreeMemory(device_, b.memory, nullptr);
+    }
+    b = Buffer{};
+}
+
+bool Context::bind_to_slab(Buffer& b, const VkMemoryRequirements& req, uint32_t type,
+                           bool host_visible) {
+    const auto offset_in = [&](const Slab& s) {
+        return (s.used + req.alignment - 1) / req.alignment * req.alignment;
+    };
+    // The most recent slab of the type with room (a slab never holds buffers of two types).
+    size_t pick = slabs_.size();
+    for (size_t i = slabs_.size(); i-- > 0;)
+        if (slabs_[i].memory && slabs_[i].type == type && slabs_[i].host_visible == host_visible &&
+            offset_in(slabs_[i]) + req.size <= slabs_[i].size) {
+            pick = i;
+            break;
+        }
+    if (pick == slabs_.size()) {
+        Slab slab;
+        slab.size = kSlabBytes[host_visible];
+        slab.type = type;
+        slab.host_visible = host_visible;
+        auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
+        mai.allocationSize = slab.size;
+        mai.memoryTypeIndex = type;
+        const auto start = std::chrono::steady_clock::now();
+        ++host_.allocations;
+        if (vkAllocateMemory(device_, &mai, nullptr, &slab.memory) != VK_SUCCESS) return false;
+        void* mapped = nullptr;
+        if (host_visible &&
+            vkMapMemory(device_, slab.memory, 0, slab.size, 0, &mapped) != VK_SUCCESS) {
+            vkFreeMemory(device_, slab.memory, nullptr);
+            return false;
+        }
+        slab.mapped = static_cast<uint8_t*>(mapped);
+        if (host_log_)
+            log_host(
+                host_visible ? "host-visible slab" : "device slab", slab.size,
+                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                    .count(),
+                0);
+        // (a freed slab's place is taken first)
+        for (pick = 0; pick < slabs_.size() && slabs_[pick].memory; ++pick) {
+        }
+        if (pick == slabs_.size()) slabs_.emplace_back();
+        slabs_[pick] = slab;
+    }
+    Slab& slab = slabs_[pick];
+    const uint64_t offset = offset_in(slab);
+    vkBindBufferMemory(device_, b.buffer, slab.memory, offset);
+    b.memory = slab.memory;
+    b.mapped = slab.mapped ? slab.mapped + offset : nullptr;
+    b.slab = int32_t(pick);
+    slab.used = offset + req.size;
+    ++slab.buffers;
+    return true;
+}
+
+void Context::free_empty_slabs() {
+    for (Slab& slab : slabs_)
+        if (slab.memory && slab.buffers == 0) {
+            if (slab.mapped) vkUnmapMemory(device_, slab.memory);
+            vkFreeMemory(device_, slab.memory, nullptr);
+            slab = Slab{};
+        }
+}
+
+void Context::trim(uint64_t keep_bytes) {
+    size_t n = 0;  // idle_'s first n, the oldest, are freed
+    while (n < idle_.size() && cached_ > keep_bytes) {
+        cached_ -= idle_[n].capacity;
+        free_buffer(idle_[n++]);
+    }
+    idle_.erase(idle_.begin(), idle_.begin() + ptrdiff_t(n));
+    if (keep_bytes == 0) free_empty_slabs();
+}
+
+void Context::set_cache_budget(uint64_t bytes) {
+    cache_budget_ = bytes;
+    trim(bytes);
+}
+
+}  // namespace sdfprune::gpu
