@@ -639,7 +639,6 @@ TEST(Gpu, SmallBuffersShareSlabs) {
     EXPECT_EQ(second.stats().host_buffers_reused, 0u);
     EXPECT_LE(second.stats().host_allocations, first.stats().host_allocations);
     expect_same_device_cells(first, second, "a slab taken again");
-    uncached->release_cached_memory();
 }
 
 // The idle cache keeps to its budget (SDFPRUNE_VULKAN_CACHE_BYTES), buffers cached longest

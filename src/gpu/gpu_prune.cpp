@@ -212,10 +212,7 @@ void Pruner::prune_level(uint32_t li) {
     lv.refined = &local.create(lv.refine ? lv.total * sizeof(PrunedCell) : 16);
     lv.next = &local.create(lv.finest ? 16 : lv.total * sizeof(GpuBlock));
     // Room to list every finest cell for refinement.
-    if (lv.refine && refine_list.size < lv.total * 4) {
-        ctx.destroy(refine_list);
-        refine_list = ctx.create_buffer(lv.total * 4);
-    }
+    if (lv.refine) hold(refine_list, lv.total * 4);
     lv.first_shape = st.steps.size();
 
     const GpuCounters c = prune_slices(lv);
@@ -514,6 +511,12 @@ void Pruner::grow(Buffer& pool, uint64_t& cap, uint64_t need, uint64_t keep) {
 void Pruner::presize(Buffer& pool, uint64_t& cap, uint64_t used, uint64_t bound) {
     const uint64_t want = used + std::min(bound, presize_cap);
     if (want > cap) resize(pool, cap, want, used);
+}
+
+void Pruner::hold(Buffer& b, uint64_t bytes) {
+    if (b.size >= bytes) return;
+    ctx.destroy(b);
+    b = ctx.create_buffer(bytes);
 }
 
 // All levels' cells in one buffer, for the lookups of the tracing and discretizing kernels,

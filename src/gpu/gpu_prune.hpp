@@ -86,6 +86,8 @@ class Pruner {
     void resize(Buffer& pool, uint64_t& cap, uint64_t words, uint64_t keep);
     void grow(Buffer& pool, uint64_t& cap, uint64_t need, uint64_t keep);
     void presize(Buffer& pool, uint64_t& cap, uint64_t used, uint64_t bound);
+    // Makes b hold at least `bytes` (a new buffer if it is smaller; its contents are not kept).
+    void hold(Buffer& b, uint64_t bytes);
     void gather_cells();
 
     Context& ctx;

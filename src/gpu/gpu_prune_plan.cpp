@@ -41,10 +41,7 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
     if (mode != 3 || refine_lane_tape == 0 || 4 * teams.team_jobs > ctx.max_buffer_bytes())
         return {teams};
     Step lanes = plan_refine_lanes(teams);
-    if (scratch.size < 4 * teams.team_jobs) {
-        ctx.destroy(scratch);
-        scratch = ctx.create_buffer(4 * teams.team_jobs);
-    }
+    hold(scratch, 4 * teams.team_jobs);
     if (max_len <= refine_lane_tape) return {lanes};
     teams.listed = true;
     teams.push.flags |= 8u;
@@ -130,10 +127,7 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
     uint64_t scratch_bytes = s.teams * team_bytes;
     const Step teams = s;
     if (wide_override != 0 && ctx.can_run(KernelId::kPruneWide)) plan_wide(s, scratch_bytes);
-    if (scratch.size < scratch_bytes) {
-        ctx.destroy(scratch);
-        scratch = ctx.create_buffer(scratch_bytes);
-    }
+    hold(scratch, scratch_bytes);
     // A wide step's further scratch buffers (those it does not take are given back: only the
     // top levels' steps spread, and the finer levels need the memory). Where the device has
     // no memory left for them (a small GPU, a large scene), the pruning goes on with one
@@ -142,21 +136,14 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
         ctx.destroy(*more_scratch[b - 1]);
     try {
         while (more_scratch.size() + 1 < s.scratch_buffers) more_scratch.push_back(&local.slot());
-        for (uint32_t b = 1; b < s.scratch_buffers; ++b)
-            if (more_scratch[b - 1]->size < scratch_bytes) {
-                ctx.destroy(*more_scratch[b - 1]);
-                *more_scratch[b - 1] = ctx.create_buffer(scratch_bytes);
-            }
+        for (uint32_t b = 1; b < s.scratch_buffers; ++b) hold(*more_scratch[b - 1], scratch_bytes);
     } catch (const GpuError&) {
         for (Buffer* b : more_scratch) ctx.destroy(*b);
         scratch_buffers_cap = 1;
         s = teams;
         scratch_bytes = s.teams * team_bytes;
         plan_wide(s, scratch_bytes);
-        if (scratch.size < scratch_bytes) {
-            ctx.destroy(scratch);
-            scratch = ctx.create_buffer(scratch_bytes);
-        }
+        hold(scratch, scratch_bytes);
     }
     return s;
 }

@@ -454,11 +454,14 @@ struct HostTally {
 // SDFPRUNE_VULKAN_HOST_LOG: a line on stderr per buffer allocated (not those taken from the idle
 // cache) and per submission, with the host's time in it and the time since the context was
 // made, so that the gaps between them show the host's other work.
-void Context::log_host(const char* what, uint64_t bytes, double host_ms, double gpu_ms) const {
-    const double since =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - made_).count();
-    std::fprintf(stderr, "vulkan host %10.3f ms: %s %llu bytes, host %.3f ms, gpu %.3f ms\n", since,
-                 what, static_cast<unsigned long long>(bytes), host_ms, gpu_ms);
+void Context::log_host(const char* what, uint64_t bytes,
+                       std::chrono::steady_clock::time_point start, double gpu_ms) const {
+    const auto now = std::chrono::steady_clock::now();
+    const auto ms = [&](auto since) {
+        return std::chrono::duration<double, std::milli>(now - since).count();
+    };
+    std::fprintf(stderr, "vulkan host %10.3f ms: %s %llu bytes, host %.3f ms, gpu %.3f ms\n",
+                 ms(made_), what, static_cast<unsigned long long>(bytes), ms(start), gpu_ms);
 }
 
 uint32_t Context::groups_for(uint64_t n) const {
@@ -650,23 +653,12 @@ double Context::submit_part() {
     };
     for (size_t j = 0; j < part_stamps_.size(); ++j)
         stamps_ms_[part_stamps_[j]] = carried_ms_ + ms(ticks[2 + j]);
-    if (host_log_)
-        log_host("submission", 0,
-                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() -
-                                                           tally.start)
-                     .count(),
-                 ms(ticks[1]));
+    if (host_log_) log_host("submission", 0, tally.start, ms(ticks[1]));
     return ms(ticks[1]);
 }
 
 void Context::upload(const Buffer& dst, const void* data, uint64_t bytes, uint64_t dst_offset) {
-    if (bytes == 0) return;
-    Buffer staging = create_buffer(bytes, true);
-    std::memcpy(staging.mapped, data, bytes);
-    begin();
-    copy(staging, dst, bytes, 0, dst_offset);
-    submit();
-    destroy(staging);
+    upload({{&dst, data, bytes, dst_offset}});
 }
 
 void Context::upload(std::initializer_list<Upload> uploads) {
@@ -681,7 +673,7 @@ void Context::upload(std::initializer_list<Upload> uploads) {
     for (const Upload& u : uploads) {
         if (u.bytes == 0) continue;
         std::memcpy(static_cast<uint8_t*>(staging.mapped) + at, u.data, u.bytes);
-        copy(staging, *u.dst, u.bytes, at, 0);
+        copy(staging, *u.dst, u.bytes, at, u.dst_offset);
         at += padded(u.bytes);
     }
     submit();

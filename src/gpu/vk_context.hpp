@@ -183,13 +183,16 @@ class Context {
         const Buffer* dst;
         const void* data;
         uint64_t bytes;
+        uint64_t dst_offset = 0;
     };
     void upload(std::initializer_list<Upload> uploads);
     void download(const Buffer& src, void* data, uint64_t bytes, uint64_t src_offset = 0);
 
   private:
     void report_kernel_statistics(const char* name, VkPipeline pipeline) const;
-    void log_host(const char* what, uint64_t bytes, double host_ms, double gpu_ms) const;
+    // SDFPRUNE_VULKAN_HOST_LOG's line: what, its bytes, the host's time since `start`.
+    void log_host(const char* what, uint64_t bytes, std::chrono::steady_clock::time_point start,
+                  double gpu_ms) const;
     struct Kernel {
         VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
         VkPipelineLayout layout = VK_NULL_HANDLE;

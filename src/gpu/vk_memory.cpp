@@ -111,10 +111,7 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
     }
     ++host_.buffers;
     if (host_log_)
-        log_host(host_visible ? "host-visible buffer" : "device buffer", capacity,
-                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-                     .count(),
-                 0);
+        log_host(host_visible ? "host-visible buffer" : "device buffer", capacity, start, 0);
     return hand_out(b);
 }
 
@@ -175,11 +172,7 @@ bool Context::bind_to_slab(Buffer& b, const VkMemoryRequirements& req, uint32_t 
         }
         slab.mapped = static_cast<uint8_t*>(mapped);
         if (host_log_)
-            log_host(
-                host_visible ? "host-visible slab" : "device slab", slab.size,
-                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-                    .count(),
-                0);
+            log_host(host_visible ? "host-visible slab" : "device slab", slab.size, start, 0);
         // (a freed slab's place is taken first)
         for (pick = 0; pick < slabs_.size() && slabs_[pick].memory; ++pick) {
         }
