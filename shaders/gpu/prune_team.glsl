@@ -7,11 +7,14 @@
 //   mode 2: kTeam cells of an octant, from the octant's tape (or far-field from a far octant)
 // (Refinement, mode 3, is prune_refine.comp's.)
 // The kernel runs in steps, the same for every lane of a workgroup: at each step a team that
-// evaluates stages the next kWindow entries of its tape (words and nodes) in shared memory, then
-// every lane advances its phase by at most kWindow entries (evaluation from the window; the
-// far-field test; the top-down sweep; the write of the compacted tape). During evaluation every
-// lane of a team runs the same entry at the same step. Decisions and the sweep's flags are kept
-// per lane and entry, interleaved so that a team's lanes touch adjacent words.
+// evaluates stages the next kWindow words of its tape in shared memory, then every lane advances
+// its phase by at most kWindow entries (evaluation from the window; the far-field test; the
+// top-down sweep; the write of the compacted tape). During evaluation every lane of a team runs
+// the same entry at the same step. Decisions and the sweep's flags are kept per lane and entry,
+// interleaved so that a team's lanes touch adjacent words. The entries' nodes are read from the
+// scene's buffer, not staged: on an H100, staging them too (8 KB of shared memory a workgroup,
+// 10 more registers) left less of the SM's memory to the cache that serves the scratch, and the
+// finer levels' steps ran up to 2× slower (BENCHMARKS.md, stop 30).
 // New tapes are appended to the pool with an atomic counter; on overflow nothing is written
 // (the box is stored as far-field) and the host grows the pool and runs the steps again.
 //
@@ -45,7 +48,6 @@ layout(std430, binding = 12) buffer LaneScratch { uint lane_scratch[]; };
 
 // A team's window of its parent tape, staged for the step.
 shared uint s_word[kTeams * kWindow];
-shared Node s_node[kTeams * kWindow];
 // Lanes still busy after a step, counted in one word while the other is reset.
 shared uint s_busy[2];
 
@@ -140,7 +142,6 @@ void main() {
                 for (uint k = i + lane; k < we; k += kTeam) {
                     uint w = tape_read(parent, 2u + k);
                     s_word[win + k - w0] = w;
-                    s_node[win + k - w0] = nodes[tape_node(w)];
                 }
             }
             memoryBarrierShared();
@@ -150,7 +151,7 @@ void main() {
                 uint we = min(i + kWindow, len);
                 for (; i < we; ++i) {
                     uint w = s_word[win + i - w0];
-                    Node nd = s_node[win + i - w0];
+                    Node nd = nodes[tape_node(w)];
                     vec3 x;
                     uint decision = kKeepBoth;
                     if (nd.kind < kPrimitiveKindCount) {
@@ -186,7 +187,7 @@ void main() {
                     // (is_near_field); the root is in this window.
                     uint s0 = sbase + lane;
                     value = uintBitsToFloat(lane_scratch[s0]);
-                    float L = s_node[win + len - 1u - w0].lipschitz;
+                    float L = nodes[tape_node(s_word[win + len - 1u - w0])].lipschitz;
                     vec2 range = far_field_range(value, uintBitsToFloat(lane_scratch[s0 + kTeam]),
                                                  uintBitsToFloat(lane_scratch[s0 + 2u * kTeam]),
                                                  L, R);
