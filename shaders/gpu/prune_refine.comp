@@ -42,7 +42,9 @@ uint q;  // the invocation's squad in its workgroup
 #define REFINE_SEEN(i) s_seen[q][i]
 #define REFINE_SEE(i, bits) atomicOr(s_seen[q][i], bits)
 #define REFINE_LEFT(i) s_left[q][i]
+#define REFINE_SET_LEFT(i, l) s_left[q][i] = (l)
 #define REFINE_FLAG(i) s_flag[q][i]
+#define REFINE_SET_FLAG(i, f) s_flag[q][i] = (f)
 const uint kRefineStack = kRefineMaxTape / 2u + 1u;
 #include "refine_common.glsl"
 

@@ -5,8 +5,11 @@
 // Most refined cells have tapes of a few words, and a lane per cell keeps as many cells in
 // flight as the device has lanes: a cell's chain of dependent loads (the list, the cell, its
 // block, its tape, the nodes) is waited for by 32 cells of a subgroup at once, where a squad
-// (prune_refine.comp) waits for it alone. The lane's arrays (the tape, the decisions, the sweep)
-// are private, its stack too. Cells with longer tapes are listed for the squads, in the long
+// (prune_refine.comp) waits for it alone. The lane's tape, left operands and stack are private
+// arrays (which the device keeps in memory, cached); an entry's decisions and sweep flags are
+// bits of six registers. (Everything in registers and shared memory instead cost 18 registers
+// and 13 KB of shared memory a workgroup, and ran 1.7× slower on an H100: BENCHMARKS.md, stop
+// 30.) Cells with longer tapes are listed for the squads, in the long
 // list (scratch[pc.list_start], counted in long_jobs).
 // Job k takes cell refine_list[k], for k below refine_cells (listed by the cells step); the
 // far-field cells were copied to binding 5 before, as they are.
@@ -19,12 +22,36 @@ layout(local_size_x = 64) in;
 
 const uint kLaneTape = 32u;  // the longest tape a lane refines (device_layout.hpp)
 
-uint r_word[kLaneTape], r_seen[kLaneTape], r_left[kLaneTape], r_flag[kLaneTape];
+uint r_word[kLaneTape], r_left[kLaneTape];
+// Bit i of each: entry i was decided 0, 1, 2 in some sub-box; is kept, skipped, negated.
+uint r_seen0, r_seen1, r_seen2, r_kept, r_skipped, r_negated;
+
+uint refine_seen(uint i) {
+    return ((r_seen0 >> i) & 1u) | (((r_seen1 >> i) & 1u) << 1) | (((r_seen2 >> i) & 1u) << 2);
+}
+void refine_see(uint i, uint bits) {
+    uint b = 1u << i;
+    if ((bits & 1u) != 0u) r_seen0 |= b;
+    if ((bits & 2u) != 0u) r_seen1 |= b;
+    if ((bits & 4u) != 0u) r_seen2 |= b;
+}
+uint refine_flag(uint i) {
+    uint alive = ((r_kept >> i) & 1u) | (((r_skipped >> i) & 1u) << 1);
+    return alive | (((r_negated >> i) & 1u) << 2);
+}
+void refine_set_flag(uint i, uint f) {
+    uint b = 1u << i;
+    r_kept = (f & 3u) == 1u ? r_kept | b : r_kept & ~b;
+    r_skipped = (f & 3u) == 2u ? r_skipped | b : r_skipped & ~b;
+    r_negated = (f & 4u) != 0u ? r_negated | b : r_negated & ~b;
+}
 #define REFINE_WORD(i) r_word[i]
-#define REFINE_SEEN(i) r_seen[i]
-#define REFINE_SEE(i, bits) r_seen[i] |= (bits)
+#define REFINE_SEEN(i) refine_seen(i)
+#define REFINE_SEE(i, bits) refine_see(i, bits)
 #define REFINE_LEFT(i) r_left[i]
-#define REFINE_FLAG(i) r_flag[i]
+#define REFINE_SET_LEFT(i, l) r_left[i] = (l)
+#define REFINE_FLAG(i) refine_flag(i)
+#define REFINE_SET_FLAG(i, f) refine_set_flag(i, f)
 const uint kRefineStack = kLaneTape / 2u + 1u;
 #include "refine_common.glsl"
 
@@ -70,11 +97,8 @@ void main() {
             }
             continue;
         }
-        for (uint k = 0u; k < len; ++k) {
-            r_word[k] = tape_read(parent, 2u + k);
-            r_seen[k] = 0u;
-            r_flag[k] = 0u;
-        }
+        for (uint k = 0u; k < len; ++k) r_word[k] = tape_read(parent, 2u + k);
+        r_seen0 = r_seen1 = r_seen2 = r_kept = r_skipped = r_negated = 0u;
         // Stage 1 over each sub-box, then stage 2: the far-field test of is_near_field on the
         // sub-box's root range against the whole cell's clearance.
         precise vec3 centre = refine_cell_centre(cell);

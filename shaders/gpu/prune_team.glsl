@@ -39,11 +39,13 @@ const uint kWindow = 64u;  // tape entries a lane advances per step (gpu_prune.c
 // word per lane), then 4 words per stack slot and lane (value, lo, hi, entry). Lane l's
 // word of item k is at k · kTeam + l.
 
-// The lanes' evaluation stacks, through a second view of the scratch buffer (binding 12, the
-// same buffer as binding 8) without `coherent`: only the lane that writes a stack slot reads it
-// (program order suffices; a job resumed in a later dispatch reads it after the dispatch's
-// barrier), so its loads may be served from the SM's cache, where the coherent view's go to
-// the device's. The two views never touch the same words.
+// The team's scratch, through a second view of the scratch buffer (binding 12, the same buffer
+// as binding 8) without `coherent`: a lane reads only words it wrote itself (its state, its
+// stack, its decisions and flags; an entry's left operand is written by every lane of the team,
+// the same value), so program order suffices (a job resumed in a later dispatch reads them
+// after the dispatch's barrier), and its loads may be served from the SM's cache, where the
+// coherent view's go to the device's: on an H100 the team steps ran 2–33 % faster so
+// (BENCHMARKS.md, stop 30). This kernel does not use the coherent view.
 layout(std430, binding = 12) buffer LaneScratch { uint lane_scratch[]; };
 
 // A team's window of its parent tape, staged for the step.
@@ -64,7 +66,7 @@ uint team_words() {
 }
 
 // An entry's sweep flags set, its decision bits kept.
-void set_sweep_flags(uint at, uint flags) { scratch[at] = (scratch[at] & 3u) | flags; }
+void set_sweep_flags(uint at, uint flags) { lane_scratch[at] = (lane_scratch[at] & 3u) | flags; }
 // The sweep's flags of a tape's root (its last entry, `len` words at `parent`): alive, with its
 // own sign.
 uint root_sweep_flags(uint parent, uint len) {
@@ -113,19 +115,19 @@ void main() {
         if (walk && pc.round == 0u) {
             phase = kPhaseEvaluate;
         } else if (walk) {
-            phase = scratch[st];
+            phase = lane_scratch[st];
         }
         if (walk && pc.round != 0u && phase != kPhaseDone) {
-            i = scratch[st + kTeam];
-            top = scratch[st + 2u * kTeam];
-            out_len = scratch[st + 3u * kTeam];
-            prims = scratch[st + 4u * kTeam];
-            at = scratch[st + 5u * kTeam];
-            value = uintBitsToFloat(scratch[st + 6u * kTeam]);
-            constant = uintBitsToFloat(scratch[st + 7u * kTeam]);
-            pdepth = scratch[st + 8u * kTeam];
-            depth = scratch[st + 9u * kTeam];
-            depth_max = scratch[st + 10u * kTeam];
+            i = lane_scratch[st + kTeam];
+            top = lane_scratch[st + 2u * kTeam];
+            out_len = lane_scratch[st + 3u * kTeam];
+            prims = lane_scratch[st + 4u * kTeam];
+            at = lane_scratch[st + 5u * kTeam];
+            value = uintBitsToFloat(lane_scratch[st + 6u * kTeam]);
+            constant = uintBitsToFloat(lane_scratch[st + 7u * kTeam]);
+            pdepth = lane_scratch[st + 8u * kTeam];
+            depth = lane_scratch[st + 9u * kTeam];
+            depth_max = lane_scratch[st + 10u * kTeam];
         }
 
         barrier();  // the previous job's last reads of s_busy are done
@@ -168,12 +170,12 @@ void main() {
                                           uintBitsToFloat(lane_scratch[sr + 2u * kTeam]));
                         // Written by every lane (the same value): a lane's sweep may follow in
                         // this very step, and reads its own write, with no barrier between.
-                        scratch[lbase + i] = lane_scratch[sl + 3u * kTeam];
+                        lane_scratch[lbase + i] = lane_scratch[sl + 3u * kTeam];
                         x = combine_operator(nd, R, interval, false, left, right, decision);
                     }
                     if (tape_negated(w)) x = negate_range(x);
                     // The decision, its sweep flags cleared for stage 3.
-                    scratch[dbase + i * kTeam + lane] = decision;
+                    lane_scratch[dbase + i * kTeam + lane] = decision;
                     uint so = sbase + 4u * top * kTeam + lane;
                     lane_scratch[so] = floatBitsToUint(x.x);
                     lane_scratch[so + kTeam] = floatBitsToUint(x.y);
@@ -216,7 +218,7 @@ void main() {
                 for (; i > stop; --i) {
                     uint e = i - 1u;
                     uint fe = dbase + e * kTeam + lane;
-                    uint fl = scratch[fe];
+                    uint fl = lane_scratch[fe];
                     if (((fl >> 2) & 3u) != 1u) continue;
                     uint w = tape_read(parent, 2u + e);
                     if (is_primitive(tape_node(w))) {
@@ -224,7 +226,7 @@ void main() {
                         ++prims;
                         continue;
                     }
-                    uint l = scratch[lbase + e], r = e - 1u;
+                    uint l = lane_scratch[lbase + e], r = e - 1u;
                     uint d = fl & 3u;
                     if (d == kKeepBoth) {
                         ++out_len;
@@ -264,7 +266,7 @@ void main() {
             if (phase == kPhaseWrite) {
                 uint we = min(i + kWindow, len);
                 for (; i < we; ++i) {
-                    uint fl = scratch[dbase + i * kTeam + lane];
+                    uint fl = lane_scratch[dbase + i * kTeam + lane];
                     if (((fl >> 2) & 3u) != 1u) continue;
                     uint node = tape_node(tape_read(parent, 2u + i));
                     tape_write(top++, tape_word(node, ((fl >> 4) & 1u) != 0u));
@@ -287,18 +289,18 @@ void main() {
             if (gl_LocalInvocationID.x == 0u) s_busy[(s + 1u) & 1u] = 0u;
             if (!busy) break;
         }
-        if (walk) scratch[st] = phase;
+        if (walk) lane_scratch[st] = phase;
         if (walk && phase != kPhaseDone) {
-            scratch[st + kTeam] = i;
-            scratch[st + 2u * kTeam] = top;
-            scratch[st + 3u * kTeam] = out_len;
-            scratch[st + 4u * kTeam] = prims;
-            scratch[st + 5u * kTeam] = at;
-            scratch[st + 6u * kTeam] = floatBitsToUint(value);
-            scratch[st + 7u * kTeam] = floatBitsToUint(constant);
-            scratch[st + 8u * kTeam] = pdepth;
-            scratch[st + 9u * kTeam] = depth;
-            scratch[st + 10u * kTeam] = depth_max;
+            lane_scratch[st + kTeam] = i;
+            lane_scratch[st + 2u * kTeam] = top;
+            lane_scratch[st + 3u * kTeam] = out_len;
+            lane_scratch[st + 4u * kTeam] = prims;
+            lane_scratch[st + 5u * kTeam] = at;
+            lane_scratch[st + 6u * kTeam] = floatBitsToUint(value);
+            lane_scratch[st + 7u * kTeam] = floatBitsToUint(constant);
+            lane_scratch[st + 8u * kTeam] = pdepth;
+            lane_scratch[st + 9u * kTeam] = depth;
+            lane_scratch[st + 10u * kTeam] = depth_max;
         }
     }
     counts_end();

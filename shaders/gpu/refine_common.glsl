@@ -6,10 +6,27 @@
 //   REFINE_SEEN(i)        entry i's decisions over the sub-boxes so far (bit d: some decided d)
 //   REFINE_SEE(i, bits)   adds decisions to REFINE_SEEN(i)
 //   REFINE_LEFT(i)        entry i's left operand (an entry index)
+//   REFINE_SET_LEFT(i, l) sets it
 //   REFINE_FLAG(i)        the sweep's flags: bits 0-1 alive (0 dead, 1 kept, 2 skipped), bit 2
 //                         negate; cleared before the sweep
+//   REFINE_SET_FLAG(i, f) sets them
 //   kRefineStack          the deepest evaluation stack of a tape it walks
+// and, optionally, where a sub-box walk's stack is (else in arrays local to refine_sub_box):
+//   REFINE_STACK(j)             slot j's value and range (a vec3)
+//   REFINE_STACK_ENTRY(j)       the entry that made slot j
+//   REFINE_PUSH(j, x, entry)    sets slot j
 // Include after prune_common.glsl.
+
+#ifndef REFINE_STACK
+#define REFINE_LOCAL_STACK
+#define REFINE_STACK(j) st[j]
+#define REFINE_STACK_ENTRY(j) st_entry[j]
+#define REFINE_PUSH(j, x, entry) \
+    {                            \
+        st[j] = (x);             \
+        st_entry[j] = (entry);   \
+    }
+#endif
 
 // One sub-box's walk over the cell's tape of `len` words (evaluate_boxes in
 // OperatorMode::kRefine): each operator's decision added to REFINE_SEEN, its left operand
@@ -17,8 +34,10 @@
 // (far_field_range; L: the root's Lipschitz bound).
 vec2 refine_sub_box(uint len, vec3 p, vec3 sub_half, float sub_R, bool interval, float L,
                     bool record) {
+#ifdef REFINE_LOCAL_STACK
     vec3 st[kRefineStack];  // values and ranges
     uint st_entry[kRefineStack];
+#endif
     uint top = 0u;
     for (uint i = 0u; i < len; ++i) {
         uint w = REFINE_WORD(i);
@@ -29,23 +48,24 @@ vec2 refine_sub_box(uint len, vec3 p, vec3 sub_half, float sub_R, bool interval,
         } else {
             top -= 2u;
             uint decision;
-            x = combine_operator(nd, sub_R, interval, true, st[top], st[top + 1u], decision);
+            x = combine_operator(nd, sub_R, interval, true, REFINE_STACK(top),
+                                 REFINE_STACK(top + 1u), decision);
             REFINE_SEE(i, 1u << decision);
-            if (record) REFINE_LEFT(i) = st_entry[top];
+            if (record) REFINE_SET_LEFT(i, REFINE_STACK_ENTRY(top));
         }
         if (tape_negated(w)) x = negate_range(x);
-        st[top] = x;
-        st_entry[top] = i;
+        REFINE_PUSH(top, x, i);
         ++top;
     }
-    return far_field_range(st[0].x, st[0].y, st[0].z, L, sub_R);
+    vec3 root = REFINE_STACK(0u);
+    return far_field_range(root.x, root.y, root.z, L, sub_R);
 }
 
 // Stage 3 of a near cell (compact_tape): the top-down sweep from the root, an operator decided
 // alike in every sub-box replaced by its winner; then the kept entries written to the level's
 // pool, and the refined cell `cell` (c0 as it was, with its new tape) stored.
 void refine_write(uint cell, uint len, Cell c0) {
-    REFINE_FLAG(len - 1u) = 1u | (tape_negated(REFINE_WORD(len - 1u)) ? 4u : 0u);
+    REFINE_SET_FLAG(len - 1u, 1u | (tape_negated(REFINE_WORD(len - 1u)) ? 4u : 0u));
     uint out_len = 0u, prims = 0u;
     for (uint i = len; i > 0u; --i) {
         uint e = i - 1u;
@@ -62,14 +82,14 @@ void refine_write(uint cell, uint len, Cell c0) {
         uint d = bitCount(seen) == 1 ? uint(findLSB(seen)) : kKeepBoth;
         if (d == kKeepBoth) {
             ++out_len;
-            REFINE_FLAG(l) = 1u | (tape_negated(REFINE_WORD(l)) ? 4u : 0u);
-            REFINE_FLAG(r) = 1u | (tape_negated(REFINE_WORD(r)) ? 4u : 0u);
+            REFINE_SET_FLAG(l, 1u | (tape_negated(REFINE_WORD(l)) ? 4u : 0u));
+            REFINE_SET_FLAG(r, 1u | (tape_negated(REFINE_WORD(r)) ? 4u : 0u));
             continue;
         }
         uint wn = d == kLeftWins ? l : r;
         uint neg = ((fl >> 2) & 1u) ^ (tape_negated(REFINE_WORD(wn)) ? 1u : 0u);
-        REFINE_FLAG(e) = 2u | (fl & 4u);
-        REFINE_FLAG(wn) = 1u | (neg << 2);
+        REFINE_SET_FLAG(e, 2u | (fl & 4u));
+        REFINE_SET_FLAG(wn, 1u | (neg << 2));
     }
     note_len(out_len);
     uint at = pool_allocate(false, out_len + 2u);
