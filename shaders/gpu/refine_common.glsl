@@ -11,22 +11,7 @@
 //                         negate; cleared before the sweep
 //   REFINE_SET_FLAG(i, f) sets them
 //   kRefineStack          the deepest evaluation stack of a tape it walks
-// and, optionally, where a sub-box walk's stack is (else in arrays local to refine_sub_box):
-//   REFINE_STACK(j)             slot j's value and range (a vec3)
-//   REFINE_STACK_ENTRY(j)       the entry that made slot j
-//   REFINE_PUSH(j, x, entry)    sets slot j
 // Include after prune_common.glsl.
-
-#ifndef REFINE_STACK
-#define REFINE_LOCAL_STACK
-#define REFINE_STACK(j) st[j]
-#define REFINE_STACK_ENTRY(j) st_entry[j]
-#define REFINE_PUSH(j, x, entry) \
-    {                            \
-        st[j] = (x);             \
-        st_entry[j] = (entry);   \
-    }
-#endif
 
 // One sub-box's walk over the cell's tape of `len` words (evaluate_boxes in
 // OperatorMode::kRefine): each operator's decision added to REFINE_SEEN, its left operand
@@ -34,10 +19,8 @@
 // (far_field_range; L: the root's Lipschitz bound).
 vec2 refine_sub_box(uint len, vec3 p, vec3 sub_half, float sub_R, bool interval, float L,
                     bool record) {
-#ifdef REFINE_LOCAL_STACK
     vec3 st[kRefineStack];  // values and ranges
     uint st_entry[kRefineStack];
-#endif
     uint top = 0u;
     for (uint i = 0u; i < len; ++i) {
         uint w = REFINE_WORD(i);
@@ -48,17 +31,16 @@ vec2 refine_sub_box(uint len, vec3 p, vec3 sub_half, float sub_R, bool interval,
         } else {
             top -= 2u;
             uint decision;
-            x = combine_operator(nd, sub_R, interval, true, REFINE_STACK(top),
-                                 REFINE_STACK(top + 1u), decision);
+            x = combine_operator(nd, sub_R, interval, true, st[top], st[top + 1u], decision);
             REFINE_SEE(i, 1u << decision);
-            if (record) REFINE_SET_LEFT(i, REFINE_STACK_ENTRY(top));
+            if (record) REFINE_SET_LEFT(i, st_entry[top]);
         }
         if (tape_negated(w)) x = negate_range(x);
-        REFINE_PUSH(top, x, i);
+        st[top] = x;
+        st_entry[top] = i;
         ++top;
     }
-    vec3 root = REFINE_STACK(0u);
-    return far_field_range(root.x, root.y, root.z, L, sub_R);
+    return far_field_range(st[0].x, st[0].y, st[0].z, L, sub_R);
 }
 
 // Stage 3 of a near cell (compact_tape): the top-down sweep from the root, an operator decided
