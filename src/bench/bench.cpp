@@ -13,6 +13,7 @@
 #include <optional>
 #include <thread>
 
+#include "../core/clock.hpp"
 #include "sdfprune/bench.hpp"
 #include "sdfprune/builtin.hpp"
 #include "sdfprune/discretize.hpp"
@@ -62,10 +63,6 @@ uint64_t scene_bytes(const Scene& sc) {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double ms_since(Clock::time_point t0) {
-    return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 // Node evaluations a pilot sample aims at (about 0.1 s of one core): the first sample's size
 // follows from the scene's node count, so pilots stay short on million-node scenes.

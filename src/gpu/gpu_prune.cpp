@@ -23,6 +23,7 @@
 #include <limits>
 #include <optional>
 
+#include "../core/clock.hpp"
 #include "gpu_prune.hpp"
 
 namespace sdfprune::gpu {
@@ -551,9 +552,7 @@ void Pruner::gather_cells() {
         }
         st.clearance_bytes = set_clearance(levels, opt.threads) + cell_total * sizeof(PrunedCell);
         ctx.upload(g.cells, host.data(), cell_total * sizeof(PrunedCell));
-        st.clearance_ms =
-            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_clear)
-                .count();
+        st.clearance_ms = ms_since(t_clear);
     }
     st.prune_ms = gpu_ms;
     st.subgroups = ctx.can_run(KernelId::kPruneWideSubgroups);
@@ -631,9 +630,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     pruning::Pruner pruner(device, sc, opt, g);
     pruner.run();
     st.prune_peak_bytes = ctx.bytes_peak() - live_before;
-    st.wall_ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start)
-            .count();
+    st.wall_ms = ms_since(t_start);
     const Context::HostTime& host = ctx.host_time();
     st.host_buffers = host.buffers - host_before.buffers;
     st.host_buffers_reused = host.buffers_reused - host_before.buffers_reused;

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <thread>
 
+#include "../core/clock.hpp"
 #include "device_layout.hpp"
 
 namespace sdfprune::gpu {
@@ -444,8 +445,7 @@ struct HostTally {
     std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
     ~HostTally() {
         ++calls;
-        ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-                  .count();
+        ms += ms_since(start);
     }
 };
 

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <string>
 
+#include "../core/clock.hpp"
 #include "vk_context.hpp"
 
 namespace sdfprune::gpu {
@@ -35,11 +36,7 @@ uint64_t capacity_class(uint64_t bytes) {
 
 Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
     const auto start = std::chrono::steady_clock::now();
-    const auto add_time = [&] {
-        host_.buffer_ms +=
-            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-                .count();
-    };
+    const auto add_time = [&] { host_.buffer_ms += ms_since(start); };
     const uint64_t size = (std::max<uint64_t>(bytes, 16) + 15) & ~uint64_t(15);
     // (A buffer as large as the device's largest range is not rounded past it.)
     const uint64_t capacity = std::max(size, std::min(capacity_class(size), max_range_));

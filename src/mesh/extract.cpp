@@ -21,6 +21,7 @@
 #include <chrono>
 #include <memory>
 
+#include "../core/clock.hpp"
 #include "../core/parallel.hpp"
 #include "sdfprune/eval.hpp"
 #include "sdfprune/mesh.hpp"
@@ -920,8 +921,7 @@ Mesh extract(const Scene& sc, const PrunedGrid* grid, const MeshOptions& o, Mesh
         stats->cubes_visited = cubes;
         stats->corners_evaluated = evaluated;
         stats->brick_bytes = bricks.bytes();
-        stats->ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                        .count();
+        stats->ms = ms_since(t0);
     }
     return mesh;
 }

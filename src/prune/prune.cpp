@@ -25,6 +25,7 @@
 #include <malloc.h>
 #endif
 
+#include "../core/clock.hpp"
 #include "../core/parallel.hpp"
 #include "prune_level.hpp"
 #include "sdfprune/eval.hpp"
@@ -354,8 +355,7 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     for (const PrunedGrid::Level& l : g.levels_) st.tape_bytes += bytes_of(l.cells);
     st.prune_peak_bytes =
         std::max({buf.peak, st.tape_bytes + scratch_bytes(), st.tape_bytes + st.clearance_bytes});
-    st.prune_ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    st.prune_ms = ms_since(t0);
     return g;
 }
 

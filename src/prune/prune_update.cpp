@@ -10,6 +10,7 @@
 
 #include <tbb/enumerable_thread_specific.h>
 
+#include "../core/clock.hpp"
 #include "../core/parallel.hpp"
 #include "prune_level.hpp"
 #include "sdfprune/prune.hpp"
@@ -364,8 +365,7 @@ void GridUpdate::run(PrunedGrid& g, const Scene& sc, const SceneEdit& edit,
     for (const PrunedGrid::Level& l : g.levels_)
         st.tape_bytes += uint64_t(l.cells.capacity()) * sizeof(PrunedCell);
     st.prune_peak_bytes = st.tape_bytes;
-    st.prune_ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    st.prune_ms = ms_since(t0);
 }
 
 PrunedGrid update(PrunedGrid&& old, const Scene& edited, const SceneEdit& edit) {

@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "../core/clock.hpp"
 #include "../core/parallel.hpp"
 #include "sdfprune/eval.hpp"
 #include "sdfprune/prune.hpp"
@@ -154,8 +155,7 @@ void PrunedGrid::build_clearance(const CellRange* changed) {
     std::vector<LevelCells> levels;
     for (Level& l : levels_) levels.push_back({l.res, l.factor, l.cells});
     stats_.clearance_bytes = set_clearance(levels, options_.threads, changed);
-    stats_.clearance_ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    stats_.clearance_ms = ms_since(t0);
 }
 
 float PrunedGrid::eval(vec3 p, float* stack) const {

@@ -13,6 +13,7 @@
 #include <numbers>
 #include <vector>
 
+#include "../core/clock.hpp"
 #include "../core/parallel.hpp"
 #include "render_internal.hpp"
 #include "sdfprune/eval.hpp"
@@ -687,9 +688,7 @@ Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
     };
     parallel_for<NotCancellable>(tiles, parallel_options(opt), trace_tile);
 
-    const double trace_ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start)
-            .count();
+    const double trace_ms = ms_since(t_start);
     const TraceTotals totals{trace_ms, total_steps, total_evals, hits};
     if (heatmap) {
         std::vector<vec3> color(size_t(W) * H);  // finish_image colors it from `evals`

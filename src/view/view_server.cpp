@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "../core/clock.hpp"
 #include "sdfprune/io.hpp"
 
 namespace sdfprune::view {
@@ -242,9 +243,7 @@ void Server::routes() {
               const auto t0 = std::chrono::steady_clock::now();
               const Frame f = session_.render(r);
               std::vector<uint8_t> png = encode_png(f.image, 1);
-              const double total_ms =
-                  std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                      .count();
+              const double total_ms = ms_since(t0);
               res.set_header("Cache-Control", "no-store");
               res.set_header("X-Sdfprune-Version", std::to_string(f.version));
               res.set_header("X-Sdfprune-Trace-Ms", number(f.render.trace_ms));

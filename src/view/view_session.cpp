@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "../core/clock.hpp"
 #include "sdfprune/eval.hpp"
 #include "sdfprune/io.hpp"
 #include "sdfprune/primitives.hpp"
@@ -29,10 +30,6 @@ struct Session::State {
 };
 
 namespace {
-
-double ms_since(std::chrono::steady_clock::time_point t0) {
-    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
 
 // The world point that primitive p's local frame origin sits at.
 vec3 primitive_position(const Scene& sc, uint32_t p) {

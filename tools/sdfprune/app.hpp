@@ -10,6 +10,7 @@
 #include "command.hpp"
 #include "sdfprune/gpu.hpp"
 #include "sdfprune/prune.hpp"
+#include "src/core/clock.hpp"  // ms_since
 
 namespace sdfprune::cli {
 
@@ -73,7 +74,5 @@ class Progress {
     bool shown_ = false;
     std::chrono::steady_clock::time_point start_;
 };
-
-double ms_since(std::chrono::steady_clock::time_point t0);
 
 }  // namespace sdfprune::cli

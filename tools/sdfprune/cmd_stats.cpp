@@ -11,6 +11,7 @@
 #include "sdfprune/builtin.hpp"
 #include "sdfprune/gpu.hpp"
 #include "sdfprune/prune.hpp"
+#include "src/core/clock.hpp"
 
 namespace sdfprune::cli {
 
@@ -92,9 +93,7 @@ EditBench edit_bench(const PrunedGrid& grid, uint32_t count, uint64_t seed) {
         const PrunedGrid a = prune(moved, grid.options());
         const auto t0 = std::chrono::steady_clock::now();
         PrunedGrid copy = base;
-        copies.push_back(
-            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                .count());
+        copies.push_back(ms_since(t0));
         const PrunedGrid b = update(std::move(copy), moved, scene_edit(sc, moved));
         full.push_back(a.stats().prune_ms);
         incremental.push_back(b.stats().prune_ms);
