@@ -887,6 +887,7 @@ TEST(Gpu, RenderMatchesCpu) {
             const gpu::Grid gpu = gpu::prune(*dev, sc, o);
             for (Shading shading : {Shading::kShaded, Shading::kNormals, Shading::kHeatmap}) {
                 RenderOptions ro;
+                ro.tile_cones = ro.convex_steps = false;  // the Vulkan renderer's steps
                 ro.width = 160;
                 ro.height = 96;
                 ro.shading = shading;
@@ -923,6 +924,7 @@ TEST(Gpu, RenderMarchesTheCpusBox) {
         const PrunedGrid cpu = prune(sc, o);
         const gpu::Grid gpu = gpu::prune(*dev, sc, o);
         RenderOptions ro;
+        ro.tile_cones = ro.convex_steps = false;  // the Vulkan renderer's steps
         ro.width = 96;
         ro.height = 64;
         ro.camera = orbit_camera(sc.aabb, 35, 20, 0, 40);
@@ -1025,6 +1027,7 @@ TEST(Gpu, StacksAreSizedFromThePrunedTapes) {
     ASSERT_GT(deepest, 1u);
 
     RenderOptions ro;
+    ro.tile_cones = ro.convex_steps = false;  // the Vulkan renderer's steps
     ro.width = 96;
     ro.height = 64;
     ro.camera = orbit_camera(sc.aabb, 0, 0, 0, 40);  // looking down -z, at the cut face
@@ -1089,7 +1092,8 @@ TEST(Gpu, SmallBufferRangeSplitsTheWork) {
     expect_same_stats(cpu.stats(), gpu.stats(), "16^3 on a 1 MiB device", exact_device(*small));
 
     RenderOptions ro;
-    ro.width = 256;  // 49,152 pixels of 32 bytes: chunks of 32,768
+    ro.tile_cones = ro.convex_steps = false;  // the Vulkan renderer's steps
+    ro.width = 256;                           // 49,152 pixels of 32 bytes: chunks of 32,768
     ro.height = 192;
     ro.camera = orbit_camera(sc.aabb, 35, 20, 0, 40);
     RenderStats cs, gs;

@@ -49,6 +49,17 @@ struct RenderOptions {
     // scene's per-primitive arrays) decides the surface (eval_tape_winner); -1: none. The
     // Vulkan renderer ignores it.
     int64_t highlight_primitive = -1;
+    // Two ways the pruned CPU tracer steps further than a sphere tracer, each only over space
+    // where no ray can stop (trace.cpp; the naive tracer and the Vulkan renderer take neither):
+    // - tile_cones: each 8×8 tile of primary rays first marches one cone that holds them
+    //   through the grid's free space (far-field boxes, and balls from the field's value), and
+    //   its rays start where the cone stops, or are not marched where it leaves the box;
+    // - convex_steps: in a near-field cell whose tape is one convex primitive, a ray goes on
+    //   to the zero of the secant through its last two values of that primitive, or to the
+    //   cell's exit where that is nearer or the value did not decrease.
+    // Off: each ray takes the plain sphere tracer's steps (as up to stop 30).
+    bool tile_cones = true;
+    bool convex_steps = true;
 };
 
 struct Image {

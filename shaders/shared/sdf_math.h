@@ -219,6 +219,14 @@ SDFPRUNE_FN float eval_primitive(uint kind, PrimitiveParams prm, vec3 p) {
     return eval_primitive_local(kind, prm, to_local(prm, p));
 }
 
+// Whether a primitive's value is a convex function of the point. The exact signed distance of
+// a convex solid is one: it is the largest of the signed distances to the planes that support
+// the solid, each affine in the point. A convex function of an affine map of the point (a
+// primitive's placement: rotation, scale, shear) is convex in the point. Every kind is the exact
+// distance of a convex solid, but the torus. The CPU tracer's convex steps rely on it: the
+// secant of a convex function, extended, lies below it (PrimitivesExact.ConvexKinds... tests it).
+SDFPRUNE_FN bool primitive_value_is_convex(uint kind) { return kind != kPrimTorus; }
+
 // ---- operators -------------------------------------------------------------------------------
 // The quadratic blending kernel phi(x, k) = max(k - x, 0)^2 / (4k); 0 when k = 0.
 // Written as selects, without branches, so that loops over boxes vectorize.

@@ -43,6 +43,8 @@ float eval_tape(const Scene& sc, std::span<const uint32_t> tape, vec3 p, float* 
 
 vec3 eval_tape_color(const Scene& sc, std::span<const uint32_t> tape, vec3 p, float* stack,
                      vec3* color_stack) {
+    // (one primitive: its colour, whatever its value; most near-field cells' tapes)
+    if (tape.size() == 1) return sc.color[sc.primitive[math::tape_node(tape[0])]];
     uint32_t top = 0;
     for (const uint32_t w : tape) {
         const uint32_t n = math::tape_node(w);

@@ -24,7 +24,7 @@ void add_render(CLI::App& app, std::vector<Command>& commands) {
         std::string scene, out, target, shading = "shaded";
         uint32_t width = 1920, height = 1080;
         float yaw = 30, pitch = 25, distance = 0, fov = 40;
-        bool no_shadows = false;
+        bool no_shadows = false, no_tile_cones = false, no_convex_steps = false;
         AppOptions app;
     };
     auto a = std::make_shared<Args>();
@@ -55,6 +55,12 @@ void add_render(CLI::App& app, std::vector<Command>& commands) {
         ->capture_default_str()
         ->check(CLI::IsMember({"shaded", "normals", "heatmap"}));
     sub->add_flag("--no-shadows", a->no_shadows, "trace primary rays only");
+    sub->add_flag("--no-tile-cones", a->no_tile_cones,
+                  "ablation: primary rays start at the box, not where their 8x8 tile's cone "
+                  "stops (pruned CPU tracer)");
+    sub->add_flag("--no-convex-steps", a->no_convex_steps,
+                  "ablation: plain sphere-tracing steps in cells whose tape is one convex "
+                  "primitive (pruned CPU tracer)");
     a->app.prune.clearance = true;  // the tracer's far-field skips (--no-clearance: off)
     add_app_options(sub, a->app);
     add_backend_option(sub, a->app.backend);
@@ -80,6 +86,8 @@ void add_render(CLI::App& app, std::vector<Command>& commands) {
                           : a->shading == "heatmap" ? Shading::kHeatmap
                                                     : Shading::kShaded;
              ro.shadows = !a->no_shadows;
+             ro.tile_cones = !a->no_tile_cones;
+             ro.convex_steps = !a->no_convex_steps;
              ro.threads = a->app.prune.threads;
              Progress bar("tracing", a->app.quiet);
              ro.progress = [&bar](double f) { bar.update(f); };
