@@ -1,7 +1,9 @@
 // render.hpp — sphere-traced images of a scene (DESIGN.md §6): one primary and one shadow ray per
 // pixel, either on the pruned grid (far-field blocks skipped whole, near-field cells evaluated
 // with their tapes) or naively (the full tree at every step, the paper's baseline). Both use
-// the same tracer, evaluator and threading, so their time ratio measures the pruning alone.
+// the same tracer, evaluator and threading, so their time ratio measures what the pruned grid
+// gives: shorter tapes, and the longer steps its far-field cells and one-primitive tapes allow
+// (RenderOptions::tile_cones, convex_steps; PruneOptions::clearance).
 //
 // Thread-safety: render() is reentrant; it runs on oneTBB.
 #pragma once

@@ -3,7 +3,8 @@
 // level) jumps to the cell's exit — no surface can be inside it — or by the cell's constant if
 // that is longer; in a near-field cell it steps by the value of the cell's tape. Rays are
 // marched within the near-field cells' box only (PrunedGrid::near_box). Both fields run the same
-// loop, so their time ratio is the pruning's alone.
+// loop; the pruned one also starts a tile's primary rays where the tile's cone stops
+// (start_at_cones) and steps by secants in cells of one convex primitive (convex_step).
 #include <algorithm>
 #include <atomic>
 #include <bit>
@@ -596,7 +597,7 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
         }
         const float sphere = l.t + d * ctx.inv_lipschitz;
         if constexpr (kPruned) {
-            l.t = field.convex_tape(l.tape) && convex_steps
+            l.t = convex_steps && field.convex_tape(l.tape)
                       ? convex_step(l, l.tape[0], d, sphere, field.secant_margin,
                                     field.levels.back().tiny)
                       : sphere;
