@@ -845,13 +845,7 @@ TEST(Gpu, ReferenceScenesMatchCpu) {
 void expect_similar(const Image& a, const Image& b, const std::string& what) {
     SCOPED_TRACE(what);
     ASSERT_EQ(a.rgb.size(), b.rgb.size());
-    size_t differ = 0;
-    for (size_t i = 0; i < a.rgb.size(); i += 3) {
-        int d = 0;
-        for (int c = 0; c < 3; ++c)
-            d = std::max(d, std::abs(int(a.rgb[i + c]) - int(b.rgb[i + c])));
-        differ += d > 2 ? 1 : 0;
-    }
+    const size_t differ = test::pixels_differing(a, b, 2);
     EXPECT_LE(double(differ), 0.002 * double(a.rgb.size() / 3)) << differ << " pixels differ";
 }
 

@@ -15,6 +15,7 @@
 #include "sdfprune/eval.hpp"
 #include "sdfprune/prune.hpp"
 #include "sdfprune/render.hpp"
+#include "test_util.hpp"
 
 namespace sdfprune {
 namespace {
@@ -255,18 +256,6 @@ INSTANTIATE_TEST_SUITE_P(
 // samples other points of its path, and at grazing hits the stopping test |f| < 5·10⁻⁴·t then
 // fires a step earlier or later: a few pixels may differ. The pruned tracer's own longer steps
 // (tile cones, convex steps) stop rays at other points of the same band: a few pixels more.
-size_t pixels_differing(const Image& a, const Image& b, int tolerance) {
-    EXPECT_EQ(a.rgb.size(), b.rgb.size());
-    size_t differ = 0;
-    for (size_t i = 0; i < a.rgb.size(); i += 3) {
-        int d = 0;
-        for (int ch = 0; ch < 3; ++ch)
-            d = std::max(d, std::abs(int(a.rgb[i + ch]) - int(b.rgb[i + ch])));
-        differ += d > tolerance;
-    }
-    return differ;
-}
-
 TEST(PruneBandRender, PrunedAndNaiveRendersAgreeUnderScale) {
     for (const Transform t : {Transform::kUniform, Transform::kNonUniform, Transform::kSheared}) {
         const Scene sc = band_scene(77 + uint32_t(t), t, 40, 128);
@@ -293,11 +282,11 @@ TEST(PruneBandRender, PrunedAndNaiveRendersAgreeUnderScale) {
             plain.tile_cones = plain.convex_steps = false;
             RenderStats ps, ds;
             const Image pruned = render(g, plain, &ps);
-            EXPECT_LE(double(pixels_differing(pruned, naive, far_field ? 8 : 0)) / pixels,
+            EXPECT_LE(double(test::pixels_differing(pruned, naive, far_field ? 8 : 0)) / pixels,
                       far_field ? 0.005 : 0.0)
                 << what;
             const Image stepped = render(g, ro, &ds);
-            EXPECT_LE(double(pixels_differing(stepped, naive, 8)) / pixels, 0.005)
+            EXPECT_LE(double(test::pixels_differing(stepped, naive, 8)) / pixels, 0.005)
                 << what << ", tile cones and convex steps";
             EXPECT_NEAR(ds.hit_fraction, ns.hit_fraction, 0.002) << what;
             EXPECT_LT(ds.steps_avg, ps.steps_avg) << what;

@@ -25,15 +25,7 @@ RenderOptions small_options(const Scene& sc, Shading shading = Shading::kShaded)
 
 // Fraction of pixels whose channels differ by more than `tolerance`.
 double differing_fraction(const Image& a, const Image& b, int tolerance) {
-    EXPECT_EQ(a.rgb.size(), b.rgb.size());
-    size_t n = 0;
-    for (size_t i = 0; i < a.rgb.size(); i += 3) {
-        int d = 0;
-        for (int c = 0; c < 3; ++c)
-            d = std::max(d, std::abs(int(a.rgb[i + c]) - int(b.rgb[i + c])));
-        n += d > tolerance;
-    }
-    return double(n) / double(a.rgb.size() / 3);
+    return double(test::pixels_differing(a, b, tolerance)) / double(a.rgb.size() / 3);
 }
 
 TEST(Render, PrunedAndNaiveAgreeOnDemo) {

@@ -4,7 +4,9 @@
 #include <stdlib.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -60,6 +62,19 @@ CliResult run_cli(const std::string& args, const std::string& env) {
     std::remove(out.c_str());
     std::remove(err.c_str());
     return r;
+}
+
+size_t pixels_differing(const Image& a, const Image& b, int tolerance) {
+    EXPECT_EQ(a.rgb.size(), b.rgb.size());
+    const size_t n = std::min(a.rgb.size(), b.rgb.size());
+    size_t differ = 0;
+    for (size_t i = 0; i + 2 < n; i += 3) {
+        int d = 0;
+        for (int c = 0; c < 3; ++c)
+            d = std::max(d, std::abs(int(a.rgb[i + c]) - int(b.rgb[i + c])));
+        differ += d > tolerance;
+    }
+    return differ;
 }
 
 }  // namespace sdfprune::test

@@ -1,4 +1,5 @@
-// test_util.hpp — helpers shared by the tests: locating the reference scenes, running the CLI.
+// test_util.hpp — helpers shared by the tests: locating the reference scenes, running the CLI,
+// comparing images.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -6,6 +7,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <string>
+
+#include "sdfprune/render.hpp"
 
 namespace sdfprune::test {
 
@@ -37,5 +40,8 @@ struct CliResult {
 // Runs the sdfprune CLI with `args` (shell-quoted by the caller) and captures its output;
 // `env` is prefixed to the command (e.g. "VAR=value").
 CliResult run_cli(const std::string& args, const std::string& env = "");
+
+// How many pixels of two images of one size differ by more than `tolerance` in some channel.
+size_t pixels_differing(const Image& a, const Image& b, int tolerance);
 
 }  // namespace sdfprune::test
