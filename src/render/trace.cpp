@@ -11,7 +11,6 @@
 #include <bit>
 #include <chrono>
 #include <cmath>
-#include <cstdlib>
 #include <cstring>
 #include <numbers>
 #include <vector>
@@ -104,6 +103,18 @@ struct Lane {
 // The next t of lane l at p in far-field cell c (corner lo, level geometry geo): no surface
 // is in the cell nor in the box of cells its clearance in the ray's octant gives, so continue
 // from the exit of that box, or by the cell's constant if that is longer.
+// The t at which lane l's ray reaches the faces `exit` (per axis, the face it leaves a box by:
+// the upper one where it goes up) first.
+float exit_time(const Lane& l, float4 exit) {
+    float4 t_axis = (exit - l.o) * l.inv_dir;
+    // NaN (0·inf): the ray runs in the face's plane, which it never leaves. Which of equal
+    // candidates wins (+0 or -0) does not matter: callers add a tiny step. exit - o is finite,
+    // so only an infinite 1 / dir (dir ±0, or so small that its inverse overflows) can make a
+    // NaN: other rays skip the select (8 instructions a far-field step).
+    if (l.inf_inverse) t_axis = t_axis == t_axis ? t_axis : splat(INFINITY);
+    return std::min(std::min(t_axis[0], t_axis[1]), t_axis[2]);
+}
+
 float far_field_advance(const Lane& l, float4 p, float4 lo, const LevelGeometry& geo,
                         const PrunedCell& c, float inv_lipschitz) {
     const float r = float(clearance_in(c, l.octant));
@@ -111,26 +122,11 @@ float far_field_advance(const Lane& l, float4 p, float4 lo, const LevelGeometry&
     // is the same float (negation is exact), so one multiply-add serves both. The factor
     // r·(±1) + (1 or 0) is r + 1 or -r exactly (small integers); -r is +0 rather than -0 for
     // r = 0, which gives the same exit (lo is never -0: a sum with +0·size).
-    const float4 exit = lo + geo.size * (splat(r) * l.exit_sign + l.exit_up);
-    float4 t_axis = (exit - l.o) * l.inv_dir;
-    // NaN (0·inf): the ray runs in the face's plane, which it never leaves. Which of equal
-    // candidates wins (+0 or -0) does not matter: only t_exit + tiny is used. exit - o is
-    // finite, so only an infinite 1 / dir (dir ±0, or so small that its inverse overflows) can
-    // make a NaN: other rays skip the select (8 instructions a far-field step).
-    if (l.inf_inverse) t_axis = t_axis == t_axis ? t_axis : splat(INFINITY);
-    const float t_exit = std::min(std::min(t_axis[0], t_axis[1]), t_axis[2]);
+    const float t_exit = exit_time(l, lo + geo.size * (splat(r) * l.exit_sign + l.exit_up));
     // |f(p)| >= |f(centre)| - L·|p - centre|: often far beyond the cell.
     const float from_centre = std::fabs(c.value) * inv_lipschitz - length3(p - (lo + geo.half));
     const float step = std::max(std::fabs(c.bound) * inv_lipschitz, from_centre);
     return std::max(l.t + step, t_exit + geo.tiny);
-}
-
-// The exit of lane l's ray from the box [lo, hi] it is in: the smallest t at which it reaches
-// a face on its way out (far_field_advance's exit, for a box of one cell).
-float box_exit(const Lane& l, float4 lo, float4 hi) {
-    float4 t_axis = ((l.up ? hi : lo) - l.o) * l.inv_dir;
-    if (l.inf_inverse) t_axis = t_axis == t_axis ? t_axis : splat(INFINITY);
-    return std::min(std::min(t_axis[0], t_axis[1]), t_axis[2]);
 }
 
 // Where lane l goes on from t, in a near-field cell whose tape is one primitive with a convex
@@ -144,7 +140,7 @@ float box_exit(const Lane& l, float4 lo, float4 hi) {
 float convex_step(Lane& l, uint32_t word, float d, float sphere, float margin, float tiny) {
     float next = sphere;
     if (l.convex_word == word) {
-        float target = box_exit(l, l.near_lo, l.near_hi) + tiny;
+        float target = exit_time(l, l.up ? l.near_hi : l.near_lo) + tiny;
         const float drop = l.convex_d - d + margin;
         if (drop > 0) target = std::min(target, l.t + d * (l.t - l.convex_t) / drop);
         next = std::max(next, target);
@@ -167,7 +163,6 @@ float convex_step(Lane& l, uint32_t word, float d, float sphere, float margin, f
 // only their order in time differs.
 template <class Field>
 void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, float* stack) {
-    const bool convex_steps = ctx.convex_steps;
     constexpr bool kPruned = std::is_same_v<Field, PrunedField>;
     constexpr uint32_t kLanes = kPruned ? 16 : 1;
     Lane lanes[kLanes];
@@ -274,7 +269,7 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
         }
         const float sphere = l.t + d * ctx.inv_lipschitz;
         if constexpr (kPruned) {
-            l.t = convex_steps && field.convex_tape(l.tape)
+            l.t = ctx.convex_steps && field.convex_tape(l.tape)
                       ? convex_step(l, l.tape[0], d, sphere, field.secant_margin,
                                     field.levels.back().tiny)
                       : sphere;
@@ -362,65 +357,63 @@ CameraFrame camera_frame(const Scene& sc, const RenderOptions& opt) {
 namespace {
 
 // RenderOptions::tile_cones, for the primary rays of a tile whose pixel j = row · w + i has
-// the direction column[i] + up · v(row), normalized. The tile's rays go in sub-tiles of
-// kConeTiles[0]² pixels, each marched as one cone (its axis through the middle of its corner
-// rays) from where its first ray enters the box; then each in smaller sub-tiles of the next
-// size, each cone from where the larger one stopped; and so on. Each ray starts where its last
-// cone stopped; one that a cone has left the box before the ray's exit is dropped (a miss,
-// t = -1). Returns how many rays are left, in order, in `rays`. Camera at 1920×1080, trace time
-// against no cones: 8 × 8 -11 %, 16 × 16 -9 %, 4 × 4 -4 % (its cones, each from the box, cost
-// more than the rays' steps they save). 8 × 8 then 4 × 4 took 11 % fewer steps than 8 × 8
-// alone but no less time (medians of six alternated renders each, 165.0 and 165.5 ms), nor did
-// 16, 8, 4 or 8, 4, 2: one size.
-constexpr uint32_t kConeTiles[] = {8};
+// the direction column[i] + up · v(row), normalized: the tile's rays in sub-tiles of
+// kConeTile² pixels, each sub-tile's marched as one cone (its axis through the middle of its
+// corner rays) from where its first ray enters the box. Each ray starts where its cone stopped;
+// one whose cone left the box before the ray's exit is dropped (a miss, t = -1). Returns how
+// many rays are left, in order, in `rays`. Camera at 1920×1080, trace time against no cones:
+// 8 × 8 -11 %, 16 × 16 -9 %, 4 × 4 -4 % (its cones, each from the box, cost more than the
+// rays' steps they save). Cones of 4 × 4 from where each 8 × 8 one stopped took 11 % fewer
+// steps than 8 × 8 alone but no less time (medians of six alternated renders each, 165.0 and
+// 165.5 ms), nor did sizes 16, 8, 4 or 8, 4, 2 in turn.
+constexpr uint32_t kConeTile = 8;
 uint32_t start_at_cones(const PrunedField& field, const CameraFrame& frame, vec3 eye, uint32_t H,
                         uint32_t y0, const vec3* column, uint32_t w, uint32_t h, Ray* rays,
                         uint32_t* ray_pixel, uint32_t n_rays, float* stack, Counters& counters) {
-    constexpr uint32_t kMaxSubTiles = 64;  // of a 16 × 16 tile, 2 × 2 pixels each
-    for (const uint32_t size : kConeTiles) {
-        const uint32_t sub_x = (w + size - 1) / size, sub_y = (h + size - 1) / size;
-        float sub_t0[kMaxSubTiles], sub_t1[kMaxSubTiles];
-        std::fill_n(sub_t0, sub_x * sub_y, INFINITY);
-        std::fill_n(sub_t1, sub_x * sub_y, -INFINITY);
-        const auto sub_of = [&](uint32_t j) { return (j / w) / size * sub_x + (j % w) / size; };
-        // The cone of each sub-tile spans its rays' [t0, t1].
-        for (uint32_t r = 0; r < n_rays; ++r) {
-            const uint32_t k = sub_of(ray_pixel[r]);
-            sub_t0[k] = std::min(sub_t0[k], rays[r].t0);
-            sub_t1[k] = std::max(sub_t1[k], rays[r].t1);
-        }
-        for (uint32_t sy = 0; sy < sub_y; ++sy)
-            for (uint32_t sx = 0; sx < sub_x; ++sx) {
-                const uint32_t k = sy * sub_x + sx;
-                if (!(sub_t0[k] <= sub_t1[k])) continue;  // no ray
-                const uint32_t i0 = sx * size, i1 = std::min(w, i0 + size) - 1;
-                const uint32_t r0 = sy * size, r1 = std::min(h, r0 + size) - 1;
-                float4 corner[4];
-                int n = 0;
-                for (const uint32_t row : {r0, r1})
-                    for (const uint32_t i : {i0, i1}) {
-                        const vec3 c = column[i] + frame.up * pixel_v(frame, H, y0 + row);
-                        corner[n++] = load4(c) / splat(math::length(c));
-                    }
-                const float4 sum = corner[0] + corner[1] + corner[2] + corner[3];
-                const float4 axis = sum / splat(length3(sum));
-                float spread = 0;
-                for (const float4& c : corner) spread = std::max(spread, length3(c - axis));
-                // (a margin for the rounding of the directions)
-                const Cone cone{load4(eye), axis, spread * 1.001f + 1e-6f};
-                sub_t0[k] = field.cone_start(cone, sub_t0[k], sub_t1[k], stack, counters);
-            }
-        uint32_t kept = 0;
-        for (uint32_t r = 0; r < n_rays; ++r) {
-            const float start = sub_t0[sub_of(ray_pixel[r])];
-            if (start > rays[r].t1) continue;
-            rays[r].t0 = std::max(rays[r].t0, start);
-            rays[kept] = rays[r];
-            ray_pixel[kept++] = ray_pixel[r];
-        }
-        n_rays = kept;
+    constexpr uint32_t kMaxSubTiles = 4;  // of a 16 × 16 tile
+    const uint32_t sub_x = (w + kConeTile - 1) / kConeTile, sub_y = (h + kConeTile - 1) / kConeTile;
+    float sub_t0[kMaxSubTiles], sub_t1[kMaxSubTiles];
+    std::fill_n(sub_t0, sub_x * sub_y, INFINITY);
+    std::fill_n(sub_t1, sub_x * sub_y, -INFINITY);
+    const auto sub_of = [&](uint32_t j) {
+        return (j / w) / kConeTile * sub_x + (j % w) / kConeTile;
+    };
+    // The cone of each sub-tile spans its rays' [t0, t1].
+    for (uint32_t r = 0; r < n_rays; ++r) {
+        const uint32_t k = sub_of(ray_pixel[r]);
+        sub_t0[k] = std::min(sub_t0[k], rays[r].t0);
+        sub_t1[k] = std::max(sub_t1[k], rays[r].t1);
     }
-    return n_rays;
+    for (uint32_t sy = 0; sy < sub_y; ++sy)
+        for (uint32_t sx = 0; sx < sub_x; ++sx) {
+            const uint32_t k = sy * sub_x + sx;
+            if (!(sub_t0[k] <= sub_t1[k])) continue;  // no ray
+            const uint32_t i0 = sx * kConeTile, i1 = std::min(w, i0 + kConeTile) - 1;
+            const uint32_t r0 = sy * kConeTile, r1 = std::min(h, r0 + kConeTile) - 1;
+            float4 corner[4];
+            int n = 0;
+            for (const uint32_t row : {r0, r1})
+                for (const uint32_t i : {i0, i1}) {
+                    const vec3 c = column[i] + frame.up * pixel_v(frame, H, y0 + row);
+                    corner[n++] = load4(c) / splat(math::length(c));
+                }
+            const float4 sum = corner[0] + corner[1] + corner[2] + corner[3];
+            const float4 axis = sum / splat(length3(sum));
+            float spread = 0;
+            for (const float4& c : corner) spread = std::max(spread, length3(c - axis));
+            // (a margin for the rounding of the directions)
+            const Cone cone{load4(eye), axis, spread * 1.001f + 1e-6f};
+            sub_t0[k] = field.cone_start(cone, sub_t0[k], sub_t1[k], stack, counters);
+        }
+    uint32_t kept = 0;
+    for (uint32_t r = 0; r < n_rays; ++r) {
+        const float start = sub_t0[sub_of(ray_pixel[r])];
+        if (start > rays[r].t1) continue;
+        rays[r].t0 = std::max(rays[r].t0, start);
+        rays[kept] = rays[r];
+        ray_pixel[kept++] = ray_pixel[r];
+    }
+    return kept;
 }
 
 template <class Field>

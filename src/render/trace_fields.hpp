@@ -50,26 +50,25 @@ float length3(float4 v) {
     return std::sqrt(sq[0] + sq[1] + sq[2]);
 }
 
-// Whether p lies in the closed box [lo, hi] (x, y, z; the unused lane is ignored). With SSE,
-// the three lanes' verdicts are taken as one mask (movmskps) rather than one by one: 11
-// instructions a test went to 5 (callgrind, character).
-bool in_box(float4 p, float4 lo, float4 hi) {
-    const int4 in = (p >= lo) & (p <= hi);
+// Whether lanes x, y and z of a comparison's mask are all true (the unused lane is ignored).
+// With SSE, the three verdicts are taken as one mask (movmskps) rather than one by one: 11
+// instructions a box test went to 5 (callgrind, character).
+bool all_xyz(int4 mask) {
 #if defined(__SSE__)
-    return (__builtin_ia32_movmskps(float4(in)) & 7) == 7;
+    return (__builtin_ia32_movmskps(float4(mask)) & 7) == 7;
 #else
-    return (in[0] & in[1] & in[2]) != 0;
+    return (mask[0] & mask[1] & mask[2]) != 0;
 #endif
+}
+
+// Whether p lies in the closed box [lo, hi] (x, y, z).
+bool in_box(float4 p, float4 lo, float4 hi) {
+    return all_xyz((p >= lo) & (p <= hi));
 }
 
 // Whether the three lanes (x, y, z) of a and b are equal.
 bool all_equal(int4 a, int4 b) {
-    const int4 eq = a == b;
-#if defined(__SSE__)
-    return (__builtin_ia32_movmskps(float4(eq)) & 7) == 7;
-#else
-    return (eq[0] & eq[1] & eq[2]) != 0;
-#endif
+    return all_xyz(a == b);
 }
 
 // Whether the box [lo, hi] holds no point (some min > max: PrunedGrid::near_box without a
@@ -144,12 +143,7 @@ struct Cone {
 float cone_step_in_box(const Cone& cone, float t, float4 lo, float4 hi) {
     const float4 c = splat(cone.spread), s4 = splat(t);
     const float4 low = cone.eye + s4 * (cone.axis - c), high = cone.eye + s4 * (cone.axis + c);
-    const int4 in = (low >= lo) & (high <= hi);
-#if defined(__SSE__)
-    if ((__builtin_ia32_movmskps(float4(in)) & 7) != 7) return 0;
-#else
-    if (!(in[0] & in[1] & in[2])) return 0;
-#endif
+    if (!all_xyz((low >= lo) & (high <= hi))) return 0;
     // The lower side approaches lo where axis - spread < 0, the upper side hi where
     // axis + spread > 0: the distance s at which each reaches it.
     const float4 down = c - cone.axis, up = cone.axis + c;
