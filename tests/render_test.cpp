@@ -88,13 +88,29 @@ TEST(Render, TileConesAndConvexStepsKeepTheImage) {
             }
         scenes.push_back(b.build(lattice));
     }
+    {
+        // Grains just above a floor: blocks of finest cells that hold both the floor's face
+        // (one convex primitive: convex steps may run to such a block's exit only where every
+        // near-field cell of the block is the floor's) and a grain.
+        SceneBuilder b;
+        Shape scene = b.box({1.6f, 0.2f, 1.6f});
+        for (int i = 0; i < 12; ++i)
+            for (int j = 0; j < 12; ++j) {
+                const float r = 0.008f + 0.004f * float((i + j) % 3);
+                const float gap = 0.004f + 0.008f * float((i * 5 + j) % 3);
+                scene = scene | b.sphere(r).translated({-0.7f + 0.127f * float(i), 0.1f + r + gap,
+                                                        -0.7f + 0.127f * float(j)});
+            }
+        scenes.push_back(b.build(scene));
+    }
     for (size_t n = 0; n < scenes.size(); ++n) {
         const Scene& sc = scenes[n];
         PruneOptions po;
         po.resolution = 128;
         po.clearance = true;
         const PrunedGrid g = prune(sc, po);
-        RenderOptions plain = small_options(sc, Shading::kNormals);
+        // Shaded: the shadow rays, which leave the surface, are compared too.
+        RenderOptions plain = small_options(sc, Shading::kShaded);
         plain.width = 240;
         plain.height = 135;
         plain.tile_cones = plain.convex_steps = false;
@@ -112,7 +128,8 @@ TEST(Render, TileConesAndConvexStepsKeepTheImage) {
                                      (ro.convex_steps ? ", convex steps" : "");
             EXPECT_LE(differing_fraction(img, base, 8), 0.003) << what;
             EXPECT_NEAR(st.hit_fraction, ps.hit_fraction, 0.001) << what;
-            EXPECT_LT(st.steps_avg, ps.steps_avg) << what;
+            // (Cones alone save nothing where the surface fills the view, as the floor does.)
+            EXPECT_LT(st.steps_avg, ps.steps_avg * (variant == 1 ? 1.01 : 1.0)) << what;
         }
     }
 }

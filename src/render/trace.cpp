@@ -134,14 +134,19 @@ float far_field_advance(const Lane& l, float4 p, float4 lo, const LevelGeometry&
 // t. If the lane's last value of this primitive was taken at an earlier t, the secant through
 // the two values, extended, lies below g (convexity), so g has no zero before the secant's;
 // where g did not decrease, none in the cell at all. Either way the ray may go on from there,
-// or from the cell's exit if that is nearer: the cell's tape gives the field there only. The
-// two values' difference is made larger by `margin` (their rounding): the secant's zero comes
-// no later than the exact secant's. Steps are never shorter than the sphere tracer's.
-float convex_step(Lane& l, uint32_t word, float d, float sphere, float margin, float tiny) {
+// or from the cell's exit if that is nearer: the cell's tape gives the field there only. In a
+// convex block (PrunedField::convex_box: every near-field cell of the cell's block of finest
+// cells has this tape, and the far-field ones hold no zero) the block's exit serves: on
+// camera at 1920×1080, 9 % fewer steps. The two values' difference is made larger by the
+// field's secant_margin (their rounding): the secant's zero comes no later than the exact
+// secant's. Steps are never shorter than the sphere tracer's.
+float convex_step(const PrunedField& field, Lane& l, uint32_t word, float d, float sphere) {
     float next = sphere;
     if (l.convex_word == word) {
-        float target = exit_time(l, l.up ? l.near_hi : l.near_lo) + tiny;
-        const float drop = l.convex_d - d + margin;
+        float4 lo = l.near_lo, hi = l.near_hi;
+        field.convex_box(l.walk.cell, l.index, lo, hi);
+        float target = exit_time(l, l.up ? hi : lo) + field.levels.back().tiny;
+        const float drop = l.convex_d - d + field.secant_margin;
         if (drop > 0) target = std::min(target, l.t + d * (l.t - l.convex_t) / drop);
         next = std::max(next, target);
     }
@@ -270,8 +275,7 @@ void march(const Field& field, const TraceContext& ctx, std::span<Ray> rays, flo
         const float sphere = l.t + d * ctx.inv_lipschitz;
         if constexpr (kPruned) {
             l.t = ctx.convex_steps && field.convex_tape(l.tape)
-                      ? convex_step(l, l.tape[0], d, sphere, field.secant_margin,
-                                    field.levels.back().tiny)
+                      ? convex_step(field, l, l.tape[0], d, sphere)
                       : sphere;
         } else {
             l.t = sphere;
@@ -416,10 +420,10 @@ uint32_t start_at_cones(const PrunedField& field, const CameraFrame& frame, vec3
     return kept;
 }
 
+// `t_start`: when the caller began, the field's making included.
 template <class Field>
-Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt,
-                  RenderStats* stats) {
-    const auto t_start = std::chrono::steady_clock::now();
+Image trace_image(const Field& field, const Scene& sc, const RenderOptions& opt, RenderStats* stats,
+                  std::chrono::steady_clock::time_point t_start) {
     const uint32_t W = opt.width, H = opt.height;
     if (W == 0 || H == 0) throw std::invalid_argument("image size must be positive");
     // Tiles write their pixels' final bytes: 3 bytes a pixel rather than a float color and an
@@ -641,7 +645,8 @@ void set_render_stats(const RenderOptions& opt, const TraceTotals& totals, doubl
 
 Image render(const PrunedGrid& grid, const RenderOptions& options, RenderStats* stats) {
     const Scene& sc = grid.scene();
-    return trace_image(PrunedField(grid), sc, options, stats);
+    const auto t_start = std::chrono::steady_clock::now();
+    return trace_image(PrunedField(grid, options.convex_steps), sc, options, stats, t_start);
 }
 
 PickResult pick(const PrunedGrid& grid, const RenderOptions& opt, uint32_t x, uint32_t y) {
@@ -674,7 +679,7 @@ PickResult pick(const PrunedGrid& grid, const RenderOptions& opt, uint32_t x, ui
 }
 
 Image render_naive(const Scene& scene, const RenderOptions& options, RenderStats* stats) {
-    return trace_image(NaiveField{scene}, scene, options, stats);
+    return trace_image(NaiveField{scene}, scene, options, stats, std::chrono::steady_clock::now());
 }
 
 }  // namespace sdfprune

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstdint>
@@ -202,6 +203,56 @@ struct PrunedField {
     std::vector<uint8_t> convex;
     // How much two values of one primitive may differ by rounding alone (see convex_step).
     float secant_margin = 0;
+    // Per block of the finest level (its cells lie at block · block_cells in level_cells, one
+    // block per near-field cell of the level above), once a convex step has asked (0: not
+    // yet): 1 where the block is convex, every near-field cell of it having the same tape (by
+    // offset: the pruner stores a block's equal tapes once), one convex primitive
+    // (convex_tape); else 2. In a convex block the field is that primitive in the near cells
+    // and has no zero in the far ones, so a convex step may go on to the block's exit rather
+    // than its cell's (see convex_step). Found when asked, since most blocks never are (a
+    // pass over all of them cost 3–26 ms a render). Empty where not wanted (one ray, no convex
+    // steps) or not pow2 or of one level.
+    mutable std::vector<std::atomic<uint8_t>> convex_block;
+    const PrunedCell* finest_cells = nullptr;
+    uint32_t block_cells = 0;
+    // `convex_blocks`: keep the blocks' answers (for convex steps over many rays).
+    PrunedField(const PrunedGrid& grid, bool convex_blocks) : PrunedField(grid) {
+        const uint32_t finest = g.level_count() - 1;
+        if (!convex_blocks || !pow2 || finest == 0) return;
+        const std::span<const PrunedCell> cells = g.level_cells(finest);
+        const uint32_t f = g.level_factor(finest);
+        block_cells = f * f * f;
+        finest_cells = cells.data();
+        convex_block = std::vector<std::atomic<uint8_t>>(cells.size() / block_cells);
+    }
+    bool block_is_convex(size_t b) const {
+        const PrunedCell* block = finest_cells + b * block_cells;
+        uint32_t tape = PrunedCell::kFarField;
+        for (uint32_t k = 0; k < block_cells; ++k) {
+            const uint32_t t = block[k].tape;
+            if (t == PrunedCell::kFarField) continue;
+            if (tape != PrunedCell::kFarField && t != tape) return false;
+            tape = t;
+        }
+        return tape != PrunedCell::kFarField && convex_tape(g.tape_at(tape));
+    }
+    // The box a convex step in finest near-field cell `cell` (index i; lo, hi its box) may go
+    // to the exit of: the cell's, or its block's where that block is convex. (Threads that
+    // ask about one block at once find the same answer.)
+    void convex_box(const PrunedCell* cell, int4 i, float4& lo, float4& hi) const {
+        if (convex_block.empty()) return;
+        const size_t b = size_t(cell - finest_cells) / block_cells;
+        uint8_t state = convex_block[b].load(std::memory_order_relaxed);
+        if (state == 0) {
+            state = block_is_convex(b) ? 1 : 2;
+            convex_block[b].store(state, std::memory_order_relaxed);
+        }
+        if (state != 1) return;
+        const LevelGeometry& geo = levels[levels.size() - 2];
+        const int4 c = i >> geo.shift;
+        lo = grid_lo + __builtin_convertvector(int4{c[0], c[1], c[2], 0}, float4) * geo.size;
+        hi = lo + geo.size;
+    }
     explicit PrunedField(const PrunedGrid& grid)
         : g(grid),
           grid_lo(load4(grid.aabb().min)),
