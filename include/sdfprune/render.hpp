@@ -58,7 +58,8 @@ struct RenderOptions {
     //   its rays start where the cone stops, or are not marched where it leaves the box;
     // - convex_steps: in a near-field cell whose tape is one convex primitive, a ray goes on
     //   to the zero of the secant through its last two values of that primitive, or to the
-    //   cell's exit where that is nearer or the value did not decrease.
+    //   cell's exit where that is nearer or the value did not decrease (the exit of the
+    //   cell's block of finest cells, where all its near-field cells have that primitive).
     // Off: each ray takes the plain sphere tracer's steps (as up to stop 30).
     bool tile_cones = true;
     bool convex_steps = true;

@@ -214,7 +214,7 @@ struct PrunedField {
     // steps) or not pow2 or of one level.
     mutable std::vector<std::atomic<uint8_t>> convex_block;
     const PrunedCell* finest_cells = nullptr;
-    uint32_t block_cells = 0;
+    uint32_t block_cells = 0, block_shift = 0;  // f³ cells a block, log2 of it (f: pow2)
     // `convex_blocks`: keep the blocks' answers (for convex steps over many rays).
     PrunedField(const PrunedGrid& grid, bool convex_blocks) : PrunedField(grid) {
         const uint32_t finest = g.level_count() - 1;
@@ -222,6 +222,7 @@ struct PrunedField {
         const std::span<const PrunedCell> cells = g.level_cells(finest);
         const uint32_t f = g.level_factor(finest);
         block_cells = f * f * f;
+        block_shift = uint32_t(std::countr_zero(block_cells));
         finest_cells = cells.data();
         convex_block = std::vector<std::atomic<uint8_t>>(cells.size() / block_cells);
     }
@@ -241,7 +242,7 @@ struct PrunedField {
     // ask about one block at once find the same answer.)
     void convex_box(const PrunedCell* cell, int4 i, float4& lo, float4& hi) const {
         if (convex_block.empty()) return;
-        const size_t b = size_t(cell - finest_cells) / block_cells;
+        const size_t b = size_t(cell - finest_cells) >> block_shift;
         uint8_t state = convex_block[b].load(std::memory_order_relaxed);
         if (state == 0) {
             state = block_is_convex(b) ? 1 : 2;
