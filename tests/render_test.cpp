@@ -88,21 +88,10 @@ TEST(Render, TileConesAndConvexStepsKeepTheImage) {
             }
         scenes.push_back(b.build(lattice));
     }
-    {
-        // Grains just above a floor: blocks of finest cells that hold both the floor's face
-        // (one convex primitive: convex steps may run to such a block's exit only where every
-        // near-field cell of the block is the floor's) and a grain.
-        SceneBuilder b;
-        Shape scene = b.box({1.6f, 0.2f, 1.6f});
-        for (int i = 0; i < 12; ++i)
-            for (int j = 0; j < 12; ++j) {
-                const float r = 0.008f + 0.004f * float((i + j) % 3);
-                const float gap = 0.004f + 0.008f * float((i * 5 + j) % 3);
-                scene = scene | b.sphere(r).translated({-0.7f + 0.127f * float(i), 0.1f + r + gap,
-                                                        -0.7f + 0.127f * float(j)});
-            }
-        scenes.push_back(b.build(scene));
-    }
+    // Blocks of finest cells that hold both a floor's face (one convex primitive: convex steps
+    // may run to such a block's exit only where every near-field cell of it is the floor's)
+    // and a grain.
+    scenes.push_back(test::grains_on_floor());
     for (size_t n = 0; n < scenes.size(); ++n) {
         const Scene& sc = scenes[n];
         PruneOptions po;

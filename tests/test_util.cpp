@@ -12,6 +12,8 @@
 #include <sstream>
 #include <system_error>
 
+#include "sdfprune/builder.hpp"
+
 namespace sdfprune::test {
 namespace {
 
@@ -75,6 +77,19 @@ size_t pixels_differing(const Image& a, const Image& b, int tolerance) {
         differ += d > tolerance;
     }
     return differ;
+}
+
+Scene grains_on_floor() {
+    SceneBuilder b;
+    Shape scene = b.box({1.6f, 0.2f, 1.6f});
+    for (int i = 0; i < 12; ++i)
+        for (int j = 0; j < 12; ++j) {
+            const float r = 0.008f + 0.004f * float((i + j) % 3);
+            const float gap = 0.004f + 0.008f * float((i * 5 + j) % 3);
+            scene = scene | b.sphere(r).translated({-0.7f + 0.127f * float(i), 0.1f + r + gap,
+                                                    -0.7f + 0.127f * float(j)});
+        }
+    return b.build(scene);
 }
 
 }  // namespace sdfprune::test

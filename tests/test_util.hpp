@@ -1,5 +1,5 @@
 // test_util.hpp — helpers shared by the tests: locating the reference scenes, running the CLI,
-// comparing images.
+// comparing images, a scene built for the tracer's convex steps.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -9,6 +9,7 @@
 #include <string>
 
 #include "sdfprune/render.hpp"
+#include "sdfprune/scene.hpp"
 
 namespace sdfprune::test {
 
@@ -43,5 +44,9 @@ CliResult run_cli(const std::string& args, const std::string& env = "");
 
 // How many pixels of two images of one size differ by more than `tolerance` in some channel.
 size_t pixels_differing(const Image& a, const Image& b, int tolerance);
+
+// Grains just above a floor (a box): at 128³, blocks of finest cells that hold the floor's face
+// alone, and blocks that hold a grain too (the tracer's convex blocks, and the others).
+Scene grains_on_floor();
 
 }  // namespace sdfprune::test

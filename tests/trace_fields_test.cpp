@@ -6,7 +6,6 @@
 #include <vector>
 
 #include "prune_check.hpp"
-#include "sdfprune/builder.hpp"
 #include "sdfprune/builtin.hpp"
 #include "sdfprune/prune.hpp"
 #include "test_util.hpp"
@@ -19,24 +18,9 @@
 namespace sdfprune {
 namespace {
 
-// Grains just above a floor: blocks that hold the floor's face alone, and blocks that hold a
-// grain too.
-Scene grains_on_floor() {
-    SceneBuilder b;
-    Shape scene = b.box({1.6f, 0.2f, 1.6f});
-    for (int i = 0; i < 12; ++i)
-        for (int j = 0; j < 12; ++j) {
-            const float r = 0.008f + 0.004f * float((i + j) % 3);
-            const float gap = 0.004f + 0.008f * float((i * 5 + j) % 3);
-            scene = scene | b.sphere(r).translated({-0.7f + 0.127f * float(i), 0.1f + r + gap,
-                                                    -0.7f + 0.127f * float(j)});
-        }
-    return b.build(scene);
-}
-
 TEST(TraceFields, ConvexBlocksHoldOneConvexPrimitive) {
     std::vector<Scene> scenes;
-    scenes.push_back(grains_on_floor());
+    scenes.push_back(test::grains_on_floor());
     scenes.push_back(builtin_scene("demo"));
     for (uint32_t i = 0; i < 3; ++i)
         scenes.push_back(test::random_scene(400 + i, test::varied_spec(i, 24)));
