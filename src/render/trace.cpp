@@ -100,9 +100,6 @@ struct Lane {
     uint64_t evals = 0;  // node evaluations, added to the ray's counters when it is done
 };
 
-// The next t of lane l at p in far-field cell c (corner lo, level geometry geo): no surface
-// is in the cell nor in the box of cells its clearance in the ray's octant gives, so continue
-// from the exit of that box, or by the cell's constant if that is longer.
 // The t at which lane l's ray reaches the faces `exit` (per axis, the face it leaves a box by:
 // the upper one where it goes up) first.
 float exit_time(const Lane& l, float4 exit) {
@@ -115,6 +112,9 @@ float exit_time(const Lane& l, float4 exit) {
     return std::min(std::min(t_axis[0], t_axis[1]), t_axis[2]);
 }
 
+// The next t of lane l at p in far-field cell c (corner lo, level geometry geo): no surface
+// is in the cell nor in the box of cells its clearance in the ray's octant gives, so continue
+// from the exit of that box, or by the cell's constant if that is longer.
 float far_field_advance(const Lane& l, float4 p, float4 lo, const LevelGeometry& geo,
                         const PrunedCell& c, float inv_lipschitz) {
     const float r = float(clearance_in(c, l.octant));

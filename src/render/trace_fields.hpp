@@ -206,12 +206,12 @@ struct PrunedField {
     // Per block of the finest level (its cells lie at block · block_cells in level_cells, one
     // block per near-field cell of the level above), once a convex step has asked (0: not
     // yet): 1 where the block is convex, every near-field cell of it having the same tape (by
-    // offset: the pruner stores a block's equal tapes once), one convex primitive
-    // (convex_tape); else 2. In a convex block the field is that primitive in the near cells
-    // and has no zero in the far ones, so a convex step may go on to the block's exit rather
-    // than its cell's (see convex_step). Found when asked, since most blocks never are (a
-    // pass over all of them cost 3–26 ms a render). Empty where not wanted (one ray, no convex
-    // steps) or not pow2 or of one level.
+    // offset: the CPU pruner stores a call's equal tapes once; equal tapes stored apart only
+    // make fewer convex blocks), one convex primitive (convex_tape); else 2. In a convex block the
+    // field is that primitive in the near cells and has no zero in the far ones, so a convex step
+    // may go on to the block's exit rather than its cell's (see convex_step). Found when asked,
+    // since most blocks never are (a pass over all of them cost 3–26 ms a render). Empty where not
+    // wanted (one ray, no convex steps) or not pow2 or of one level.
     mutable std::vector<std::atomic<uint8_t>> convex_block;
     const PrunedCell* finest_cells = nullptr;
     uint32_t block_cells = 0, block_shift = 0;  // f³ cells a block, log2 of it (f: pow2)
