@@ -1,7 +1,6 @@
 """PrunedGrid: a shape pruned over a grid, reusable for many queries (Shape.prune)."""
 from __future__ import annotations
 
-import os
 from typing import TYPE_CHECKING, Any, Optional, Sequence, Tuple
 
 if TYPE_CHECKING:
@@ -9,7 +8,7 @@ if TYPE_CHECKING:
 
 from . import _sdfprune as _core
 from ._progress import progress_callback
-from ._shape import _MESH_EXTS, _SAVE_EXTS, _check_ext, _points
+from ._inputs import _MESH_EXTS, _SAVE_EXTS, _check_ext, _points
 
 
 class PrunedGrid:

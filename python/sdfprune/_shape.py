@@ -12,10 +12,13 @@ import os
 from typing import TYPE_CHECKING, Any, Optional, Sequence, Tuple, Union
 
 from . import _sdfprune as _core
+from ._inputs import _MESH_EXTS, _SAVE_EXTS, _check_ext, _points
 from ._progress import progress_callback
 
 if TYPE_CHECKING:  # numpy is imported on first use: `import sdfprune` stays fast
     import numpy as np
+
+    from ._grid import PrunedGrid
 
 Vec3 = Tuple[float, float, float]
 # Scenes with at most this many nodes answer f(points) with the whole tree by default: it costs
@@ -33,8 +36,6 @@ Z = (0.0, 0.0, 1.0)
 ORIGIN = (0.0, 0.0, 0.0)
 
 _IDENTITY = (1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
-_MESH_EXTS = (".stl", ".ply", ".obj")
-_SAVE_EXTS = _MESH_EXTS + (".npy", ".vdb", ".png")
 
 
 # ---- 3x4 affine maps as 12-tuples (row-major), local -> world -------------------------------
@@ -110,15 +111,6 @@ def _bounds(bounds: Any) -> Optional[Tuple[Vec3, Vec3]]:
     if not all(a < b for a, b in zip(lo, hi)):
         raise ValueError("bounds must have min < max on every axis")
     return lo, hi
-
-
-def _check_ext(path: Any, allowed: Sequence[str]) -> Tuple[str, str]:
-    path = os.fspath(path)
-    ext = os.path.splitext(path)[1].lower()
-    if ext not in allowed:
-        raise OSError(f'{path}: unknown output extension "{ext}" (expected {", ".join(allowed)})')
-    _core.check_writable(path)
-    return path, ext
 
 
 # ---- the tree -----------------------------------------------------------------------------
@@ -326,8 +318,8 @@ class Shape:
             exact = self.scene().nodes <= EXACT_NODES
         if exact:
             arr = _points(points)
-            return _finish(_core.eval_scene(self.scene(), arr, out, int(threads),
-                                            progress_callback(progress, "evaluating")), points)
+            return _core.eval_scene(self.scene(), arr, out, int(threads),
+                                    progress_callback(progress, "evaluating"))
         return self.prune(grid, threads=threads)(points, out=out, threads=threads,
                                                  progress=progress)
 
@@ -451,31 +443,3 @@ def loads(text: str, name: str = "<string>") -> Shape:
     return Shape(("scene", scene), scene.aabb)
 
 
-def _points(points: Any) -> "np.ndarray":
-    """An (N, 3) float32/float64 view of `points` (no copy for float32/float64 arrays)."""
-    import numpy as np
-    if isinstance(points, np.ndarray) and points.dtype in (np.float32, np.float64):
-        arr = points
-    else:
-        try:
-            arr = np.asarray(points)
-        except Exception as e:
-            raise ValueError(f"points must be an (N, 3) array of numbers: {e}") from None
-        if arr.dtype.kind not in "fiub" or arr.dtype == np.float16:
-            if arr.dtype.kind in "fiub":
-                arr = arr.astype(np.float32)
-            else:
-                raise ValueError(f"points must be numbers (got dtype {arr.dtype})")
-        if arr.dtype not in (np.float32, np.float64):
-            arr = arr.astype(np.float64)
-    if arr.ndim == 1 and arr.shape[0] == 3:
-        arr = arr.reshape(1, 3)
-    elif arr.ndim == 2 and arr.shape[0] == 0 and arr.shape[1] != 3:
-        raise ValueError(f"points must be an (N, 3) array (got shape {arr.shape})")
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise ValueError(f"points must be an (N, 3) array (got shape {arr.shape})")
-    return arr
-
-
-def _finish(values: "np.ndarray", points: Any) -> "np.ndarray":
-    return values
