@@ -5,9 +5,9 @@
 // Thread-safety: all functions are pure; batch functions run on oneTBB.
 #pragma once
 
-#include <functional>
 #include <span>
 
+#include "parallel.hpp"  // with_threads, for callers of the batch functions
 #include "scene.hpp"
 
 namespace sdfprune {
@@ -28,12 +28,22 @@ struct PointLanes {
 };
 
 // Evaluates `tape` at points 0..count-1 of `points` (count in 1..kEvalLanes) into
-// out[0..count): eval_tape's values bit for bit, computed in vector lanes (AVX2 where the
-// processor has it, see lane_isa() in prune.hpp), so a batch of points sharing a tape costs
+// out[0..count): eval_tape's values bit for bit, computed in vector lanes (AVX2 or AVX-512 where
+// the processor has it, see lane_isa()), so a batch of points sharing a tape costs
 // little more than one. Lanes past `count` are overwritten. `stack` must hold
 // scene.max_stack · kEvalLanes floats.
 void eval_tape_lanes(const Scene& scene, std::span<const uint32_t> tape, PointLanes& points,
                      uint32_t count, float* out, float* stack);
+
+// The instruction set that the loops over vector lanes run on (eval_tape_lanes' over points, and
+// the pruner's over boxes): the widest the processor has (x86-64: kAvx512, else kAvx2; chosen on
+// first use), else kBaseline. All give the same results bit for bit. set_lane_isa is for tests
+// and benchmarks (process-wide; not to be called while pruning or evaluating); it throws
+// std::invalid_argument for an instruction set the processor lacks (lane_isa_supported).
+enum class LaneIsa { kBaseline, kAvx2, kAvx512 };
+LaneIsa lane_isa();
+bool lane_isa_supported(LaneIsa isa);
+void set_lane_isa(LaneIsa isa);
 
 // The albedo at p: primitives' colors blended through the operators by operator_weight_b, the
 // way smooth operators blend the shapes. Stacks must hold scene.max_stack entries each.
@@ -53,8 +63,5 @@ float eval_point(const Scene& scene, vec3 p);
 // The full tree's values at many points, in parallel. out.size() must equal points.size().
 void eval_points(const Scene& scene, std::span<const vec3> points, std::span<float> out,
                  const EvalOptions& options = {});
-
-// Runs fn() with at most `threads` oneTBB workers (0 = no limit).
-void with_threads(int threads, const std::function<void()>& fn);
 
 }  // namespace sdfprune

@@ -561,16 +561,6 @@ PrunedGrid prune(std::shared_ptr<const Scene> scene, const PruneOptions& options
 
 // ---- the per-cell stages, exposed for tests ------------------------------------------------
 
-// The instruction set that the stages' loops over boxes (and eval_tape_lanes' over points) run
-// on: the widest the processor has (x86-64: kAvx512, else kAvx2; chosen on first use), else
-// kBaseline. All give the same results bit for bit. set_lane_isa is for tests and benchmarks
-// (process-wide; not to be called while pruning); it throws std::invalid_argument for an
-// instruction set the processor lacks (lane_isa_supported).
-enum class LaneIsa { kBaseline, kAvx2, kAvx512 };
-LaneIsa lane_isa();
-bool lane_isa_supported(LaneIsa isa);
-void set_lane_isa(LaneIsa isa);
-
 // An axis-aligned cell.
 struct CellBox {
     vec3 centre;

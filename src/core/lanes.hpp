@@ -8,7 +8,7 @@
 // results are bit for bit those of one point at a time (and of the Vulkan kernels, which share
 // sdf_math.h). Callers compile these loops inside functions marked flatten, once for the baseline
 // instruction set and, on x86-64, once for AVX2 (8 lanes per instruction) and once for AVX-512
-// (16), and choose at run time (lane_isa() in prune.hpp).
+// (16), and choose at run time (lane_isa() in eval.hpp).
 #pragma once
 
 #include <cstdint>

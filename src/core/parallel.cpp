@@ -12,9 +12,16 @@
 #include <thread>
 #include <vector>
 
-#include "sdfprune/eval.hpp"  // with_threads
-
 namespace sdfprune {
+
+void with_threads(int threads, const std::function<void()>& fn) {
+    if (threads <= 0) {
+        fn();
+        return;
+    }
+    tbb::task_arena arena(threads);
+    arena.execute(fn);
+}
 
 namespace {
 // The progress reported after `done` of `count` chunks: never past hi, so that the reported

@@ -9,6 +9,8 @@
 #include <cstdint>
 #include <functional>
 
+#include "sdfprune/parallel.hpp"  // with_threads: the same limit for a caller's own work
+
 namespace sdfprune {
 
 // What every batch operation's options carry, for parallel_for.

@@ -2,12 +2,10 @@
 // the post-order words with a value stack, the primitive and operator math from sdf_math.h.
 #include "sdfprune/eval.hpp"
 
-#include "../core/parallel.hpp"
-
-#include <tbb/task_arena.h>
-
 #include <stdexcept>
 #include <vector>
+
+#include "../core/parallel.hpp"
 
 namespace sdfprune {
 
@@ -98,15 +96,6 @@ uint32_t eval_tape_winner(const Scene& sc, std::span<const uint32_t> tape, vec3 
 float eval_point(const Scene& sc, vec3 p) {
     std::vector<float> stack(sc.max_stack);
     return eval_tape(sc, sc.full_tape, p, stack.data());
-}
-
-void with_threads(int threads, const std::function<void()>& fn) {
-    if (threads <= 0) {
-        fn();
-        return;
-    }
-    tbb::task_arena arena(threads);
-    arena.execute(fn);
 }
 
 void eval_points(const Scene& sc, std::span<const vec3> points, std::span<float> out,

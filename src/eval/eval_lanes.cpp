@@ -1,12 +1,14 @@
 // eval_lanes.cpp — eval_tape for a batch of points sharing a tape (eval.hpp): the tape is walked
 // once, and each entry is computed across the points' lanes (lanes.hpp), on a stack of rows of
 // kEvalLanes floats. Compiled for the baseline instruction set and for AVX2 and AVX-512
-// (lanes.hpp), chosen at run time; all give eval_tape's values bit for bit.
+// (lanes.hpp), chosen at run time by lane_isa (defined here; the pruner's loops over boxes take
+// the same choice); all give eval_tape's values bit for bit.
 #include <algorithm>
+#include <atomic>
+#include <stdexcept>
 
 #include "../core/lanes.hpp"
 #include "sdfprune/eval.hpp"
-#include "sdfprune/prune.hpp"
 
 namespace sdfprune {
 namespace {
@@ -45,14 +47,15 @@ inline void eval_any_rows(const Scene& sc, std::span<const uint32_t> tape, const
 
 #if SDFPRUNE_X86_LANES
 [[SDFPRUNE_AVX2_LANES_TARGET, gnu::flatten]] void eval_rows_avx2(const Scene& sc,
-                                                                std::span<const uint32_t> tape,
-                                                                const PointLanes& p,
-                                                                uint32_t lanes, float* stack) {
+                                                                 std::span<const uint32_t> tape,
+                                                                 const PointLanes& p,
+                                                                 uint32_t lanes, float* stack) {
     eval_any_rows(sc, tape, p, lanes, stack);
 }
-[[SDFPRUNE_AVX512_LANES_TARGET, gnu::flatten]] void eval_rows_avx512(
-    const Scene& sc, std::span<const uint32_t> tape, const PointLanes& p, uint32_t lanes,
-    float* stack) {
+[[SDFPRUNE_AVX512_LANES_TARGET, gnu::flatten]] void eval_rows_avx512(const Scene& sc,
+                                                                     std::span<const uint32_t> tape,
+                                                                     const PointLanes& p,
+                                                                     uint32_t lanes, float* stack) {
     eval_any_rows(sc, tape, p, lanes, stack);
 }
 #endif
@@ -62,7 +65,42 @@ inline void eval_any_rows(const Scene& sc, std::span<const uint32_t> tape, const
     eval_any_rows(sc, tape, p, lanes, stack);
 }
 
+// The instruction set in use: chosen on first use, or by set_lane_isa.
+std::atomic<int> g_lane_isa{-1};
+
+LaneIsa best_lane_isa() {
+    for (const LaneIsa isa : {LaneIsa::kAvx512, LaneIsa::kAvx2})
+        if (lane_isa_supported(isa)) return isa;
+    return LaneIsa::kBaseline;
+}
+
 }  // namespace
+
+bool lane_isa_supported(LaneIsa isa) {
+#if SDFPRUNE_X86_LANES
+    __builtin_cpu_init();
+    if (isa == LaneIsa::kAvx2) return __builtin_cpu_supports("avx2");
+    if (isa == LaneIsa::kAvx512)
+        return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+               __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512bw");
+#endif
+    return isa == LaneIsa::kBaseline;
+}
+
+LaneIsa lane_isa() {
+    int isa = g_lane_isa.load(std::memory_order_relaxed);
+    if (isa < 0) {
+        isa = int(best_lane_isa());
+        g_lane_isa.store(isa, std::memory_order_relaxed);
+    }
+    return LaneIsa(isa);
+}
+
+void set_lane_isa(LaneIsa isa) {
+    if (!lane_isa_supported(isa))
+        throw std::invalid_argument("set_lane_isa: this processor lacks the instruction set");
+    g_lane_isa.store(int(isa), std::memory_order_relaxed);
+}
 
 void eval_tape_lanes(const Scene& sc, std::span<const uint32_t> tape, PointLanes& p, uint32_t count,
                      float* out, float* stack) {

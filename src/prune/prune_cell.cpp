@@ -5,7 +5,6 @@
 // baseline instruction set and for AVX2, with the same results bit for bit.
 #include <algorithm>
 #include <array>
-#include <atomic>
 #include <bit>
 #include <cmath>
 #include <stdexcept>
@@ -16,6 +15,7 @@
 #endif
 
 #include "../core/lanes.hpp"
+#include "sdfprune/eval.hpp"  // lane_isa
 #include "sdfprune/prune.hpp"
 
 namespace sdfprune {
@@ -291,30 +291,6 @@ inline void evaluate_any_lanes(const Scene& sc, std::span<const uint32_t> tape, 
     evaluate_any_lanes(sc, tape, c, half, radius, bounds, out, s, only);
 }
 
-}  // namespace
-
-bool lane_isa_supported(LaneIsa isa) {
-#if SDFPRUNE_X86_LANES
-    __builtin_cpu_init();
-    if (isa == LaneIsa::kAvx2) return __builtin_cpu_supports("avx2");
-    if (isa == LaneIsa::kAvx512)
-        return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
-               __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512bw");
-#endif
-    return isa == LaneIsa::kBaseline;
-}
-
-namespace {
-
-LaneIsa best_lane_isa() {
-    for (const LaneIsa isa : {LaneIsa::kAvx512, LaneIsa::kAvx2})
-        if (lane_isa_supported(isa)) return isa;
-    return LaneIsa::kBaseline;
-}
-
-// The instruction set in use: chosen on first use, or by set_lane_isa.
-std::atomic<int> g_lane_isa{-1};
-
 void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const BoxLanes& c, vec3 half,
                     float radius, CellBounds bounds, LaneArrays out, CellScratch& s,
                     std::span<const uint32_t> only = {}) {
@@ -332,21 +308,6 @@ void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const BoxLa
 }
 
 }  // namespace
-
-LaneIsa lane_isa() {
-    int isa = g_lane_isa.load(std::memory_order_relaxed);
-    if (isa < 0) {
-        isa = int(best_lane_isa());
-        g_lane_isa.store(isa, std::memory_order_relaxed);
-    }
-    return LaneIsa(isa);
-}
-
-void set_lane_isa(LaneIsa isa) {
-    if (!lane_isa_supported(isa))
-        throw std::invalid_argument("set_lane_isa: this processor lacks the instruction set");
-    g_lane_isa.store(int(isa), std::memory_order_relaxed);
-}
 
 float evaluate_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box,
                     CellBounds bounds, CellScratch& s, bool sub_box) {
