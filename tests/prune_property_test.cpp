@@ -9,7 +9,9 @@
 #include "prune_check.hpp"
 #include "sdfprune/builder.hpp"
 #include "sdfprune/eval.hpp"
+#include "sdfprune/generate.hpp"
 #include "sdfprune/prune.hpp"
+#include "src/prune/prune_level.hpp"
 
 namespace sdfprune {
 namespace {
@@ -314,6 +316,31 @@ TEST(PruneProperty, ThreadCountDoesNotChangeOutput) {
                 "scene " + std::to_string(i) + ", threads " + std::to_string(threads) + " vs 1");
         }
     }
+}
+
+// A parent buffer's pages that no chunk still to run reads are handed back while pruning goes
+// on (set_parent_discard_bytes). Handing them back at every chunk, one page at a time, changes
+// no cell, tape or count, and the grid stays exact: no block read a page after it went back.
+TEST(PruneProperty, ParentPagesHandedBackEarlyChangeNothing) {
+    const Scene sc = generate_scene("fluid", 3, 4000);
+    PruneOptions o;
+    o.resolution = 128;
+    o.threads = 2;
+    const uint64_t saved = set_parent_discard_bytes(~uint64_t(0));  // never
+    const PrunedGrid kept = prune(sc, o);
+    set_parent_discard_bytes(1);  // at every chunk
+    const uint64_t before = discarded_parent_bytes();
+    const PrunedGrid early = prune(sc, o);
+    const uint64_t handed_back = discarded_parent_bytes() - before;
+    set_parent_discard_bytes(saved);
+#if defined(__linux__)
+    EXPECT_GT(handed_back, uint64_t(1) << 20) << "the test should hand back pages";
+#endif
+    expect_same_structure(kept, early, "fluid of 4000 spheres, pages handed back early");
+    Failures fail("fluid of 4000 spheres, pages handed back early");
+    Rng r(77);
+    test::check_points(early, test::sample_points(early, r, 2000, 4000, 1000), fail);
+    EXPECT_EQ(fail.count(), 0u) << fail.context();
 }
 
 // Unusual resolutions: a single cell, resolutions that do not split evenly, and every factor.

@@ -6,12 +6,14 @@
 //
 // Memory: a level's tapes stay in their chunks' buffers, which are the next level's parents. The
 // chunks are committed in order as they finish (parallel_for_ordered): a parent buffer is freed
-// as soon as no chunk still to run refers to it, and finest tapes go to the pool chunk by chunk;
-// coarse tapes are dropped once they have served as parents (PruneOptions::coarse_tapes keeps
-// them).
+// as soon as no chunk still to run refers to it (and, on Linux, the pages of a large one that no
+// chunk still to run reads are handed back before that), and finest tapes go to the pool chunk by
+// chunk; coarse tapes are dropped once they have served as parents (PruneOptions::coarse_tapes
+// keeps them).
 #include <tbb/enumerable_thread_specific.h>
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <chrono>
 #include <cmath>
@@ -23,6 +25,10 @@
 
 #if defined(__GLIBC__)
 #include <malloc.h>
+#endif
+#if defined(__linux__)
+#include <sys/mman.h>
+#include <unistd.h>
 #endif
 
 #include "../core/clock.hpp"
@@ -117,6 +123,27 @@ void return_freed_memory() {
 #endif
 }
 
+// Pages of a parent buffer that no chunk still to run reads are handed back to the system while
+// the buffer lives on (their contents are never read again), once this many bytes of them are
+// (set_parent_discard_bytes). Without it a million-sphere scene's level of 64³ cells held each
+// of its parent buffers, 300 MB apiece, until the buffer's last block was done.
+std::atomic<uint64_t> discard_bytes{1u << 20};
+std::atomic<uint64_t> discarded_bytes{0};
+
+// Hands back the whole pages within [begin, end) (Linux: MADV_DONTNEED; elsewhere nothing).
+void discard_pages(const uint32_t* begin, const uint32_t* end) {
+#if defined(__linux__)
+    static const uintptr_t page = uintptr_t(sysconf(_SC_PAGESIZE));
+    const uintptr_t lo = (reinterpret_cast<uintptr_t>(begin) + page - 1) & ~(page - 1);
+    const uintptr_t hi = reinterpret_cast<uintptr_t>(end) & ~(page - 1);
+    if (hi > lo && madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_DONTNEED) == 0)
+        discarded_bytes.fetch_add(hi - lo, std::memory_order_relaxed);
+#else
+    (void)begin;
+    (void)end;
+#endif
+}
+
 // The buffers of one level's pruning as it runs: the parents (the previous level's chunk
 // buffers), which are freed as soon as no block left refers to them, and the byte counts of the
 // peak-memory statistic.
@@ -127,8 +154,28 @@ struct LevelBuffers {
     uint32_t released = 0;  // parents[0, released) are freed
     uint64_t parent_bytes = 0, done_cells_bytes = 0, peak = 0;
     uint64_t unreturned = 0;  // bytes freed since the last return_freed_memory()
+    // read_from[b]: the lowest parent word that blocks b, b + 1, ... of b's parent buffer read
+    // (equal tapes are stored once, so a block may read words before its predecessors').
+    std::vector<const uint32_t*> read_from;
+    const uint32_t* discarded_to = nullptr;  // parents[released]'s pages before this are gone
 
-    // Frees the parents of blocks before `block` (all of them when block = number of blocks).
+    // Called when `blocks` become the level's blocks, with their parents and first_block set.
+    void start_level(std::span<const ParentBlock> blocks) {
+        read_from.resize(blocks.size());
+        for (size_t c = first_block.size(); c-- > 0;) {
+            const size_t end = c + 1 < first_block.size() ? first_block[c + 1] : blocks.size();
+            const uint32_t* lowest = nullptr;
+            for (size_t b = end; b-- > first_block[c];) {
+                if (!lowest || blocks[b].words < lowest) lowest = blocks[b].words;
+                read_from[b] = lowest;
+            }
+        }
+        released = 0;
+        discarded_to = parents.empty() ? nullptr : parents[0].data();
+    }
+
+    // Frees the parents of blocks before `block` (all of them when block = number of blocks),
+    // and hands back the pages of block's parent buffer below what it and later blocks read.
     void release_before(uint64_t block, uint64_t blocks) {
         const uint32_t needed =
             block < blocks
@@ -139,10 +186,17 @@ struct LevelBuffers {
             parent_bytes -= bytes_of(parents[released]);
             unreturned += bytes_of(parents[released]);
             std::vector<uint32_t>().swap(parents[released]);
+            discarded_to = released + 1 < parents.size() ? parents[released + 1].data() : nullptr;
         }
         if (unreturned >= kReturnBytes) {
             return_freed_memory();
             unreturned = 0;
+        }
+        if (block < blocks && discarded_to &&
+            uint64_t(read_from[block] - discarded_to) * sizeof(uint32_t) >=
+                discard_bytes.load(std::memory_order_relaxed)) {
+            discard_pages(discarded_to, read_from[block]);
+            discarded_to = read_from[block];
         }
     }
 };
@@ -166,6 +220,14 @@ void link_chunk(std::span<PrunedCell> cells, std::span<const ParentBlock> blocks
 }
 
 }  // namespace
+
+uint64_t set_parent_discard_bytes(uint64_t bytes) {
+    return discard_bytes.exchange(bytes);
+}
+
+uint64_t discarded_parent_bytes() {
+    return discarded_bytes.load();
+}
 
 // The driver of the hierarchy: for each level, the level step (prune_level.hpp) over fixed
 // chunks of its blocks' cells in parallel, committed in chunk order: the chunks' tapes are placed
@@ -205,6 +267,7 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
     buf.first_block = {0};
     std::vector<ParentBlock> blocks{{{0, 0, 0}, sc.size(), buf.parents[0].data() + 2}};
     buf.parent_bytes = bytes_of(buf.parents[0]);
+    buf.start_level(blocks);
 
     const auto scratch_bytes = [&] {
         uint64_t b = 0;
@@ -322,12 +385,12 @@ PrunedGrid prune(const Scene& sc, const PruneOptions& opt) {
             // This level's buffers become the parents.
             buf.parents.clear();
             buf.parent_bytes = 0;
-            buf.released = 0;
             buf.first_block.swap(first_block);
             for (uint32_t c = 0; c < chunks; ++c) {
                 buf.parent_bytes += bytes_of(outs[c].words);
                 buf.parents.push_back(std::move(outs[c].words));
             }
+            buf.start_level(blocks);
             buf.peak =
                 std::max(buf.peak, pool_bytes() + buf.parent_bytes + bytes_of(level.cells) +
                                        buf.done_cells_bytes + bytes_of(blocks) + scratch_bytes());

@@ -81,4 +81,11 @@ inline void prune_level_step(const Scene& scene, const PruneOptions& options,
     prune_level_step(scene, options, geometry, blocks, 0, blocks.size() * f * f * f, cells, s, out);
 }
 
+// Pruning hands back the pages of a parent buffer that no chunk still to run reads once at least
+// this many bytes of them are (default 1 MiB; Linux only). Returns the previous setting; tests
+// set 1 to exercise it on small scenes. discarded_parent_bytes(): the bytes handed back so far in
+// this process.
+uint64_t set_parent_discard_bytes(uint64_t bytes);
+uint64_t discarded_parent_bytes();
+
 }  // namespace sdfprune
