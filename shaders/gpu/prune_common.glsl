@@ -135,19 +135,24 @@ vec3 negate_range(vec3 x) { return vec3(-x.x, -x.z, -x.y); }
 
 // A primitive's value at the box's centre p and its range over the box (half sizes h, radius
 // spread_r): v ± L·R, with interval bounds narrowed by its similarity bound.
-vec3 primitive_range(Node nd, vec3 p, vec3 h, float spread_r, bool interval) {
+// primitive_range_of takes the primitive's parameters and similarity bound (b0: extras' bound0,
+// b1: bound1's f0 and rho) as read, for a caller that evaluates several boxes from one read.
+vec3 primitive_range_of(Node nd, PrimitiveParams prm, vec4 b0, vec2 b1, vec3 p, vec3 h,
+                        float spread_r, bool interval) {
     float spread = nd.lipschitz * spread_r;
-    uint prim = nd.primitive;
-    float v = eval_primitive(nd.kind, params[prim], p);
+    float v = eval_primitive(nd.kind, prm, p);
     float lo = v - spread, hi = v + spread;
-    vec4 b0 = extras[prim].bound0;
     if (interval && b0.w > 0.0) {
-        vec2 r = similarity_range(b0.xyz, b0.w, extras[prim].bound1.x, extras[prim].bound1.y, p,
-                                  h);
+        vec2 r = similarity_range(b0.xyz, b0.w, b1.x, b1.y, p, h);
         lo = max(lo, r.x);
         hi = min(hi, r.y);
     }
     return vec3(v, lo, hi);
+}
+vec3 primitive_range(Node nd, vec3 p, vec3 h, float spread_r, bool interval) {
+    uint prim = nd.primitive;
+    return primitive_range_of(nd, params[prim], extras[prim].bound0, extras[prim].bound1.xy, p,
+                              h, spread_r, interval);
 }
 
 // An operator's value and range and its decision, from its operands'. An undecided operator's

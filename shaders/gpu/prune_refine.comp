@@ -114,8 +114,11 @@ void main() {
                 uint sb = min(batch * kSquad + lane, nsub - 1u);
                 uvec3 sc = uvec3(sb % subs, (sb / subs) % subs, sb / (subs * subs));
                 precise vec3 p = centre - half_cell + vec3(2u * sc + 1u) * sub_half;
-                vec2 range = refine_sub_box(len, p, sub_half, sub_R, interval, L,
-                                            lane == 0u && batch == 0u);
+                vec3 ps[1] = vec3[1](p);
+                vec2 ranges[1];
+                refine_sub_boxes(len, ps, sub_half, sub_R, interval, L, lane == 0u && batch == 0u,
+                                 ranges);
+                vec2 range = ranges[0];
                 if (!clears_above(range.x, clearance)) far_flags &= ~1u;
                 if (!clears_below(range.y, clearance)) far_flags &= ~2u;
                 lowest = min(lowest, range.x);

@@ -13,34 +13,54 @@
 //   kRefineStack          the deepest evaluation stack of a tape it walks
 // Include after prune_common.glsl.
 
-// One sub-box's walk over the cell's tape of `len` words (evaluate_boxes in
-// OperatorMode::kRefine): each operator's decision added to REFINE_SEEN, its left operand
-// recorded where `record`. Gives the root's range widened as the far-field test reads it
+// REFINE_BATCH (default 1): how many sub-boxes one walk takes at once. The includer may set it
+// before the include; the sub-boxes' order changes nothing (their decisions are or-ed, their
+// ranges min- and max-ed).
+#ifndef REFINE_BATCH
+#define REFINE_BATCH 1
+#endif
+
+// A walk over the cell's tape of `len` words for REFINE_BATCH sub-boxes at once (centres p,
+// evaluate_boxes in OperatorMode::kRefine): each entry's word, node and primitive read once for
+// all of them, each operator's decisions added to REFINE_SEEN, its left operand recorded where
+// `record`. Gives each sub-box's root range widened as the far-field test reads it
 // (far_field_range; L: the root's Lipschitz bound).
-vec2 refine_sub_box(uint len, vec3 p, vec3 sub_half, float sub_R, bool interval, float L,
-                    bool record) {
-    vec3 st[kRefineStack];  // values and ranges
-    uint st_entry[kRefineStack];
+void refine_sub_boxes(uint len, vec3 p[REFINE_BATCH], vec3 sub_half, float sub_R, bool interval,
+                      float L, bool record, out vec2 range[REFINE_BATCH]) {
+    vec3 st[kRefineStack * REFINE_BATCH];  // values and ranges: slot s, box j at s · B + j
+    uint st_entry[kRefineStack];           // the entry in slot s (the same for every box)
     uint top = 0u;
     for (uint i = 0u; i < len; ++i) {
         uint w = REFINE_WORD(i);
         Node nd = nodes[tape_node(w)];
-        vec3 x;
+        bool negated = tape_negated(w);
         if (nd.kind < kPrimitiveKindCount) {
-            x = primitive_range(nd, p, sub_half, sub_R, interval);
+            uint prim = nd.primitive;
+            PrimitiveParams prm = params[prim];
+            vec4 b0 = extras[prim].bound0;
+            vec2 b1 = extras[prim].bound1.xy;
+            for (uint j = 0u; j < REFINE_BATCH; ++j) {
+                vec3 x = primitive_range_of(nd, prm, b0, b1, p[j], sub_half, sub_R, interval);
+                st[top * REFINE_BATCH + j] = negated ? negate_range(x) : x;
+            }
         } else {
             top -= 2u;
-            uint decision;
-            x = combine_operator(nd, sub_R, interval, true, st[top], st[top + 1u], decision);
-            REFINE_SEE(i, 1u << decision);
+            uint seen = 0u;
+            for (uint j = 0u; j < REFINE_BATCH; ++j) {
+                uint decision;
+                vec3 x = combine_operator(nd, sub_R, interval, true, st[top * REFINE_BATCH + j],
+                                          st[(top + 1u) * REFINE_BATCH + j], decision);
+                seen |= 1u << decision;
+                st[top * REFINE_BATCH + j] = negated ? negate_range(x) : x;
+            }
+            REFINE_SEE(i, seen);
             if (record) REFINE_SET_LEFT(i, st_entry[top]);
         }
-        if (tape_negated(w)) x = negate_range(x);
-        st[top] = x;
         st_entry[top] = i;
         ++top;
     }
-    return far_field_range(st[0].x, st[0].y, st[0].z, L, sub_R);
+    for (uint j = 0u; j < REFINE_BATCH; ++j)
+        range[j] = far_field_range(st[j].x, st[j].y, st[j].z, L, sub_R);
 }
 
 // Stage 3 of a near cell (compact_tape): the top-down sweep from the root, an operator decided
