@@ -184,13 +184,13 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
         // These tapes are short: the team kernel by default, then the wide kernel wherever
         // it fits (prune_wide.comp: a workgroup per parent tape), with subgroup operations
         // where the device has them, and without. Refinement: by default a lane per cell for
-        // the tapes of up to 16 words and squads for the rest, then squads alone, then lanes
-        // up to their longest tape, then lanes up to 4 words.
+        // the tapes of up to 32 words (their longest) and squads for the rest, then squads alone,
+        // then lanes up to 16 words, then lanes up to 4 words.
         for (int variant = 0; variant < 4; ++variant) {
             ::setenv("SDFPRUNE_VULKAN_WIDE", variant == 3 ? "0" : variant > 0 ? "1" : "", 1);
             ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE",
                      variant == 1   ? "0"
-                     : variant == 2 ? "32"
+                     : variant == 2 ? "16"
                      : variant == 3 ? "4"
                                     : "",
                      1);
@@ -202,7 +202,7 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
             }
             const std::string how =
                 what + (variant == 1   ? ", wide, refinement on squads"
-                        : variant == 2 ? ", wide without subgroups, refinement's lanes up to 32"
+                        : variant == 2 ? ", wide without subgroups, refinement's lanes up to 16"
                         : variant == 3 ? ", teams, refinement's lanes up to 4 words"
                                        : "");
             const bool exact = exact_device(*dev);

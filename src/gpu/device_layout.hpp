@@ -54,7 +54,7 @@ inline constexpr uint64_t kPruneTeam = 8;
 inline constexpr uint64_t kPruneWindow = 64;
 inline constexpr uint64_t kRefineSquad = 32;
 inline constexpr uint32_t kLaneTapeMax = 32;
-inline constexpr uint32_t kRefineLaneTape = 16;
+inline constexpr uint32_t kRefineLaneTape = 32;
 // prune_wide.comp: kWide, the lanes of a workgroup that takes one team job (kPruneTeam boxes of
 // one parent tape); kWideEntryWords, its scratch words per tape entry and box;
 // kWideHeightWords, per scene height (the counting sort's, the rounds' and their runs').
