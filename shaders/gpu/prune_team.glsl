@@ -148,9 +148,22 @@ void main() {
             }
             memoryBarrierShared();
             barrier();
-            // Stage 1: values and ranges at the box centre, decisions (evaluate_cell).
+            // Stage 1: values and ranges at the box centre, decisions (evaluate_cell). The
+            // stack's top slot (top − 1) is held in registers during the step (tx, its entry
+            // t_entry), the slots below it in scratch: an operator's right operand is the top,
+            // and only a push spills the top before it. The top goes to scratch at the step's
+            // end.
             if (phase == kPhaseEvaluate) {
                 uint we = min(i + kWindow, len);
+                vec3 tx = vec3(0.0);
+                uint t_entry = 0u;
+                if (top > 0u) {
+                    uint so = sbase + 4u * (top - 1u) * kTeam + lane;
+                    tx = vec3(uintBitsToFloat(lane_scratch[so]),
+                              uintBitsToFloat(lane_scratch[so + kTeam]),
+                              uintBitsToFloat(lane_scratch[so + 2u * kTeam]));
+                    t_entry = lane_scratch[so + 3u * kTeam];
+                }
                 for (; i < we; ++i) {
                     uint w = s_word[win + i - w0];
                     Node nd = nodes[tape_node(w)];
@@ -158,31 +171,38 @@ void main() {
                     uint decision = kKeepBoth;
                     if (nd.kind < kPrimitiveKindCount) {
                         x = primitive_range(nd, centre, half_size, R, interval);
+                        if (top > 0u) {
+                            uint so = sbase + 4u * (top - 1u) * kTeam + lane;
+                            lane_scratch[so] = floatBitsToUint(tx.x);
+                            lane_scratch[so + kTeam] = floatBitsToUint(tx.y);
+                            lane_scratch[so + 2u * kTeam] = floatBitsToUint(tx.z);
+                            lane_scratch[so + 3u * kTeam] = t_entry;
+                        }
+                        ++top;
                     } else {
-                        uint sr = sbase + 4u * (top - 1u) * kTeam + lane;
                         uint sl = sbase + 4u * (top - 2u) * kTeam + lane;
-                        top -= 2u;
+                        --top;
                         vec3 left = vec3(uintBitsToFloat(lane_scratch[sl]),
                                          uintBitsToFloat(lane_scratch[sl + kTeam]),
                                          uintBitsToFloat(lane_scratch[sl + 2u * kTeam]));
-                        vec3 right = vec3(uintBitsToFloat(lane_scratch[sr]),
-                                          uintBitsToFloat(lane_scratch[sr + kTeam]),
-                                          uintBitsToFloat(lane_scratch[sr + 2u * kTeam]));
                         // Written by every lane (the same value): a lane's sweep may follow in
                         // this very step, and reads its own write, with no barrier between.
                         lane_scratch[lbase + i] = lane_scratch[sl + 3u * kTeam];
-                        x = combine_operator(nd, R, interval, false, left, right, decision);
+                        x = combine_operator(nd, R, interval, false, left, tx, decision);
                     }
                     if (tape_negated(w)) x = negate_range(x);
                     // The decision, its sweep flags cleared for stage 3.
                     lane_scratch[dbase + i * kTeam + lane] = decision;
-                    uint so = sbase + 4u * top * kTeam + lane;
-                    lane_scratch[so] = floatBitsToUint(x.x);
-                    lane_scratch[so + kTeam] = floatBitsToUint(x.y);
-                    lane_scratch[so + 2u * kTeam] = floatBitsToUint(x.z);
-                    lane_scratch[so + 3u * kTeam] = i;
-                    ++top;
+                    tx = x;
+                    t_entry = i;
                     pdepth = max(pdepth, top);
+                }
+                if (top > 0u) {
+                    uint so = sbase + 4u * (top - 1u) * kTeam + lane;
+                    lane_scratch[so] = floatBitsToUint(tx.x);
+                    lane_scratch[so + kTeam] = floatBitsToUint(tx.y);
+                    lane_scratch[so + 2u * kTeam] = floatBitsToUint(tx.z);
+                    lane_scratch[so + 3u * kTeam] = t_entry;
                 }
                 if (i == len) {
                     // Stage 2: the far-field test on the root range against the box's margin

@@ -27,8 +27,12 @@
 // (far_field_range; L: the root's Lipschitz bound).
 void refine_sub_boxes(uint len, vec3 p[REFINE_BATCH], vec3 sub_half, float sub_R, bool interval,
                       float L, bool record, out vec2 range[REFINE_BATCH]) {
+    // The stack's top slot (top − 1) is held in registers (tx, its entry t_entry), the slots
+    // below it in the array: an operator's right operand is the top, and only a push spills it.
     vec3 st[kRefineStack * REFINE_BATCH];  // values and ranges: slot s, box j at s · B + j
     uint st_entry[kRefineStack];           // the entry in slot s (the same for every box)
+    vec3 tx[REFINE_BATCH];
+    uint t_entry = 0u;
     uint top = 0u;
     for (uint i = 0u; i < len; ++i) {
         uint w = REFINE_WORD(i);
@@ -39,28 +43,32 @@ void refine_sub_boxes(uint len, vec3 p[REFINE_BATCH], vec3 sub_half, float sub_R
             PrimitiveParams prm = params[prim];
             vec4 b0 = extras[prim].bound0;
             vec2 b1 = extras[prim].bound1.xy;
+            if (top > 0u) {
+                for (uint j = 0u; j < REFINE_BATCH; ++j) st[(top - 1u) * REFINE_BATCH + j] = tx[j];
+                st_entry[top - 1u] = t_entry;
+            }
             for (uint j = 0u; j < REFINE_BATCH; ++j) {
                 vec3 x = primitive_range_of(nd, prm, b0, b1, p[j], sub_half, sub_R, interval);
-                st[top * REFINE_BATCH + j] = negated ? negate_range(x) : x;
+                tx[j] = negated ? negate_range(x) : x;
             }
+            ++top;
         } else {
-            top -= 2u;
+            --top;  // the left operand in slot top − 1, the right one the top
             uint seen = 0u;
             for (uint j = 0u; j < REFINE_BATCH; ++j) {
                 uint decision;
-                vec3 x = combine_operator(nd, sub_R, interval, true, st[top * REFINE_BATCH + j],
-                                          st[(top + 1u) * REFINE_BATCH + j], decision);
+                vec3 x = combine_operator(nd, sub_R, interval, true,
+                                          st[(top - 1u) * REFINE_BATCH + j], tx[j], decision);
                 seen |= 1u << decision;
-                st[top * REFINE_BATCH + j] = negated ? negate_range(x) : x;
+                tx[j] = negated ? negate_range(x) : x;
             }
             REFINE_SEE(i, seen);
-            if (record) REFINE_SET_LEFT(i, st_entry[top]);
+            if (record) REFINE_SET_LEFT(i, st_entry[top - 1u]);
         }
-        st_entry[top] = i;
-        ++top;
+        t_entry = i;
     }
     for (uint j = 0u; j < REFINE_BATCH; ++j)
-        range[j] = far_field_range(st[j].x, st[j].y, st[j].z, L, sub_R);
+        range[j] = far_field_range(tx[j].x, tx[j].y, tx[j].z, L, sub_R);
 }
 
 // Stage 3 of a near cell (compact_tape): the top-down sweep from the root, an operator decided
