@@ -74,6 +74,18 @@ uint root_sweep_flags(uint parent, uint len) {
     return (1u << 2) | (root_neg << 4);
 }
 
+// A stack slot's words (value, lo, hi, entry) at `at`, `at` + kTeam, ... (one lane's).
+vec3 slot_range(uint at) {
+    return vec3(uintBitsToFloat(lane_scratch[at]), uintBitsToFloat(lane_scratch[at + kTeam]),
+                uintBitsToFloat(lane_scratch[at + 2u * kTeam]));
+}
+void store_slot(uint at, vec3 x, uint entry) {
+    lane_scratch[at] = floatBitsToUint(x.x);
+    lane_scratch[at + kTeam] = floatBitsToUint(x.y);
+    lane_scratch[at + 2u * kTeam] = floatBitsToUint(x.z);
+    lane_scratch[at + 3u * kTeam] = entry;
+}
+
 void main() {
     counts_begin();
     uint tl = gl_LocalInvocationID.x / kTeam, lane = gl_LocalInvocationID.x % kTeam;
@@ -159,9 +171,7 @@ void main() {
                 uint t_entry = 0u;
                 if (top > 0u) {
                     uint so = sbase + 4u * (top - 1u) * kTeam + lane;
-                    tx = vec3(uintBitsToFloat(lane_scratch[so]),
-                              uintBitsToFloat(lane_scratch[so + kTeam]),
-                              uintBitsToFloat(lane_scratch[so + 2u * kTeam]));
+                    tx = slot_range(so);
                     t_entry = lane_scratch[so + 3u * kTeam];
                 }
                 for (; i < we; ++i) {
@@ -171,20 +181,13 @@ void main() {
                     uint decision = kKeepBoth;
                     if (nd.kind < kPrimitiveKindCount) {
                         x = primitive_range(nd, centre, half_size, R, interval);
-                        if (top > 0u) {
-                            uint so = sbase + 4u * (top - 1u) * kTeam + lane;
-                            lane_scratch[so] = floatBitsToUint(tx.x);
-                            lane_scratch[so + kTeam] = floatBitsToUint(tx.y);
-                            lane_scratch[so + 2u * kTeam] = floatBitsToUint(tx.z);
-                            lane_scratch[so + 3u * kTeam] = t_entry;
-                        }
+                        if (top > 0u)
+                            store_slot(sbase + 4u * (top - 1u) * kTeam + lane, tx, t_entry);
                         ++top;
                     } else {
                         uint sl = sbase + 4u * (top - 2u) * kTeam + lane;
                         --top;
-                        vec3 left = vec3(uintBitsToFloat(lane_scratch[sl]),
-                                         uintBitsToFloat(lane_scratch[sl + kTeam]),
-                                         uintBitsToFloat(lane_scratch[sl + 2u * kTeam]));
+                        vec3 left = slot_range(sl);
                         // Written by every lane (the same value): a lane's sweep may follow in
                         // this very step, and reads its own write, with no barrier between.
                         lane_scratch[lbase + i] = lane_scratch[sl + 3u * kTeam];
@@ -197,13 +200,7 @@ void main() {
                     t_entry = i;
                     pdepth = max(pdepth, top);
                 }
-                if (top > 0u) {
-                    uint so = sbase + 4u * (top - 1u) * kTeam + lane;
-                    lane_scratch[so] = floatBitsToUint(tx.x);
-                    lane_scratch[so + kTeam] = floatBitsToUint(tx.y);
-                    lane_scratch[so + 2u * kTeam] = floatBitsToUint(tx.z);
-                    lane_scratch[so + 3u * kTeam] = t_entry;
-                }
+                if (top > 0u) store_slot(sbase + 4u * (top - 1u) * kTeam + lane, tx, t_entry);
                 if (i == len) {
                     // Stage 2: the far-field test on the root range against the box's margin
                     // (is_near_field); the root is in this window.
