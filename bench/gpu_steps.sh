@@ -12,11 +12,14 @@
 # SDFPRUNE_GPU_SCENES names the scenes (default: molecule, trees and five generated kinds);
 # molecule and trees are read from SDFPRUNE_SCENES (default ../shared/scenes), the others
 # generated. GRID sets `--grid` (default stats' 256; a small one checks the script on lavapipe).
+# ROUNDS=N runs the whole sweep N times (labels LABEL#1 ... LABEL#N): a fresh machine has slowed
+# down single runs 2-4x in every step (stops 29, 30 and 35), which a second round shows up.
 set -euo pipefail
 [ $# -ge 1 ] || { echo "usage: bench/gpu_steps.sh LABEL=COMMAND [LABEL=COMMAND ...]" >&2; exit 2; }
 here=$(cd "$(dirname "$0")" && pwd)
 scenes=${SDFPRUNE_SCENES:-$here/../../shared/scenes}
 repeat=${REPEAT:-3}
+rounds=${ROUNDS:-1}
 grid=()
 [ -n "${GRID:-}" ] && grid=(--grid "$GRID")
 tmp=$(mktemp -d)
@@ -61,10 +64,14 @@ else:
 }
 
 $first stats builtin:demo "${grid[@]}" --backend vulkan --json >/dev/null  # the warm-up
-for f in "$tmp"/*.json; do
-  k=$(basename "$f" .json)
-  for i in "${!labels[@]}"; do
-    ${commands[$i]} stats "$f" "${grid[@]}" --backend vulkan --json --repeat "$repeat" 2>&1 |
-      show "$k" "${labels[$i]}"
+for round in $(seq 1 "$rounds"); do
+  for f in "$tmp"/*.json; do
+    k=$(basename "$f" .json)
+    for i in "${!labels[@]}"; do
+      label=${labels[$i]}
+      [ "$rounds" -gt 1 ] && label="$label#$round"
+      ${commands[$i]} stats "$f" "${grid[@]}" --backend vulkan --json --repeat "$repeat" 2>&1 |
+        show "$k" "$label"
+    done
   done
 done
