@@ -700,7 +700,9 @@ TEST(Gpu, PrunePeakStaysNearTheResult) {
     const gpu::Grid small = gpu::prune(*capped, sc, o);
     const gpu::Grid large = gpu::prune(*uncapped, sc, o);
     const gpu::DevicePruneStats& st = small.stats();
-    EXPECT_LE(st.prune_peak_bytes, 16 * st.tape_bytes + (8u << 20))
+    // (8.1 × the tapes + 8 MiB since the pools are no longer presized where an exact bound
+    // follows; 13.2 × before.)
+    EXPECT_LE(st.prune_peak_bytes, 10 * st.tape_bytes + (8u << 20))
         << "tape_bytes " << st.tape_bytes;
     EXPECT_LT(st.prune_peak_bytes, large.stats().prune_peak_bytes);
     for (const gpu::GpuStepShape& step : st.steps)
