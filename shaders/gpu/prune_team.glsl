@@ -163,8 +163,7 @@ void main() {
             // Stage 1: values and ranges at the box centre, decisions (evaluate_cell). The
             // stack's top slot (top − 1) is held in registers during the step (tx, its entry
             // t_entry), the slots below it in scratch: an operator's right operand is the top,
-            // and only a push spills the top before it. The top goes to scratch at the step's
-            // end.
+            // and only a push spills the top before it.
             if (phase == kPhaseEvaluate) {
                 uint we = min(i + kWindow, len);
                 vec3 tx = vec3(0.0);
@@ -200,16 +199,16 @@ void main() {
                     t_entry = i;
                     pdepth = max(pdepth, top);
                 }
-                if (top > 0u) store_slot(sbase + 4u * (top - 1u) * kTeam + lane, tx, t_entry);
+                // The top back to scratch for the next step; after the last entry it is the
+                // root, which stage 2 reads from the registers.
+                if (i < len && top > 0u)
+                    store_slot(sbase + 4u * (top - 1u) * kTeam + lane, tx, t_entry);
                 if (i == len) {
                     // Stage 2: the far-field test on the root range against the box's margin
                     // (is_near_field); the root is in this window.
-                    uint s0 = sbase + lane;
-                    value = uintBitsToFloat(lane_scratch[s0]);
+                    value = tx.x;
                     float L = nodes[tape_node(s_word[win + len - 1u - w0])].lipschitz;
-                    vec2 range = far_field_range(value, uintBitsToFloat(lane_scratch[s0 + kTeam]),
-                                                 uintBitsToFloat(lane_scratch[s0 + 2u * kTeam]),
-                                                 L, R);
+                    vec2 range = far_field_range(value, tx.y, tx.z, L, R);
                     float clearance = far_field_clearance(pc.csize.w, L, R);
                     bool far_field = (pc.flags & 1u) != 0u;
                     bool above = far_field && clears_above(range.x, clearance);
