@@ -195,9 +195,9 @@ void Pruner::prune_level(uint32_t li) {
     // would only be given back then (molecule's finest level: 134 MB presized, 17 MB used).
     const bool sized_later = lv.split || lv.refine;
     resize(g.pool, capacity,
-           head_words + std::max<uint64_t>(
-                            sized_later ? 0 : std::min(share(main_bound, main_ratio), presize_cap),
-                            1 << 16),
+           head_words +
+               std::max<uint64_t>(
+                   sized_later ? 0 : std::min(share(main_bound, main_ratio), presize_cap), 1 << 16),
            0);
     if (lv.finest) {
         ctx.upload(g.pool, head.data(), head_words * 4);
@@ -649,4 +649,3 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
 }
 
 }  // namespace sdfprune::gpu
-
