@@ -14,7 +14,10 @@
 # generated. GRID sets `--grid` (default stats' 256; a small one checks the script on lavapipe).
 # ROUNDS=N runs the whole sweep N times (labels LABEL#1 ... LABEL#N): a fresh machine has slowed
 # down single runs 2-4x in every step (stops 29, 30 and 35), which a second round shows up.
+# SAVE=DIR also keeps each run's whole JSON (every step's shape: dispatches, workgroups, lanes,
+# longest walk) as DIR/SCENE.LABEL.json.
 set -euo pipefail
+[ -n "${SAVE:-}" ] && mkdir -p "$SAVE"
 [ $# -ge 1 ] || { echo "usage: bench/gpu_steps.sh LABEL=COMMAND [LABEL=COMMAND ...]" >&2; exit 2; }
 here=$(cd "$(dirname "$0")" && pwd)
 scenes=${SDFPRUNE_SCENES:-$here/../../shared/scenes}
@@ -43,7 +46,7 @@ done
 # One stats line: the last JSON object of the output, in a line.
 show() {  # show SCENE LABEL < stats output
   python3 -c '
-import json, sys
+import json, os, sys
 scene, label = sys.argv[1], sys.argv[2]
 d = None
 for line in sys.stdin:
@@ -51,6 +54,9 @@ for line in sys.stdin:
         d = json.loads(line)
     elif line.strip():
         print(scene, label, "says:", line.strip()[:200])
+if d is not None and os.environ.get("SAVE"):
+    with open(os.path.join(os.environ["SAVE"], "%s.%s.json" % (scene, label.replace("#", "_"))), "w") as f:
+        json.dump(d, f)
 if d is None:
     print(scene, label, "no result")
 else:
