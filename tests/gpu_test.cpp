@@ -174,7 +174,7 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
         o.hierarchy = seed % 5 != 4;
         o.far_field_c = seed % 2 ? 2.0f : 1.5f;
         o.bounds = seed % 7 == 6 ? CellBounds::kLipschitz : CellBounds::kInterval;
-        o.refine = uint32_t(seed % 3 + 1);
+        o.refine = uint32_t(seed % 4 + 1);
         const std::string what =
             "seed " + std::to_string(seed) + ", " + tree_shape_name(spec.tree) + ", " +
             placement_name(spec.placement) + ", grid " + std::to_string(o.resolution) + " factor " +
@@ -397,6 +397,33 @@ TEST(Gpu, RefinementTakesTheNearFieldCellsOnly) {
             EXPECT_EQ(refine.dispatches, presized_dispatches);
         }
         expect_matches_cpu(sc, prune(sc, o), gpu, *dev, c.what);
+    }
+}
+
+// Refinement's lane pass walks every cell's corners and middle first, and a second pass the
+// other sub-boxes of the cells that still need them: those with an operator that every sub-box
+// so far decided alike, or a far-field test still open. The cells are the same as the CPU's
+// for every number of sub-boxes: with 2 per axis the first pass has them all, with 3 or more a
+// second pass takes some cells but not all (the demo scene has both kinds).
+TEST(Gpu, RefinementsSecondPassTakesTheOpenCells) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Scene sc = builtin_scene("demo");
+    for (const uint32_t refine : {2u, 3u, 4u, 5u}) {
+        SCOPED_TRACE("refine " + std::to_string(refine));
+        PruneOptions o;
+        o.resolution = 32;
+        o.refine = refine;
+        const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+        const gpu::GpuStepShape& st = gpu.stats().steps.back();
+        ASSERT_EQ(st.mode, 3u);
+        const uint64_t lane_cells = st.jobs - st.long_jobs;
+        if (refine == 2) {
+            EXPECT_EQ(st.more_jobs, 0u);
+        } else {
+            EXPECT_GT(st.more_jobs, 0u);
+            EXPECT_LT(st.more_jobs, lane_cells);
+        }
+        expect_matches_cpu(sc, prune(sc, o), gpu, *dev, "refine " + std::to_string(refine));
     }
 }
 

@@ -97,9 +97,11 @@ struct GpuStepShape {
     double gpu_ms = 0;
     // Refinement runs first a lane per cell where the cell's tape is short
     // (prune_refine_lanes.comp): its GPU time, within gpu_ms, and the cells it left to the squads
-    // after it (0 in other steps).
+    // after it (0 in other steps). The lane pass walks every cell's first sub-boxes (the corners
+    // and the middle), then in a second pass the others of the cells that need them: more_jobs.
     double lanes_ms = 0;
     uint64_t long_jobs = 0;
+    uint64_t more_jobs = 0;
 };
 
 struct DevicePruneStats : PruneStats {

@@ -27,6 +27,7 @@ layout(std430, binding = 7) buffer Counters {
     uint near_lo[3];    // expand.comp's (GpuCounters)
     uint near_hi[3];
     uint long_jobs;  // entries of refinement's long list (prune_refine_lanes.comp)
+    uint more_jobs;  // entries of the lane pass's second list (prune_refine_lanes.comp)
 };
 // The kernel's scratch (its layout is the kernel's own). Coherent: lanes read what other lanes
 // of their workgroup wrote at earlier steps (a barrier between). In refinement, from
@@ -60,7 +61,9 @@ layout(push_constant) uniform Push {
                      // prune_wide.comp: the highest node's height (scene_height)
     uint flags;      // 1: far field on; 2: interval bounds; 4: new tapes go to the octant pool
                      // (the finest cells before refinement: near ones listed in refine_list);
-                     // 8: prune_refine.comp takes its jobs from the long list
+                     // 8: prune_refine.comp takes its jobs from the long list;
+                     // 32: prune_refine_lanes.comp's second pass (its jobs: the more list);
+                     // 64: prune_refine_lanes.comp in one pass (every sub-box)
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's team jobs: [first_job, jobs)
     uint round;       // 0: start the jobs; later rounds resume them (prune.comp)
@@ -70,6 +73,7 @@ layout(push_constant) uniform Push {
     uint list_start;    // mode 3: where the long list starts in scratch
     uint lane_tape;     // mode 3: the longest tape a lane refines alone
     uint wide_split;    // prune_wide.comp: workgroups per job (a share of its kTeam boxes each)
+    uint more_start;    // prune_refine_lanes.comp: where its more list starts in scratch
     uint group_base;    // prune_wide.comp: the dispatch's first workgroup among the step's
 } pc;
 

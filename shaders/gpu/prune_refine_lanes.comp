@@ -60,22 +60,78 @@ const uint kRefineStack = kLaneTape / 2u + 1u;
 #define REFINE_BATCH 3
 #include "refine_common.glsl"
 
+// The cell's sub-boxes in refine_cell's visiting order (prune_cell.cpp: sub_box_order), split
+// in two: the first kFirstBoxes, the 8 corners and the middle, then the others. On the CPU's
+// reference scenes two cells in three are decided by the first ones alone (no operator left that
+// every sub-box so far decides alike, and no far-field test still open): the others cannot
+// change their result. The first pass walks the first boxes for every cell and finishes those;
+// it lists the others, with what it found, for a second pass over the other sub-boxes. A pass's
+// lanes do the same walks, so a subgroup does not wait for its one cell that needs them all.
+// With push flag 64 the first pass walks every sub-box and lists nothing (one pass, as before;
+// SDFPRUNE_VULKAN_REFINE_SECOND_PASS=0, for comparisons).
+const uint kFirstBoxes = 9u;
+// Sub-box k (< kFirstBoxes) of the first ones: corner k (bit 0: x, 1: y, 2: z at the far end),
+// then the middle. Sub-box b of all, x fastest, is one of them where is_first_box(b).
+uvec3 first_box(uint k, uint subs) {
+    uint last = subs - 1u, mid = subs / 2u;
+    if (k >= 8u) return uvec3(mid);
+    return uvec3((k & 1u) != 0u ? last : 0u, (k & 2u) != 0u ? last : 0u,
+                 (k & 4u) != 0u ? last : 0u);
+}
+uvec3 box_coord(uint b, uint subs) { return uvec3(b % subs, (b / subs) % subs, b / (subs * subs)); }
+bool is_first_box(uvec3 c, uint subs) {
+    uint last = subs - 1u, mid = subs / 2u;
+    bvec3 end = bvec3(c.x == 0u || c.x == last, c.y == 0u || c.y == last,
+                      c.z == 0u || c.z == last);
+    return all(end) || all(equal(c, uvec3(mid)));
+}
+// Boxes of the first pass: the first ones there are (all of them where refine <= 2).
+uint first_count(uint subs) {
+    uint last = subs - 1u, mid = subs / 2u;
+    bool mid_is_corner = (mid == 0u || mid == last);
+    return min(subs * subs * subs, mid_is_corner ? 8u : kFirstBoxes);
+}
+
+// A cell's refinement state between the passes (in the more list, kMoreWords a cell).
+const uint kMoreWords = 7u;
+
 void main() {
     counts_begin();
     vec3 half_cell = pc.csize.xyz * 0.5;
     float radius = length(half_cell);
     bool interval = (pc.flags & 2u) != 0u;
     bool far_field = (pc.flags & 1u) != 0u;
+    bool second = (pc.flags & 32u) != 0u;
     uint subs = pc.refine;
     uint nsub = subs * subs * subs;
+    uint nfirst = first_count(subs);
+    // The pass's sub-boxes in visiting order: [k0, k1).
+    uint k0 = second ? nfirst : 0u;
+    uint k1 = second || (pc.flags & 64u) != 0u ? nsub : nfirst;
     vec3 sub_half = half_cell / float(subs);
     float sub_R = length(sub_half);
     uint lane_tape = min(pc.lane_tape, kLaneTape);
 
-    // The host records the dispatches for every finest cell; the jobs are the listed ones only.
-    uint jobs = min(pc.jobs, refine_cells);
+    // The host records the dispatches for every finest cell; the jobs are the listed ones only
+    // (the second pass's: the more list's).
+    uint jobs = min(pc.jobs, second ? more_jobs : refine_cells);
     for (uint job = pc.first_job + gl_GlobalInvocationID.x; job < jobs; job += pc.threads) {
-        uint cell = refine_list[job];
+        uint cell;
+        uint far_flags = far_field ? 3u : 0u;
+        float lowest = kInfinity, highest = -kInfinity;
+        r_seen0 = r_seen1 = r_seen2 = r_kept = r_skipped = r_negated = 0u;
+        if (second) {
+            uint at = pc.more_start + job * kMoreWords;
+            cell = scratch[at];
+            r_seen0 = scratch[at + 1u];
+            r_seen1 = scratch[at + 2u];
+            r_seen2 = scratch[at + 3u];
+            far_flags = scratch[at + 4u];
+            lowest = uintBitsToFloat(scratch[at + 5u]);
+            highest = uintBitsToFloat(scratch[at + 6u]);
+        } else {
+            cell = refine_list[job];
+        }
         Cell c0 = cells[cell];
         if (c0.tape == kFarField) {
             octants[cell] = c0;  // only near cells are listed; were one not, it is copied
@@ -83,11 +139,11 @@ void main() {
         }
         uint parent = c0.tape;
         uint len = tape_read(parent, 0u);
-        if (len > lane_tape) {
+        if (!second && len > lane_tape) {
             scratch[pc.list_start + atomicAdd(long_jobs, 1u)] = cell;
             continue;
         }
-        if (refine_copies(parent, len, c0, radius, half_cell)) {
+        if (!second && refine_copies(parent, len, c0, radius, half_cell)) {
             // A lone primitive (the only copied tape this short), as it is.
             uint at = pool_allocate(false, 3u);
             if (at == kFarField) {
@@ -103,31 +159,50 @@ void main() {
             continue;
         }
         for (uint k = 0u; k < len; ++k) r_word[k] = tape_read(parent, 2u + k);
-        r_seen0 = r_seen1 = r_seen2 = r_kept = r_skipped = r_negated = 0u;
         // Stage 1 over each sub-box, then stage 2: the far-field test of is_near_field on the
-        // sub-box's root range against the whole cell's clearance.
+        // sub-box's root range against the whole cell's clearance. The sub-boxes in visiting
+        // order: the first ones, then the others b by b (x fastest), the first ones skipped.
         precise vec3 centre = refine_cell_centre(cell);
         float L = nodes[tape_node(r_word[len - 1u])].lipschitz;
         float clearance = far_field_clearance(pc.csize.w, L, radius);
-        uint far_flags = far_field ? 3u : 0u;
-        float lowest = kInfinity, highest = -kInfinity;
-        for (uint sb0 = 0u; sb0 < nsub; sb0 += REFINE_BATCH) {
+        uint b = 0u;  // the next sub-box of all, past the first ones
+        uvec3 sc = uvec3(0u);
+        for (uint k = k0; k < k1; k += REFINE_BATCH) {
             // A batch past the last sub-box repeats it.
             vec3 p[REFINE_BATCH];
             for (uint j = 0u; j < REFINE_BATCH; ++j) {
-                uint sb = min(sb0 + j, nsub - 1u);
-                uvec3 sc = uvec3(sb % subs, (sb / subs) % subs, sb / (subs * subs));
+                if (k + j < min(nfirst, k1)) {
+                    sc = first_box(k + j, subs);
+                } else if (k + j < k1) {
+                    while (is_first_box(box_coord(b, subs), subs)) ++b;
+                    sc = box_coord(b++, subs);
+                }
                 precise vec3 pj = centre - half_cell + vec3(2u * sc + 1u) * sub_half;
                 p[j] = pj;
             }
             vec2 range[REFINE_BATCH];
-            refine_sub_boxes(len, p, sub_half, sub_R, interval, L, sb0 == 0u, range);
+            refine_sub_boxes(len, p, sub_half, sub_R, interval, L, k == k0, range);
             for (uint j = 0u; j < REFINE_BATCH; ++j) {
                 if (!clears_above(range[j].x, clearance)) far_flags &= ~1u;
                 if (!clears_below(range[j].y, clearance)) far_flags &= ~2u;
                 lowest = min(lowest, range[j].x);
                 highest = max(highest, range[j].y);
             }
+        }
+        // After the first boxes: an operator that every one decided alike (left, or right,
+        // never both kept) may still be decided for the cell, and a far-field test still open
+        // needs every sub-box. Otherwise the other sub-boxes change nothing.
+        uint open_operators = (r_seen1 ^ r_seen2) & ~r_seen0;
+        if (k1 < nsub && (open_operators != 0u || far_flags != 0u)) {
+            uint at = pc.more_start + atomicAdd(more_jobs, 1u) * kMoreWords;
+            scratch[at] = cell;
+            scratch[at + 1u] = r_seen0;
+            scratch[at + 2u] = r_seen1;
+            scratch[at + 3u] = r_seen2;
+            scratch[at + 4u] = far_flags;
+            scratch[at + 5u] = floatBitsToUint(lowest);
+            scratch[at + 6u] = floatBitsToUint(highest);
+            continue;
         }
         if (far_flags != 0u)
             store(cell, false, c0.value, (far_flags & 1u) != 0u ? lowest : highest, kFarField, 0u,

@@ -36,12 +36,13 @@ struct GpuGridParams {  // GridParams
 // prune.comp: Counters (expand.comp sees the same buffer as uint[]: [5] is next_blocks).
 // refine_cells: the entries of the refinement's list (prune_common.glsl: RefineList).
 // near_lo, near_hi: expand.comp's bounds of the finest level's near-field cells ([lo, hi)).
+// more_jobs: the cells the lane pass's first walks left to its second (its more list).
 // long_jobs: the entries of refinement's long list, the cells its lane pass
 // (prune_refine_lanes.comp) leaves to the squads after it.
 struct GpuCounters {
     uint32_t pool_used, pool_capacity, overflow, max_len, near_jobs, next_blocks, max_depth;
     uint32_t octant_used, octant_capacity, near_words, refine_cells;
-    uint32_t near_lo[3], near_hi[3], long_jobs, pad[2];
+    uint32_t near_lo[3], near_hi[3], long_jobs, more_jobs, pad;
 };
 // prune.comp: kStateWords, the words of a lane's job state in its team's scratch; kTeam, the
 // lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step
@@ -55,6 +56,10 @@ inline constexpr uint64_t kPruneWindow = 64;
 inline constexpr uint64_t kRefineSquad = 32;
 inline constexpr uint32_t kLaneTapeMax = 32;
 inline constexpr uint32_t kRefineLaneTape = 32;
+// prune_refine_lanes.comp: kFirstBoxes, the sub-boxes (the corners and the middle) its first
+// pass walks for every cell; kMoreWords, the words of a cell's state in the more list.
+inline constexpr uint64_t kRefineFirstBoxes = 9;
+inline constexpr uint64_t kRefineMoreWords = 7;
 // prune_wide.comp: kWide, the lanes of a workgroup that takes one team job (kPruneTeam boxes of
 // one parent tape); kWideEntryWords, its scratch words per tape entry and box;
 // kWideHeightWords, per scene height (the counting sort's, the rounds' and their runs').
@@ -66,7 +71,7 @@ struct PrunePush {                                  // prune.comp and prune_wide
     vec4 origin, csize;
     uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
     uint32_t round, budget, refine, octant_start, list_start, lane_tape, wide_split;
-    uint32_t group_base;
+    uint32_t more_start, group_base;
 };
 struct ExpandPush {  // expand.comp: Push
     uint32_t factor, cells_count, next_factor, bound_only;

@@ -133,6 +133,8 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE"); env && *env)
         refine_lane_tape =
             std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), kLaneTapeMax);
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_REFINE_SECOND_PASS"); env && *env)
+        refine_second_pass = std::atoi(env) != 0;
     origin = sc.aabb.min;
     extent = sc.aabb.max - sc.aabb.min;
     L = sc.lipschitz[sc.root()];
@@ -365,7 +367,7 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
                 ctx.fill(counters, 0, offsetof(GpuCounters, max_len), 4);
                 ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
             }
-            if (s.push.mode == 3 && !s.listed) {
+            if (s.push.mode == 3 && !s.listed && !s.second_pass) {
                 ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
                 // The far-field cells refined as they are: the slice's cells copied, the near
                 // ones (listed by the step before) then refined over them.
@@ -413,17 +415,23 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
         // Jobs counted on the device: refinement's, the listed cells, and the long list's, the
         // jobs a lane pass left (their dispatches were recorded for all, those past the list's
         // end returning at once).
-        const bool refine_jobs = s.push.mode == 3 && !s.listed;
-        if (refine_jobs || s.listed) {
-            const uint64_t jobs = s.listed ? counter->long_jobs : counter->refine_cells;
+        const bool refine_jobs = s.push.mode == 3 && !s.listed && !s.second_pass;
+        if (refine_jobs || s.listed || s.second_pass) {
+            const uint64_t jobs = s.listed        ? counter->long_jobs
+                                  : s.second_pass ? counter->more_jobs
+                                                  : counter->refine_cells;
             if (refine_jobs) s.shape.jobs = jobs;
             s.shape.lanes = std::min(jobs, s.teams) * s.shape.lanes_per_tape;
             s.shape.longest_walk_words = ceil_div(jobs, s.teams) * s.job_walk;
         }
         s.shape.gpu_ms = ctx.stamp_ms(s.last_stamp) - ctx.stamp_ms(s.first_stamp);
         if (s.kernel == KernelId::kPruneRefineLanes) {
-            s.shape.long_jobs = counter->long_jobs;
+            // Both passes' time; the first counts the lists.
             s.shape.lanes_ms = s.shape.gpu_ms;
+            if (!s.second_pass) {
+                s.shape.long_jobs = counter->long_jobs;
+                s.shape.more_jobs = counter->more_jobs;
+            }
         }
         add_shape(lv, s.shape);
     }
@@ -449,6 +457,7 @@ void Pruner::add_shape(const Level& lv, const GpuStepShape& shape) {
     same->gpu_ms += shape.gpu_ms;
     same->lanes_ms += shape.lanes_ms;
     same->long_jobs += shape.long_jobs;
+    same->more_jobs += shape.more_jobs;
 }
 
 // Records a step's dispatches; the pools' words in use before the level start them.

@@ -38,6 +38,9 @@ struct Step {
     // Refinement's squads after its lane pass (prune_refine_lanes.comp), taking the cells it
     // listed: its jobs are the long list's entries.
     bool listed = false;
+    // The lane pass's second pass (push flag 32): its jobs are the cells its first pass listed
+    // in the more list, past the first sub-boxes.
+    bool second_pass = false;
     GpuStepShape shape;
     uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
 };
@@ -78,6 +81,7 @@ class Pruner {
     Step plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
                     uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient);
     Step plan_refine_lanes(const Step& squads) const;
+    Step plan_refine_more(const Step& lanes) const;
     void plan_squads(const Level& lv, Step& s);
     PrunePush push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
                        uint32_t budget) const;
@@ -136,6 +140,9 @@ class Pruner {
     // The longest tape refinement's lane pass takes (prune_refine_lanes.comp);
     // SDFPRUNE_VULKAN_REFINE_LANE_TAPE.
     uint32_t refine_lane_tape = kRefineLaneTape;
+    // The lane pass walks every cell's first sub-boxes, then the others of the cells that need
+    // them in a second pass; SDFPRUNE_VULKAN_REFINE_SECOND_PASS=0: all of them in one pass.
+    bool refine_second_pass = true;
     vec3 origin, extent;
     float L = 1;
     uint32_t flags = 0;  // the push constants' (prune_common.glsl)

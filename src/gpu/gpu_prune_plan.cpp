@@ -41,12 +41,18 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
     if (mode != 3 || refine_lane_tape == 0 || 4 * teams.team_jobs > ctx.max_buffer_bytes())
         return {teams};
     Step lanes = plan_refine_lanes(teams);
-    hold(scratch, 4 * teams.team_jobs);
-    if (max_len <= refine_lane_tape) return {lanes};
+    // Scratch: the long list (a word a cell), then the more list (kRefineMoreWords a cell).
+    const bool more =
+        refine_second_pass && uint64_t(opt.refine) * opt.refine * opt.refine > kRefineFirstBoxes;
+    hold(scratch, 4 * teams.team_jobs * (1 + (more ? kRefineMoreWords : 0)));
+    std::vector<Step> steps{lanes};
+    if (more) steps.push_back(plan_refine_more(lanes));
+    if (max_len <= refine_lane_tape) return steps;
     teams.listed = true;
     teams.push.flags |= 8u;
     teams.shape.jobs = 0;  // the lanes' (one shape, add_shape)
-    return {lanes, teams};
+    steps.push_back(teams);
+    return steps;
 }
 
 // A step's jobs in teams (or wide, plan_wide), or in refinement squads (plan_squads).
@@ -170,6 +176,7 @@ PrunePush Pruner::push_for(const Level& lv, uint32_t mode, uint32_t threads, uin
                      0,
                      0,
                      1,
+                     0,
                      0};
 }
 
@@ -183,8 +190,8 @@ Step Pruner::plan_refine_lanes(const Step& squads) const {
     Step s = squads;
     const uint64_t len = std::min<uint64_t>(max_len, refine_lane_tape);
     const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
-    const uint64_t walk = subs * len;
-    const uint64_t per_cell = walk + 3 * len + 8;
+    const uint64_t walk = (refine_second_pass ? std::min(subs, kRefineFirstBoxes) : subs) * len;
+    const uint64_t per_cell = subs * len + subs + 3 * len + 8;
     const uint64_t cells = s.team_jobs;
     const uint64_t lanes =
         std::min({std::max<uint64_t>(cells, 1), uint64_t(ctx.max_workgroups()) * kWorkgroupSize,
@@ -200,11 +207,28 @@ Step Pruner::plan_refine_lanes(const Step& squads) const {
             : std::max<uint64_t>(cells, 1);
     s.push.threads = s.threads;
     s.push.list_start = 0;
+    s.push.more_start = uint32_t(s.team_jobs);  // past the long list
+    if (!refine_second_pass) s.push.flags |= 64u;
     s.push.lane_tape = refine_lane_tape;
     s.job_walk = walk;
     s.shape.lanes_per_tape = 1;
     s.shape.lanes = lanes;
     s.shape.longest_walk_words = ceil_div(cells, lanes) * walk;
+    return s;
+}
+
+// The lane pass's second pass (prune_refine_lanes.comp, push flag 32): the cells its first
+// pass listed, decided over their other sub-boxes than the first kRefineFirstBoxes. Its jobs'
+// count is the device's (more_jobs): its dispatches are recorded for all the first pass's.
+Step Pruner::plan_refine_more(const Step& lanes) const {
+    Step s = lanes;
+    const uint64_t len = std::min<uint64_t>(max_len, refine_lane_tape);
+    const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
+    s.second_pass = true;
+    s.push.flags |= 32u;
+    s.job_walk = (subs - kRefineFirstBoxes) * len;
+    s.shape.jobs = 0;                // the first pass's (one shape, add_shape)
+    s.shape.longest_walk_words = 0;  // counted once the list is known (run_steps)
     return s;
 }
 
