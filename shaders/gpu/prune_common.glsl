@@ -41,7 +41,7 @@ layout(std430, binding = 9) buffer OctantPool { uint octant_pool[]; };
 const uint kInOctantPool = 0x80000000u;
 // The finest near-field cells, the only ones refinement (mode 3) has work for: the step that
 // makes the finest cells (flag 4) appends each near one's index; mode 3 takes its jobs from
-// here (the far ones are copied to the refined cells beforehand, by the host).
+// here (the far ones stay as they are: refinement rewrites the near ones in place).
 layout(std430, binding = 10) buffer RefineList { uint refine_list[]; };
 // The level's own pool, where its cells' tapes go; a main-pool reference read (tape_read) is a
 // parent's, in the last level's pool (binding 3). The parents' pool is freed after the level, so
@@ -188,7 +188,8 @@ vec3 combine_operator(Node nd, float spread_r, bool interval, bool refining, vec
 }
 
 // Stores a finished box's result: `tape` of `words` words (near), or the far-field constant.
-// Mode 3 writes the refined cell `c` (to binding 5).
+// Mode 3 writes the refined cell `c` (to binding 5, the cells' own buffer, bound twice: a job
+// reads its cell from binding 6 before it writes it, and no other job touches it).
 void store(uint dest, bool near, float value, float constant, uint tape, uint words, Cell c) {
     if (pc.mode == 3u) {
         if (near) {

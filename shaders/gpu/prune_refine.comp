@@ -3,7 +3,8 @@
 // tapes are too long for a lane alone (prune_refine_lanes.comp lists them in the long list,
 // scratch[pc.list_start], counted in long_jobs; without a lane pass, every listed near cell)
 // decided again over their refine³ sub-boxes
-// (src/prune/prune_cell.cpp: refine_cell), into the buffer of binding 5. A squad of kSquad
+// (src/prune/prune_cell.cpp: refine_cell), in place (written through binding 5, the cells' own
+// buffer). A squad of kSquad
 // lanes takes one cell: its tape sits in shared memory and every lane walks it in lockstep over
 // its own sub-box (the next kSquad sub-boxes after each walk, while any are left), its
 // evaluation stack in registers and the thread's local memory. The lanes' decisions meet in one

@@ -1,7 +1,8 @@
 #version 450
 // prune_refine_lanes.comp — refinement (mode 3), its first pass: each finest near-field cell
 // whose tape has at most pc.lane_tape words decided again over its refine³ sub-boxes by one
-// lane alone (src/prune/prune_cell.cpp: refine_cell), from `cells` into the buffer of binding 5.
+// lane alone (src/prune/prune_cell.cpp: refine_cell), in place: read from `cells`, written
+// through binding 5, the same buffer.
 // Most refined cells have tapes of a few words, and a lane per cell keeps as many cells in
 // flight as the device has lanes: a cell's chain of dependent loads (the list, the cell, its
 // block, its tape, the nodes) is waited for by 32 cells of a subgroup at once, where a squad

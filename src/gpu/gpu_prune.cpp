@@ -218,7 +218,6 @@ void Pruner::prune_level(uint32_t li) {
     // while its words are copied, are not held beside them).
     lv.cells = &local.create(lv.total * sizeof(PrunedCell));
     lv.octants = &local.create(lv.split ? block_count * 8 * sizeof(PrunedCell) : 16);
-    lv.refined = &local.create(lv.refine ? lv.total * sizeof(PrunedCell) : 16);
     lv.next = &local.create(lv.finest ? 16 : lv.total * sizeof(GpuBlock));
     // Room to list every finest cell for refinement.
     if (lv.refine) hold(refine_list, lv.total * 4);
@@ -232,11 +231,6 @@ void Pruner::prune_level(uint32_t li) {
     ctx.destroy(*lv.octants);
     ctx.destroy(parents);
     parent_pool = nullptr;
-    if (lv.refine) {
-        ctx.destroy(*lv.cells);
-        *lv.cells = *lv.refined;
-        *lv.refined = Buffer{};
-    }
     max_len = std::max(c.max_len, 1u);
     max_depth = std::max(c.max_depth, 1u);
     if (!lv.finest) {
@@ -311,21 +305,22 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             continue;
         }
         if (lv.refine) {
-            // The finest cells decided again over their sub-boxes (refine_cell), into a new
-            // cell array, in a run of its own: a refined tape is never longer than its cell's,
+            // The finest cells decided again over their sub-boxes (refine_cell), in place, in a
+            // run of its own: a refined tape is never longer than its cell's,
             // so the level's pool is first made room for as many words as the cells' tapes
             // have (near_words: shared tapes too), and refinement (the level's costliest step)
-            // is never redone for want of it. The cells' longest tape and deepest stack size
-            // its teams.
+            // is never redone for want of it (a pool that cannot grow that far throws): a cell
+            // refined in place is never refined twice. The cells' longest tape and deepest
+            // stack size its teams.
             lv.listed_cells = sc->refine_cells;
             const uint64_t room = uint64_t(g.pool_words) + sc->near_words;
             if (room > capacity) resize(g.pool, capacity, room, g.pool_words);
             max_len = std::max(sc->max_len, 1u);
             max_depth = std::max(sc->max_depth, 1u);
             std::vector<Step> refinement = plan_step(lv, 3, b0, blocks_in, blocks_in * lv.per_block,
-                                                     *lv.refined, *lv.cells, false);
+                                                     *lv.cells, *lv.cells, false);
             const GpuCounters rc = *run_steps(lv, refinement, false, sc->octant_used, false,
-                                              bound ? lv.refined : nullptr);
+                                              bound ? lv.cells : nullptr);
             sc->max_depth = rc.max_depth;
         }
         c.near_jobs += sc->near_jobs;
@@ -367,14 +362,10 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
                 ctx.fill(counters, 0, offsetof(GpuCounters, max_len), 4);
                 ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
             }
-            if (s.push.mode == 3 && !s.listed && !s.second_pass) {
+            // Refinement rewrites the near cells listed by the step before in place (the
+            // far-field ones stay as they are).
+            if (s.push.mode == 3 && !s.listed && !s.second_pass)
                 ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
-                // The far-field cells refined as they are: the slice's cells copied, the near
-                // ones (listed by the step before) then refined over them.
-                if (s.team_jobs > 0)
-                    ctx.copy(*s.cells, *s.octants, s.team_jobs * sizeof(PrunedCell),
-                             s.first_cell * sizeof(PrunedCell), s.first_cell * sizeof(PrunedCell));
-            }
             record_step(s);
         }
         if (expand) {

@@ -26,8 +26,8 @@ struct Step {
     PrunePush push;
     const Buffer *octants, *cells;
     // Its team jobs are [first_team_job, first_team_job + team_jobs): those of a slice of the
-    // level's blocks (refinement: of its list, from 0; its slice's cells start at first_cell).
-    uint64_t first_team_job, team_jobs, teams, rounds, per_dispatch, first_cell = 0;
+    // level's blocks (refinement: of its list, from 0).
+    uint64_t first_team_job, team_jobs, teams, rounds, per_dispatch;
     uint64_t job_walk;         // in teams, the tape words a lane reads per job, at most
     uint32_t threads, groups;  // lanes that take jobs, and their workgroups (a dispatch's)
     // Wide steps: the scratch buffers its workgroups' scratch is spread over, one dispatch of
@@ -54,7 +54,7 @@ struct Level {
     vec3 csize;
     bool finest = false, refine = false;
     bool split = false;  // octants first (as prune.cpp)
-    Buffer *cells = nullptr, *octants = nullptr, *refined = nullptr, *next = nullptr;
+    Buffer *cells = nullptr, *octants = nullptr, *next = nullptr;
     size_t first_shape = 0;     // the level's steps' shapes in the statistics
     uint32_t listed_cells = 0;  // refinement's list, from the run that made the cells
 };
@@ -80,7 +80,7 @@ class Pruner {
                                 const Buffer& cells, bool transient);
     Step plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
                     uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient);
-    Step plan_refine_lanes(const Step& squads) const;
+    Step plan_refine_lanes(const Step& squads, bool second_pass) const;
     Step plan_refine_more(const Step& lanes) const;
     void plan_squads(const Level& lv, Step& s);
     PrunePush push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,

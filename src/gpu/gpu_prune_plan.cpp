@@ -31,19 +31,22 @@ constexpr uint64_t kWideRunsJobs = 512, kWideRunsRounds = 64;
 // A step over the blocks [first_block, first_block + blocks), `jobs` cells or octants (or in
 // refinement, mode 3, cells), `transient`: new tapes go to the octant pool (the finest cells'
 // tapes before refinement): in teams (or wide). Refinement runs first a lane per cell
-// (plan_refine_lanes), then, unless the cells' longest tape is short enough for the lanes, the
-// squads over the cells the lanes listed (the long list, in scratch); without a lane pass
-// (its setting 0, or no room for the list), squads alone.
+// (plan_refine_lanes; its second pass, plan_refine_more, over the cells its first listed),
+// then, unless the cells' longest tape is short enough for the lanes, the squads over the cells
+// the lanes listed (the long list, in scratch); without a lane pass (its setting 0, or no room
+// for the list), squads alone.
 std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t first_block,
                                     uint64_t blocks, uint64_t jobs, const Buffer& octants,
                                     const Buffer& cells, bool transient) {
     Step teams = plan_teams(lv, mode, first_block, blocks, jobs, octants, cells, transient);
     if (mode != 3 || refine_lane_tape == 0 || 4 * teams.team_jobs > ctx.max_buffer_bytes())
         return {teams};
-    Step lanes = plan_refine_lanes(teams);
-    // Scratch: the long list (a word a cell), then the more list (kRefineMoreWords a cell).
-    const bool more =
-        refine_second_pass && uint64_t(opt.refine) * opt.refine * opt.refine > kRefineFirstBoxes;
+    // Scratch: the long list (a word a cell), then the more list (kRefineMoreWords a cell),
+    // where the lane pass takes two passes: unless set off, or the list would not fit a buffer.
+    const bool more = refine_second_pass &&
+                      uint64_t(opt.refine) * opt.refine * opt.refine > kRefineFirstBoxes &&
+                      4 * teams.team_jobs * (1 + kRefineMoreWords) <= ctx.max_buffer_bytes();
+    Step lanes = plan_refine_lanes(teams, more);
     hold(scratch, 4 * teams.team_jobs * (1 + (more ? kRefineMoreWords : 0)));
     std::vector<Step> steps{lanes};
     if (more) steps.push_back(plan_refine_more(lanes));
@@ -70,11 +73,8 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
                                                 : lv.per_block;
     s.first_team_job = first_block * per_block_jobs;
     s.team_jobs = blocks * per_block_jobs;
-    if (mode == 3) {
-        // Refinement takes the slice's listed near cells (a list a run, from 0).
-        s.first_cell = s.first_team_job;
-        s.first_team_job = 0;
-    }
+    // Refinement takes the slice's listed near cells (a list a run, from 0).
+    if (mode == 3) s.first_team_job = 0;
     if (s.first_team_job + s.team_jobs > 0xfffffffeull)
         throw std::length_error("too many cells in one level");
     if (mode == 3) {
@@ -183,14 +183,15 @@ PrunePush Pruner::push_for(const Level& lv, uint32_t mode, uint32_t threads, uin
 // Refinement's lane pass (prune_refine_lanes.comp): a lane per listed cell, as many lanes as
 // the device runs at once in a grid-stride loop, each refining its cell alone where its tape
 // has at most refine_lane_tape words, and listing it for the squads where not (from scratch
-// word 0: the squads use no other scratch). Under a loop limit (lavapipe), as many cells per
-// lane and dispatch as its loops allow: per cell, the tape staged, one walk per sub-box, the
-// sweep and the write.
-Step Pruner::plan_refine_lanes(const Step& squads) const {
+// word 0), and with `second_pass` walking only the first sub-boxes of each cell, listing the
+// cells that need the others for its second pass (the more list, past the long list). Under a
+// loop limit (lavapipe), as many cells per lane and dispatch as its loops allow: per cell, the
+// tape staged, one walk per sub-box (every one, at most), the sweep and the write.
+Step Pruner::plan_refine_lanes(const Step& squads, bool second_pass) const {
     Step s = squads;
     const uint64_t len = std::min<uint64_t>(max_len, refine_lane_tape);
     const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
-    const uint64_t walk = (refine_second_pass ? std::min(subs, kRefineFirstBoxes) : subs) * len;
+    const uint64_t walk = (second_pass ? std::min(subs, kRefineFirstBoxes) : subs) * len;
     const uint64_t per_cell = subs * len + subs + 3 * len + 8;
     const uint64_t cells = s.team_jobs;
     const uint64_t lanes =
@@ -208,7 +209,7 @@ Step Pruner::plan_refine_lanes(const Step& squads) const {
     s.push.threads = s.threads;
     s.push.list_start = 0;
     s.push.more_start = uint32_t(s.team_jobs);  // past the long list
-    if (!refine_second_pass) s.push.flags |= 64u;
+    if (!second_pass) s.push.flags |= 64u;      // every sub-box in one pass
     s.push.lane_tape = refine_lane_tape;
     s.job_walk = walk;
     s.shape.lanes_per_tape = 1;
