@@ -386,6 +386,13 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
         // for the most the device allows.
         const bool main_over = (counter->overflow & 1u) != 0,
                    octant_over = (counter->overflow & 2u) != 0;
+        // Refinement rewrites its cells in place and cannot run again over them; its pool was
+        // made room for first (prune_slices), so only a pool at the device's limit overflows,
+        // which grow() reports.
+        const bool refining =
+            std::any_of(steps.begin(), steps.end(), [](const Step& s) { return s.push.mode == 3; });
+        if (refining && !(main_over && capacity >= max_pool_words))
+            throw std::logic_error("Vulkan: refinement overflowed a pool made room for");
         const auto need = [](uint32_t used, uint64_t cap) {
             return used > cap ? uint64_t(used) : std::numeric_limits<uint64_t>::max();
         };
