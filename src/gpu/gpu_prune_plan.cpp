@@ -41,13 +41,15 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
     Step teams = plan_teams(lv, mode, first_block, blocks, jobs, octants, cells, transient);
     if (mode != 3 || refine_lane_tape == 0 || 4 * teams.team_jobs > ctx.max_buffer_bytes())
         return {teams};
-    // Scratch: the long list (a word a cell), then the more list (kRefineMoreWords a cell),
-    // where the lane pass takes two passes: unless set off, or the list would not fit a buffer.
+    // Scratch: the long list (a word a cell), then the more list (kRefineMoreWords a listed
+    // near cell), where the lane pass takes two passes: unless set off, or the lists would not
+    // fit a buffer.
+    const uint64_t more_bytes = 4 * kRefineMoreWords * uint64_t(lv.listed_cells);
     const bool more = refine_second_pass &&
                       uint64_t(opt.refine) * opt.refine * opt.refine > kRefineFirstBoxes &&
-                      4 * teams.team_jobs * (1 + kRefineMoreWords) <= ctx.max_buffer_bytes();
+                      4 * teams.team_jobs + more_bytes <= ctx.max_buffer_bytes();
     Step lanes = plan_refine_lanes(teams, more);
-    hold(scratch, 4 * teams.team_jobs * (1 + (more ? kRefineMoreWords : 0)));
+    hold(scratch, 4 * teams.team_jobs + (more ? more_bytes : 0));
     std::vector<Step> steps{lanes};
     if (more) steps.push_back(plan_refine_more(lanes));
     if (max_len <= refine_lane_tape) return steps;
