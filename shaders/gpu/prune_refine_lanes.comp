@@ -70,7 +70,7 @@ const uint kRefineStack = kLaneTape / 2u + 1u;
 // lanes do the same walks, so a subgroup does not wait for its one cell that needs them all.
 // With push flag 64 the first pass walks every sub-box and lists nothing (one pass, as before;
 // SDFPRUNE_VULKAN_REFINE_SECOND_PASS=0, for comparisons).
-const uint kFirstBoxes = 9u;
+const uint kFirstBoxes = 9u;  // device_layout.hpp: kRefineFirstBoxes
 // Sub-box k (< kFirstBoxes) of the first ones: corner k (bit 0: x, 1: y, 2: z at the far end),
 // then the middle. Sub-box b of all, x fastest, is one of them where is_first_box(b).
 uvec3 first_box(uint k, uint subs) {
@@ -94,7 +94,7 @@ uint first_count(uint subs) {
 }
 
 // A cell's refinement state between the passes (in the more list, kMoreWords a cell).
-const uint kMoreWords = 7u;
+const uint kMoreWords = 7u;  // device_layout.hpp: kRefineMoreWords
 
 void main() {
     counts_begin();

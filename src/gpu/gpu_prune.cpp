@@ -413,12 +413,11 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
         // Jobs counted on the device: refinement's, the listed cells, and the long list's, the
         // jobs a lane pass left (their dispatches were recorded for all, those past the list's
         // end returning at once).
-        const bool refine_jobs = s.push.mode == 3 && !s.listed && !s.second_pass;
-        if (refine_jobs || s.listed || s.second_pass) {
+        if (s.push.mode == 3) {
             const uint64_t jobs = s.listed        ? counter->long_jobs
                                   : s.second_pass ? counter->more_jobs
                                                   : counter->refine_cells;
-            if (refine_jobs) s.shape.jobs = jobs;
+            if (!s.listed && !s.second_pass) s.shape.jobs = jobs;
             s.shape.lanes = std::min(jobs, s.teams) * s.shape.lanes_per_tape;
             s.shape.longest_walk_words = ceil_div(jobs, s.teams) * s.job_walk;
         }
