@@ -285,10 +285,10 @@ TEST(PruneLanes, RefineCellEqualsEverySubBoxAlone) {
     EXPECT_GT(undecided, 20u);
 }
 
-// refine_corners evaluates the corner sub-boxes of several cells sharing one tape in one pass;
-// refine_cell from them gives what it gives alone, bit for bit: the same outcome, constant and
-// decisions, for groups of 2 to 8 cells of a block, on every instruction set.
-TEST(PruneLanes, RefineCornersOfAGroupEqualEachCellAlone) {
+// refine_cells refines several cells sharing one tape together, their sub-boxes packed into the
+// same lanes; each cell's result is what refine_cell gives alone, bit for bit: the same outcome,
+// constant and decisions, for groups of 2 to 8 cells of a block, on every instruction set.
+TEST(PruneLanes, RefineCellsOfAGroupEqualEachCellAlone) {
     LaneIsaScope scope;
     const std::vector<LaneIsa> isas = every_isa();
     uint32_t far = 0, decided = 0, undecided = 0;
@@ -312,45 +312,39 @@ TEST(PruneLanes, RefineCornersOfAGroupEqualEachCellAlone) {
             set_lane_isa(isas[k % isas.size()]);
             CellBox boxes[kSiblingLanes];
             float values[kSiblingLanes];
-            bool need_values = false;
+            bool may_decide[kSiblingLanes];
             for (uint32_t c = 0; c < count; ++c) {
                 const vec3 at(float(c & 1), float(c >> 1 & 1), float(c >> 2 & 1));
                 boxes[c] = {origin + (at * 2.0f + 1.0f) * half, half, math::length(half)};
                 values[c] = evaluate_cell(sc, tape, boxes[c], bounds, alone);
-                need_values = need_values ||
-                              refine_need(sc, tape, boxes[c], far_field, 2.0f, values[c], true).far;
+                may_decide[c] = (k + c) % 4 != 3;
             }
-            grouped.corner_used = 0;
-            // A group evaluated before this one: offsets past zero.
-            const uint32_t before =
-                refine_corners(sc, tape, boxes, 2, S, bounds, need_values, grouped);
-            const uint32_t offset =
-                refine_corners(sc, tape, boxes, count, S, bounds, need_values, grouped);
-            ASSERT_EQ(before, 0u);
-            ASSERT_EQ(offset, 2 * kCornerSubBoxes * n);
+            RefineResult results[kSiblingLanes];
+            refine_cells(sc, tape, boxes, count, S, bounds, far_field, 2.0f, values, may_decide,
+                         grouped, results);
             for (uint32_t c = 0; c < count; ++c) {
                 const std::string what = "scene " + std::to_string(i) + ", group " +
                                          std::to_string(k) + ", cell " + std::to_string(c);
-                const RefineCorners corners{offset, kCornerSubBoxes * count, kCornerSubBoxes * c};
-                float constant_alone = 0, constant_grouped = 0;
-                const bool near_alone = refine_cell(sc, tape, boxes[c], S, bounds, far_field, 2.0f,
-                                                    values[c], true, alone, constant_alone);
-                const bool near_grouped =
-                    refine_cell(sc, tape, boxes[c], S, bounds, far_field, 2.0f, values[c], true,
-                                grouped, constant_grouped, &corners);
-                ASSERT_EQ(near_alone, near_grouped) << what;
-                if (!near_alone) {
-                    EXPECT_EQ(std::bit_cast<uint32_t>(constant_alone),
-                              std::bit_cast<uint32_t>(constant_grouped))
+                float constant = 0;
+                const bool near = refine_cell(sc, tape, boxes[c], S, bounds, far_field, 2.0f,
+                                              values[c], may_decide[c], alone, constant);
+                ASSERT_EQ(near, results[c].near) << what;
+                if (!near) {
+                    EXPECT_EQ(std::bit_cast<uint32_t>(constant),
+                              std::bit_cast<uint32_t>(results[c].constant))
                         << what;
                     ++far;
                     continue;
                 }
                 bool any = false;
                 for (uint32_t e = 0; e < n; ++e) {
-                    ASSERT_EQ(alone.decision[e], grouped.decision[e]) << what << ", entry " << e;
                     any = any || alone.decision[e] != math::kKeepBoth;
+                    if (results[c].decided) {
+                        ASSERT_EQ(alone.decision[e], grouped.refine_decision[c * n + e])
+                            << what << ", entry " << e;
+                    }
                 }
+                ASSERT_EQ(any, results[c].decided) << what;
                 ++(any ? decided : undecided);
             }
         }

@@ -577,9 +577,10 @@ struct CellScratch {
     // the cell's min corner (2i + 1), for S = sub_offset_of
     std::vector<float> sub_offset[3];
     uint32_t sub_offset_of = 0;
-    // refine_cell: the operators still decided alike in every sub-box, and their subtrees
-    std::vector<uint32_t> refine_candidates, refine_needed;
-    // refine_cell: per tape entry, the values, ranges and decisions of a batch of sub-boxes
+    // refine_cells: per cell, the operators still decided alike in every sub-box and their
+    // decisions (cell j's n entries at j · n); the subtrees of all cells' candidates
+    std::vector<uint32_t> refine_cands[8], refine_decision, refine_needed;
+    // refine_cells: per tape entry, the values, ranges and decisions of a batch of sub-boxes
     std::vector<float> lane_value, lane_lo, lane_hi;
     std::vector<uint32_t> lane_decision;
     // evaluate_siblings: the same per tape entry for sibling cells; where the lanes that
@@ -592,11 +593,6 @@ struct CellScratch {
         uint32_t offset = 0, stride = 8, first = 0;
     } sib_at;
     uint32_t sib_used = 0;
-    // refine_corners: the same for the corner sub-boxes of groups of cells, group after group,
-    // of which corner_used words are taken (reset by its caller)
-    std::vector<float> corner_value, corner_lo, corner_hi;
-    std::vector<uint32_t> corner_decision;
-    uint32_t corner_used = 0;
     // Per octant of a split block, and per sibling cell: its compacted tape (prune_level.cpp).
     std::vector<uint32_t> octants[8];
     std::vector<uint32_t> cell_tapes[8];
@@ -670,12 +666,9 @@ void compact_siblings(const Scene& scene, std::span<const uint32_t> tape, uint32
 // the tape could be decided in the sub-box holding the centre (blend_may_decide). Neither
 // changes the results, only the work: with neither an operator to try nor a far-field test that
 // could pass, nothing is evaluated.
-// With `corners`, its first batch, the 8 corner sub-boxes, was evaluated by refine_corners.
-struct RefineCorners;
 bool refine_cell(const Scene& scene, std::span<const uint32_t> tape, const CellBox& box,
                  uint32_t subdivisions, CellBounds bounds, bool far_field, float far_field_c,
-                 float value, bool may_decide, CellScratch& s, float& constant,
-                 const RefineCorners* corners = nullptr);
+                 float value, bool may_decide, CellScratch& s, float& constant);
 
 // Whether refine_cell evaluates anything for a cell (`any`; else it returns at once and keeps
 // every operator), and whether its far-field test may pass (`far`: refine_far_possible), which
@@ -687,22 +680,23 @@ struct RefineNeed {
 RefineNeed refine_need(const Scene& scene, std::span<const uint32_t> tape, const CellBox& box,
                        bool far_field, float far_field_c, float value, bool may_decide);
 
-// refine_cell's first batch for `count` <= kSiblingLanes cells of one level that share one
-// `tape`, in one pass over it: the 8 corner sub-boxes of each (of an S³ split), the same
-// results bit for bit, kBlock lanes per cell, with the values where `values` (some cell's
-// far-field test may pass). Appended to s.corner_*; returns their offset there, from which
-// cell j's RefineCorners is {offset, 8 · count, 8 · j} (8: kCornerSubBoxes). On a sibling group's
-// cells, which share their compacted tape more often than not (trees: 3 of 4 near cells), a tape
-// entry's fixed costs are paid once for the group, not once per cell.
-uint32_t refine_corners(const Scene& scene, std::span<const uint32_t> tape, const CellBox* boxes,
-                        uint32_t count, uint32_t subdivisions, CellBounds bounds, bool values,
-                        CellScratch& s);
-constexpr uint32_t kCornerSubBoxes = 8;
-struct RefineCorners {
-    uint32_t offset = 0;  // of the group's results in s.corner_*
-    uint32_t stride = 0;  // lanes per tape entry: 8 per cell of the group
-    uint32_t lane = 0;    // the cell's first lane
+// refine_cell for `count` <= kSiblingLanes cells of one size that share one `tape` (values[j]
+// and may_decide[j]: cell j's), in one pass over the tape per batch of sub-boxes, the cells'
+// sub-boxes packed into the same lanes: the corners of every cell, then the other sub-boxes of
+// the cells still open. The same results bit for bit as refine_cell on each cell alone. On a
+// sibling group's cells, which share their compacted tape more often than not (trees: 3 of 4
+// near cells), a tape entry's fixed costs are paid once per batch, not once per cell, and the
+// lanes are padded once. Cell j's decisions are left at s.refine_decision + j · n, for
+// compact_tape (after link_tape) where results[j].decided.
+struct RefineResult {
+    bool near = true;      // false: far-field, with `constant`
+    bool decided = false;  // near, with some operator decided alike over every sub-box
+    float constant = 0;
 };
+void refine_cells(const Scene& scene, std::span<const uint32_t> tape, const CellBox* boxes,
+                  uint32_t count, uint32_t subdivisions, CellBounds bounds, bool far_field,
+                  float far_field_c, const float* values, const bool* may_decide, CellScratch& s,
+                  RefineResult* results);
 
 // Whether an operator of blend radius k whose operands are worth a and b (signs applied) at a
 // cell's centre might be decided in every sub-box of the cell (refine_cell). It must then be

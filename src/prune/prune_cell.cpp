@@ -37,28 +37,28 @@ void CellScratch::reserve_siblings(size_t want) {
 size_t CellScratch::bytes() const {
     size_t b = 0;
     const auto add = [&b](const auto& v) { b += v.capacity() * sizeof(v[0]); };
-    for (const auto* v :
-         {&value, &lo, &hi, &lane_value, &lane_lo, &lane_hi, &sib_value, &sib_lo, &sib_hi,
-          &corner_value, &corner_lo, &corner_hi, &sub_offset[0], &sub_offset[1], &sub_offset[2]})
+    for (const auto* v : {&value, &lo, &hi, &lane_value, &lane_lo, &lane_hi, &sib_value, &sib_lo,
+                          &sib_hi, &sub_offset[0], &sub_offset[1], &sub_offset[2]})
         add(*v);
     for (const auto* v : {&left, &right, &decision, &stack, &lane_decision, &sib_decision,
-                          &corner_decision, &refine_candidates, &refine_needed})
+                          &refine_decision, &refine_needed})
         add(*v);
     add(alive);
     add(negate);
     for (uint32_t i = 0; i < 8; ++i) {
         add(octants[i]);
         add(cell_tapes[i]);
+        add(refine_cands[i]);
     }
     return b;
 }
 
 namespace {
 
-// Sub-boxes evaluated together by refine_cell, and by refine_corners (the 8 corners of each of
-// up to kSiblingLanes cells).
+// Sub-boxes of a cell evaluated in one batch by refine_cells after its first (its corners), for
+// each of up to kSiblingLanes cells at once.
 constexpr uint32_t kLanes = 32;
-constexpr uint32_t kCornerLanes = kCornerSubBoxes * kSiblingLanes;
+constexpr uint32_t kBoxLanes = kLanes * kSiblingLanes;
 
 // Boxes are evaluated in blocks of lanes::kBlock lanes (lanes.hpp): every loop over boxes runs
 // over structure-of-arrays data to a multiple of the block, with the same results bit for bit as
@@ -66,13 +66,13 @@ constexpr uint32_t kCornerLanes = kCornerSubBoxes * kSiblingLanes;
 using lanes::kBlock;
 using lanes::lanes_for;
 using lanes::lanes_of;
-static_assert(kBlock == kCornerSubBoxes, "refine_corners gives each cell one block: its corners");
+static_assert(kSiblingGroupLanes <= kBoxLanes);
 
-// The centres of up to kCornerLanes boxes, coordinate by coordinate, and the lanes to compute.
+// The centres of up to kBoxLanes boxes, coordinate by coordinate, and the lanes to compute.
 struct BoxLanes {
-    alignas(32) float x[kCornerLanes];
-    alignas(32) float y[kCornerLanes];
-    alignas(32) float z[kCornerLanes];
+    alignas(32) float x[kBoxLanes];
+    alignas(32) float y[kBoxLanes];
+    alignas(32) float z[kBoxLanes];
     uint32_t lanes = 0;  // 1 for a single box, else the boxes rounded up to whole blocks
 };
 
@@ -376,16 +376,15 @@ bool sibling_is_near_field(const Scene& sc, std::span<const uint32_t> tape, uint
 
 namespace {
 
-// The S³ sub-boxes of refine_cell in visiting order: the 8 corners first, then the middle, then
-// the rest. The order changes nothing but when refine_cell may stop. Its first batch is one block,
+// The S³ sub-boxes of refine_cells in visiting order: the 8 corners first, then the middle, then
+// the rest. The order changes nothing but when a cell may stop. Its first batch is one block,
 // the corners, where most cells stop: where an operator stays undecided is a band around a
 // surface, near a plane across a small cell, and a band that misses every corner misses their
 // convex hull, the cell; the middle adds less (its operands' values at the centre were tested
 // before, blend_may_decide). Corners before the middle: 1 % fewer instructions in trees' and
 // molecule's pruning (callgrind). Each sub-box (i, j, k) is stored as its centre's offsets
 // 2i + 1, 2j + 1, 2k + 1 (sub_box_centre's factors), one array per axis, so that a batch's
-// centres are a vector loop; kBlock - 1 copies of the last pad the arrays, the lanes that
-// refine_cell's last batch computes past the sub-boxes (which repeat the last one).
+// centres are a vector loop.
 void sub_box_order(uint32_t S, std::vector<float> (&offset)[3]) {
     const uint32_t mid = S / 2, last = S - 1;
     const auto is_corner = [&](uint32_t i, uint32_t j, uint32_t k) {
@@ -401,30 +400,10 @@ void sub_box_order(uint32_t S, std::vector<float> (&offset)[3]) {
     }
     // A corner is listed once however small S is (S = 1: the only box; S = 2: all eight).
     order.erase(std::unique(order.begin(), order.end()), order.end());
-    order.resize(order.size() + kBlock - 1, order.back());
     for (uint32_t a = 0; a < 3; ++a) {
         offset[a].clear();
         for (const auto& at : order) offset[a].push_back(float(2 * at[a] + 1));
     }
-}
-
-// refine_cell's entries to evaluate: the subtrees of its candidates (operators of `tape`, whose
-// links s.left and s.right hold), in tape order. A reverse sweep, parents before their operands;
-// the marks borrow s.alive, which compaction sets afresh.
-void candidates_subtrees(const Scene& sc, std::span<const uint32_t> tape, CellScratch& s,
-                         std::vector<uint32_t>& needed) {
-    const uint32_t n = uint32_t(tape.size());
-    uint8_t* mark = s.alive.data();
-    std::fill_n(mark, n, uint8_t(0));
-    for (const uint32_t e : s.refine_candidates) mark[e] = 1;
-    for (uint32_t i = n; i-- > 0;) {
-        if (mark[i] == 0 || sc.is_primitive(math::tape_node(tape[i]))) continue;
-        mark[s.left[i]] = 1;
-        mark[s.right[i]] = 1;
-    }
-    needed.clear();
-    for (uint32_t i = 0; i < n; ++i)
-        if (mark[i] != 0) needed.push_back(i);
 }
 
 // Lanes [to, to + count) of `c`: the centres of sub-boxes [at, at + count) in visiting order of
@@ -472,134 +451,174 @@ RefineNeed refine_need(const Scene& sc, std::span<const uint32_t> tape, const Ce
     return need;
 }
 
-uint32_t refine_corners(const Scene& sc, std::span<const uint32_t> tape, const CellBox* boxes,
-                        uint32_t count, uint32_t S, CellBounds bounds, bool values,
-                        CellScratch& s) {
-    const uint32_t n = uint32_t(tape.size()), stride = kCornerSubBoxes * count;
-    const uint32_t offset = s.corner_used;
-    const size_t size = offset + size_t(n) * stride;
-    s.corner_used = uint32_t(size);
-    if (s.corner_value.size() < size) {
-        for (auto* v : {&s.corner_value, &s.corner_lo, &s.corner_hi}) v->resize(size);
-        s.corner_decision.resize(size);
-    }
+void refine_cells(const Scene& sc, std::span<const uint32_t> tape, const CellBox* boxes,
+                  uint32_t count, uint32_t S, CellBounds bounds, bool far_field, float far_field_c,
+                  const float* values, const bool* may_decide, CellScratch& s,
+                  RefineResult* results) {
+    if (count == 0 || count > kSiblingLanes) throw std::invalid_argument("refine_cells: count");
+    const uint32_t n = uint32_t(tape.size());
     s.reserve(n);
-    // Each cell's corners as refine_cell's first batch computes them.
+    const float L = sc.lipschitz[math::tape_node(tape[n - 1])];
     const vec3 sub_half = boxes[0].half / float(S);
-    BoxLanes c;
-    c.lanes = stride;
-    for (uint32_t j = 0; j < count; ++j)
-        sub_box_centres(s, S, boxes[j].centre - boxes[j].half, sub_half, 0, kBlock, kBlock * j, c);
-    evaluate_boxes(sc, tape, c, sub_half, math::length(sub_half), bounds,
-                   {s.corner_value.data() + offset, s.corner_lo.data() + offset,
-                    s.corner_hi.data() + offset, s.corner_decision.data() + offset, stride,
-                    values ? OperatorMode::kRefine : OperatorMode::kRefineRanges},
-                   s);
-    return offset;
+    const float sub_radius = math::length(sub_half);
+    const uint32_t total = S * S * S;
+    // Per cell: the far-field test so far (every sub-box cleared the cell's clearance above, or
+    // below; the sub-boxes' tightest bounds), and its decisions, at s.refine_decision + j · n:
+    // the sub-boxes' common decisions so far. Its candidates (s.refine_cands[j]): the operators
+    // that may yet be decided alike in every sub-box (none when `may_decide` says that none is
+    // decided in the sub-box holding the centre).
+    struct CellState {
+        bool above = false, below = false;
+        float lowest = INFINITY, highest = -INFINITY, clearance = 0;
+    } st[kSiblingLanes];
+    if (s.refine_decision.size() < size_t(count) * n) s.refine_decision.resize(size_t(count) * n);
+    uint32_t open = 0;  // the cells still refined (bit j)
+    for (uint32_t j = 0; j < count; ++j) {
+        const RefineNeed need =
+            refine_need(sc, tape, boxes[j], far_field, far_field_c, values[j], may_decide[j]);
+        results[j] = {};
+        st[j].above = st[j].below = need.far;
+        st[j].clearance = need.clearance;
+        s.refine_cands[j].clear();
+        open |= need.any ? 1u << j : 0u;
+    }
+    // A batch evaluates, for every open cell, its next sub-boxes in visiting order (the first
+    // batch its corners, one block; the others up to kLanes), packed cell after cell into one
+    // pass over the tape: the whole tape at first and while some cell's far-field test is open
+    // (it reads the root's value), else only the candidates' subtrees, often a few words of a
+    // long tape. The results are the same as cell by cell: every entry a decision reads is
+    // evaluated, and ranges do not depend on whether values are computed.
+    bool subset = false, linked = false;
+    std::vector<uint32_t>& needed = s.refine_needed;
+    for (uint32_t at = 0; at < total && open != 0;) {
+        const bool first = at == 0;
+        const uint32_t per = std::min(first ? kBlock : kLanes, total - at);
+        uint32_t cells[kSiblingLanes], m = 0;
+        bool values_needed = false;
+        for (uint32_t rest = open; rest != 0; rest &= rest - 1) {
+            const uint32_t j = uint32_t(std::countr_zero(rest));
+            cells[m++] = j;
+            values_needed = values_needed || st[j].above || st[j].below;
+        }
+        BoxLanes c;
+        c.lanes = lanes_for(per * m);
+        for (uint32_t k = 0; k < m; ++k) {
+            const CellBox& box = boxes[cells[k]];
+            sub_box_centres(s, S, box.centre - box.half, sub_half, at, per, per * k, c);
+        }
+        // The lanes past the boxes repeat the last one.
+        for (uint32_t b = per * m; b < c.lanes; ++b) {
+            c.x[b] = c.x[b - 1];
+            c.y[b] = c.y[b - 1];
+            c.z[b] = c.z[b - 1];
+        }
+        const uint32_t stride = c.lanes;
+        const size_t size = size_t(n) * stride;
+        for (auto* v : {&s.lane_value, &s.lane_lo, &s.lane_hi})
+            if (v->size() < size) v->resize(size);
+        if (s.lane_decision.size() < size) s.lane_decision.resize(size);
+        evaluate_boxes(
+            sc, tape, c, sub_half, sub_radius, bounds,
+            {s.lane_value.data(), s.lane_lo.data(), s.lane_hi.data(), s.lane_decision.data(),
+             stride, values_needed ? OperatorMode::kRefine : OperatorMode::kRefineRanges},
+            s, subset ? std::span<const uint32_t>(needed) : std::span<const uint32_t>());
+        linked = linked || !subset;
+        at += per;
+        bool any_candidates = false, any_far = false;
+        for (uint32_t k = 0; k < m; ++k) {
+            const uint32_t j = cells[k];
+            CellState& cs = st[j];
+            uint32_t* decision = s.refine_decision.data() + size_t(j) * n;
+            std::vector<uint32_t>& candidates = s.refine_cands[j];
+            // Whether each candidate is still decided the same way in every sub-box so far; an
+            // operator kept in some sub-box stays kept. The first batch sets every entry's
+            // decision (a primitive's, and every operator's without `may_decide`: kKeepBoth).
+            const uint32_t* d0 = s.lane_decision.data() + per * k;
+            const auto common_decision = [&](uint32_t e, uint32_t common) {
+                const uint32_t* d = d0 + size_t(e) * stride;
+                uint32_t differ = 0;
+                for (uint32_t b = 0; b < per; ++b) differ |= d[b] ^ common;
+                return differ == 0 ? common : math::kKeepBoth;
+            };
+            if (first) {
+                const bool may = may_decide[j];
+                for (uint32_t e = 0; e < n; ++e) {
+                    uint32_t dec = math::kKeepBoth;
+                    if (may && !sc.is_primitive(math::tape_node(tape[e])))
+                        dec = common_decision(e, d0[size_t(e) * stride]);
+                    decision[e] = dec;
+                    if (dec != math::kKeepBoth) candidates.push_back(e);
+                }
+            } else {
+                size_t kept = 0;
+                for (const uint32_t e : candidates) {
+                    decision[e] = common_decision(e, decision[e]);
+                    if (decision[e] != math::kKeepBoth) candidates[kept++] = e;
+                }
+                candidates.resize(kept);
+            }
+            // The far-field test of is_near_field on each sub-box's root range, against the
+            // whole cell's clearance, while every sub-box so far has cleared it.
+            if (cs.above || cs.below) {
+                const size_t root = size_t(n - 1) * stride + per * k;
+                for (uint32_t b = 0; b < per; ++b) {
+                    const vec2 range =
+                        math::far_field_range(s.lane_value[root + b], s.lane_lo[root + b],
+                                              s.lane_hi[root + b], L, sub_radius);
+                    cs.above = cs.above && math::clears_above(range.x, cs.clearance);
+                    cs.below = cs.below && math::clears_below(range.y, cs.clearance);
+                    cs.lowest = std::min(cs.lowest, range.x);
+                    cs.highest = std::max(cs.highest, range.y);
+                }
+            }
+            if (candidates.empty() && !cs.above && !cs.below) open &= ~(1u << j);
+            any_candidates = any_candidates || ((open >> j & 1) != 0 && !candidates.empty());
+            any_far = any_far || cs.above || cs.below;
+        }
+        // The next batch: only the open cells' candidates' subtrees while no far-field test is
+        // open (their marks borrow s.alive, which compaction sets afresh).
+        subset = false;
+        if (open != 0 && !any_far && at < total && any_candidates) {
+            if (!linked) link_tape(sc, tape, s);
+            linked = true;
+            uint8_t* mark = s.alive.data();
+            std::fill_n(mark, n, uint8_t(0));
+            for (uint32_t rest = open; rest != 0; rest &= rest - 1)
+                for (const uint32_t e : s.refine_cands[std::countr_zero(rest)]) mark[e] = 1;
+            for (uint32_t i = n; i-- > 0;) {
+                if (mark[i] == 0 || sc.is_primitive(math::tape_node(tape[i]))) continue;
+                mark[s.left[i]] = 1;
+                mark[s.right[i]] = 1;
+            }
+            needed.clear();
+            for (uint32_t i = 0; i < n; ++i)
+                if (mark[i] != 0) needed.push_back(i);
+            subset = true;
+        }
+    }
+    for (uint32_t j = 0; j < count; ++j) {
+        const CellState& cs = st[j];
+        if (cs.above || cs.below) {
+            results[j].near = false;
+            results[j].constant = cs.above ? cs.lowest : cs.highest;
+        } else {
+            results[j].decided = !s.refine_cands[j].empty();
+        }
+    }
 }
 
 bool refine_cell(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box, uint32_t S,
                  CellBounds bounds, bool far_field, float far_field_c, float value, bool may_decide,
-                 CellScratch& s, float& constant, const RefineCorners* corners) {
+                 CellScratch& s, float& constant) {
+    RefineResult r;
+    refine_cells(sc, tape, &box, 1, S, bounds, far_field, far_field_c, &value, &may_decide, s, &r);
     const uint32_t n = uint32_t(tape.size());
-    s.reserve(n);
-    const float L = sc.lipschitz[math::tape_node(tape[n - 1])];
-    const RefineNeed need = refine_need(sc, tape, box, far_field, far_field_c, value, may_decide);
-    const float clearance = need.clearance;
-    bool all_above = need.far, all_below = need.far;
-    float lowest = INFINITY, highest = -INFINITY;
-    // s.decision holds the sub-boxes' common decisions so far: none yet.
-    std::fill_n(s.decision.begin(), n, math::kKeepBoth);
-    if (!need.any) return true;
-    // The candidates: the operators that may yet be decided alike in every sub-box (none when
-    // `may_decide` says that none is decided in the sub-box holding the centre), and what a
-    // batch evaluates: the whole tape at first and while the far-field test is open (it reads
-    // the root), else only the candidates' subtrees, often a few words of a long tape. The
-    // results are the same: every entry a decision reads is evaluated.
-    std::vector<uint32_t>& candidates = s.refine_candidates;
-    std::vector<uint32_t>& needed = s.refine_needed;
-    candidates.clear();
-    if (may_decide)
-        for (uint32_t e = 0; e < n; ++e)
-            if (!sc.is_primitive(math::tape_node(tape[e]))) candidates.push_back(e);
-    bool subset = false;
-    for (auto* v : {&s.lane_value, &s.lane_lo, &s.lane_hi})
-        if (v->size() < size_t(n) * kLanes) v->resize(size_t(n) * kLanes);
-    if (s.lane_decision.size() < size_t(n) * kLanes) s.lane_decision.resize(size_t(n) * kLanes);
-    const vec3 sub_half = box.half / float(S);
-    const float sub_radius = math::length(sub_half);
-    const vec3 corner = box.centre - box.half;
-    const uint32_t total = S * S * S;
-    bool first = true;
-    for (uint32_t at = 0; at < total;) {
-        // The first batch is one block, the others kLanes (sub_box_order). Where the batch's
-        // results are: per entry e and lane b, at e · stride + b.
-        const uint32_t count = std::min(at == 0 ? kBlock : kLanes, total - at);
-        uint32_t lanes = lanes_for(count), stride = kLanes;
-        const float *value_at = s.lane_value.data(), *lo_at = s.lane_lo.data(),
-                    *hi_at = s.lane_hi.data();
-        const uint32_t* decision_at = s.lane_decision.data();
-        if (first && corners) {
-            // Evaluated already, with other cells of the same tape (refine_corners).
-            const size_t base = corners->offset + corners->lane;
-            value_at = s.corner_value.data() + base;
-            lo_at = s.corner_lo.data() + base;
-            hi_at = s.corner_hi.data() + base;
-            decision_at = s.corner_decision.data() + base;
-            stride = corners->stride;
-            link_tape(sc, tape, s);
-        } else {
-            BoxLanes c;
-            c.lanes = lanes;
-            sub_box_centres(s, S, corner, sub_half, at, lanes, 0, c);
-            // The far-field test reads the root's value (its rounding margin), which needs
-            // every operator's; the decisions need none.
-            evaluate_boxes(
-                sc, tape, c, sub_half, sub_radius, bounds,
-                {s.lane_value.data(), s.lane_lo.data(), s.lane_hi.data(), s.lane_decision.data(),
-                 kLanes,
-                 all_above || all_below ? OperatorMode::kRefine : OperatorMode::kRefineRanges},
-                s, subset ? std::span<const uint32_t>(needed) : std::span<const uint32_t>());
-        }
-        at += count;
-        // Whether each candidate is still decided the same way in every sub-box so far. The
-        // lanes past the batch repeat its last sub-box, so they may be folded in too (here and
-        // below), and an operator kept in some sub-box stays kept.
-        size_t kept = 0;
-        for (const uint32_t e : candidates) {
-            const uint32_t* d = decision_at + size_t(e) * stride;
-            const uint32_t common = first ? d[0] : s.decision[e];
-            uint32_t differ = 0;
-            for (uint32_t b = 0; b < lanes; ++b) differ |= d[b] ^ common;
-            s.decision[e] = differ == 0 ? common : math::kKeepBoth;
-            if (s.decision[e] != math::kKeepBoth) candidates[kept++] = e;
-        }
-        candidates.resize(kept);
-        first = false;
-        // The far-field test of is_near_field on each sub-box's root range, against the whole
-        // cell's clearance, while every sub-box so far has cleared it.
-        if (all_above || all_below) {
-            const size_t root = size_t(n - 1) * stride;
-            for (uint32_t b = 0; b < lanes; ++b) {
-                const vec2 range = math::far_field_range(value_at[root + b], lo_at[root + b],
-                                                         hi_at[root + b], L, sub_radius);
-                all_above = all_above && math::clears_above(range.x, clearance);
-                all_below = all_below && math::clears_below(range.y, clearance);
-                lowest = std::min(lowest, range.x);
-                highest = std::max(highest, range.y);
-            }
-        }
-        if (candidates.empty() && !all_above && !all_below) break;
-        if (!all_above && !all_below && at < total) {
-            candidates_subtrees(sc, tape, s, needed);
-            subset = true;
-        }
-    }
-    if (all_above || all_below) {
-        constant = all_above ? lowest : highest;
-        return false;
-    }
-    return true;
+    if (r.decided)
+        std::copy_n(s.refine_decision.begin(), n, s.decision.begin());
+    else
+        std::fill_n(s.decision.begin(), n, math::kKeepBoth);
+    constant = r.constant;
+    return r.near;
 }
 
 namespace {

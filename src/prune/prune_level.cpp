@@ -75,6 +75,12 @@ uint32_t take_equal_tapes(uint32_t& open, const TapeOf& tape_of, uint32_t* taken
 }
 
 class StepPruner {
+    // A cell's refinement, done with its group (refine_siblings).
+    struct Refined {
+        RefineResult result;
+        std::vector<uint32_t> decisions;  // with result.decided: per entry of its tape
+    };
+
   public:
     StepPruner(const Scene& sc, const PruneOptions& opt, const LevelGeometry& geo, CellScratch& s,
                LevelChunk& out)
@@ -142,54 +148,55 @@ class StepPruner {
             s.cell_tapes[c].clear();
             near |= far[c] ? 0u : 1u << c;
         }
-        // Every lane's compaction before any refinement: refine_cell reuses the entry links.
         uint32_t decidable = ~0u;
         compact_siblings(sc_, parent, near, s, s.cell_tapes, prims,
                          geo_.finest && opt_.refine > 1 ? &decidable : nullptr);
-        RefineCorners corners[kSiblingLanes];
+        bool refined[kSiblingLanes] = {};
         if (geo_.finest && opt_.refine > 1)
-            refine_corners_of(parent, boxes, count, near, decidable, corners);
+            refine_siblings(parent, boxes, count, near, decidable, refined);
         for (uint32_t c = 0; c < count; ++c)
             store_cell(*cells[c], boxes[c], parent.size(), sibling_value(s, parent, c), far[c],
                        constant[c], s.cell_tapes[c], prims[c], (decidable >> c & 1) != 0,
-                       corners[c].stride != 0 ? &corners[c] : nullptr);
+                       refined[c] ? &refined_[c] : nullptr);
     }
 
-    // The first batches of the near cells (bits of `near`) that store_cell refines, evaluated
-    // together by tape (refine_corners) where two or more share one; the others keep
-    // corners[c].stride = 0 and are evaluated alone.
-    void refine_corners_of(std::span<const uint32_t> parent, const CellBox* boxes, uint32_t count,
-                           uint32_t near, uint32_t decidable, RefineCorners* corners) {
+    // Refinement of the near cells (bits of `near`) that store_cell refines, by groups of cells
+    // whose compacted tapes are equal (refine_cells: one pass over the tape per batch for the
+    // group); each cell's result goes to refined_[c] (refined[c] set), for store_cell.
+    void refine_siblings(std::span<const uint32_t> parent, const CellBox* boxes, uint32_t count,
+                         uint32_t near, uint32_t decidable, bool* refined) {
         CellScratch& s = s_;
-        s.corner_used = 0;
-        uint32_t open = 0;  // cells whose refinement evaluates something, not yet grouped
-        bool far[kSiblingLanes] = {};
+        uint32_t open = 0;  // cells to refine, not yet grouped
         for (uint32_t c = 0; c < count; ++c) {
             const std::vector<uint32_t>& tape = s.cell_tapes[c];
-            if ((near >> c & 1) == 0 || tape.empty() || tape.size() > math::kRefineMaxTape)
-                continue;
-            const RefineNeed need =
-                refine_need(sc_, tape, boxes[c], opt_.far_field, opt_.far_field_c,
-                            sibling_value(s, parent, c), (decidable >> c & 1) != 0);
-            far[c] = need.far;
-            open |= need.any ? 1u << c : 0u;
+            if ((near >> c & 1) != 0 && !tape.empty() && tape.size() <= math::kRefineMaxTape)
+                open |= 1u << c;
         }
         while (open != 0) {
             uint32_t group[kSiblingLanes];
             const uint32_t m = take_equal_tapes(
                 open, [&](uint32_t c) -> std::span<const uint32_t> { return s.cell_tapes[c]; },
                 group);
-            if (m < 2) continue;
+            const std::span<const uint32_t> tape = s.cell_tapes[group[0]];
             CellBox gboxes[kSiblingLanes];
-            bool values = false;
+            float values[kSiblingLanes];
+            bool may_decide[kSiblingLanes];
+            RefineResult results[kSiblingLanes];
             for (uint32_t j = 0; j < m; ++j) {
                 gboxes[j] = boxes[group[j]];
-                values = values || far[group[j]];
+                values[j] = sibling_value(s, parent, group[j]);
+                may_decide[j] = (decidable >> group[j] & 1) != 0;
             }
-            const uint32_t offset = refine_corners(sc_, s.cell_tapes[group[0]], gboxes, m,
-                                                   opt_.refine, opt_.bounds, values, s);
-            for (uint32_t j = 0; j < m; ++j)
-                corners[group[j]] = {offset, kCornerSubBoxes * m, kCornerSubBoxes * j};
+            refine_cells(sc_, tape, gboxes, m, opt_.refine, opt_.bounds, opt_.far_field,
+                         opt_.far_field_c, values, may_decide, s, results);
+            for (uint32_t j = 0; j < m; ++j) {
+                Refined& r = refined_[group[j]];
+                r.result = results[j];
+                if (results[j].decided)
+                    r.decisions.assign(s.refine_decision.begin() + size_t(j) * tape.size(),
+                                       s.refine_decision.begin() + size_t(j + 1) * tape.size());
+                refined[group[j]] = true;
+            }
         }
     }
 
@@ -198,7 +205,7 @@ class StepPruner {
     // `may_decide`: refine_cell's hint, whether some operator of the tape might be decided.
     void store_cell(PrunedCell& cell, const CellBox& box, size_t parent_size, float value, bool far,
                     float constant, std::span<const uint32_t> compacted, uint32_t prims,
-                    bool may_decide, const RefineCorners* corners = nullptr) {
+                    bool may_decide, const Refined* refined = nullptr) {
         CellScratch& s = s_;
         LevelChunk& out = out_;
         cell.value = value;
@@ -213,24 +220,33 @@ class StepPruner {
         out.words.push_back(0);
         out.words.push_back(0);
         if (geo_.finest && opt_.refine > 1 && compacted.size() <= math::kRefineMaxTape) {
-            // Decided again over the cell's sub-boxes, from the tape just made.
-            float refined_constant = 0;
-            if (!refine_cell(sc_, compacted, box, opt_.refine, opt_.bounds, opt_.far_field,
-                             opt_.far_field_c, value, may_decide, s, refined_constant, corners)) {
+            // Decided again over the cell's sub-boxes, from the tape just made (here, unless
+            // refine_siblings did with the cell's group).
+            RefineResult r;
+            std::span<const uint32_t> decisions;
+            if (refined) {
+                r = refined->result;
+                decisions = refined->decisions;
+            } else {
+                refine_cells(sc_, compacted, &box, 1, opt_.refine, opt_.bounds, opt_.far_field,
+                             opt_.far_field_c, &value, &may_decide, s, &r);
+                decisions = std::span<const uint32_t>(s.refine_decision).first(compacted.size());
+            }
+            if (!r.near) {
                 out.words.resize(at);
                 cell.tape = PrunedCell::kFarField;
-                cell.bound = refined_constant;
+                cell.bound = r.constant;
                 return;
             }
             // Compacted again only where some operator was decided over every sub-box: with
             // none, compaction would give back the tape word for word (most cells).
-            const bool decided =
-                std::any_of(s.decision.begin(), s.decision.begin() + compacted.size(),
-                            [](uint32_t d) { return d != math::kKeepBoth; });
-            if (decided)
+            if (r.decided) {
+                std::copy(decisions.begin(), decisions.end(), s.decision.begin());
+                link_tape(sc_, compacted, s);
                 prims = compact_tape(sc_, compacted, s, out.words);
-            else
+            } else {
                 out.words.insert(out.words.end(), compacted.begin(), compacted.end());
+            }
         } else {
             out.words.insert(out.words.end(), compacted.begin(), compacted.end());
         }
@@ -377,6 +393,7 @@ class StepPruner {
     CellBox proto_;
     // This call's tapes by hash: a tape equal to one already stored is not stored again.
     StoredTapes stored_;
+    Refined refined_[kSiblingLanes];  // refine_siblings' results, per sibling cell
 };
 
 }  // namespace
