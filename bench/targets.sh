@@ -3,12 +3,17 @@
 # BENCHMARKS.md (markdown) on stdout: pruning quality (the paper's Table 2 metric), pruning time
 # and memory, tracing and discretization speed-ups over the naive full-tree evaluation (same
 # binary, same evaluator, same threads, same image). Needs ../shared/scenes or $SDFPRUNE_SCENES.
-# Environment: W, H (image for the speed-up, default 960x540), RES (discretization, default 256).
+# Environment: W, H (image for the speed-up, default 960x540), RES (discretization, default 256),
+# ROUNDS (runs of each pruning-time row, default 5: the fastest and the median are reported).
 set -euo pipefail
 build=${1:-build}
 bin="$build/sdfprune"
 scenes=${SDFPRUNE_SCENES:-$(dirname "$0")/../../shared/scenes}
-W=${W:-960} H=${H:-540} RES=${RES:-256}
+W=${W:-960} H=${H:-540} RES=${RES:-256} ROUNDS=${ROUNDS:-5}
+if ! [[ $ROUNDS =~ ^[1-9][0-9]*$ ]]; then
+  echo "bench/targets.sh: ROUNDS must be a positive integer, not '$ROUNDS'" >&2
+  exit 2
+fi
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 log() { echo "bench: $*" >&2; }
@@ -26,7 +31,8 @@ echo "# sdfprune benchmarks"
 echo
 echo "Measured by \`make bench\` (bench/targets.sh) on $(date -u +%Y-%m-%d): $cpu, $(nproc) cores,"
 echo "$mem RAM, $(. /etc/os-release; echo "$PRETTY_NAME"), $(c++ --version | head -n 1)."
-echo "All threads in use. Times are one run each on a shared machine: compare ratios within a"
+echo "All threads in use. Pruning times are the fastest of $ROUNDS runs, with their median; other"
+echo "times are one run each on a shared machine: compare ratios within a"
 echo "table, not absolute times across machines. The paper's figures (Barbier et al. 2025,"
 echo "Tables 1–2, laptop RTX 4060) are copied from ../shared/paper for comparison."
 echo
@@ -59,11 +65,18 @@ echo "|---|---|---|---|---|---|---|---|"
 for s in molecule trees; do
   case $s in molecule) paper="8.9 ms / 1.47 GB (GPU)";; trees) paper="2.73 ms / 0.64 GB (GPU)";; esac
   for f in "4" "2" "4 --refine 1"; do
-    log "prune $s factor $f"
-    j=$("$bin" stats "$scenes/$s.json" --factor $f --json | tail -n 1)
-    printf "| %s | %s%s | %.0f ms | %s | %.1f MB | %.1f MB | %.1f MB | %s |\n" "$s" "$(field "$j" levels)" \
+    log "prune $s factor $f ($ROUNDS runs)"
+    times=()
+    for ((r = 0; r < ROUNDS; r++)); do
+      j=$("$bin" stats "$scenes/$s.json" --factor $f --json | tail -n 1)
+      times+=("$(field "$j" prune_ms)")
+    done
+    sorted=$(printf '%s\n' "${times[@]}" | sort -g)
+    fastest=$(head -n 1 <<<"$sorted")
+    median=$(sed -n "$(( (ROUNDS + 1) / 2 ))p" <<<"$sorted")
+    printf "| %s | %s%s | %.0f ms (median %.0f) | %s | %.1f MB | %.1f MB | %.1f MB | %s |\n" "$s" "$(field "$j" levels)" \
       "$([ "$(field "$j" refine)" = 1 ] && echo ", no refinement")" \
-      "$(field "$j" prune_ms)" "$(field "$j" tape_words_visited)" \
+      "$fastest" "$median" "$(field "$j" tape_words_visited)" \
       "$(calc '%.3f' "$(field "$j" prune_peak_bytes) / 1e6")" "$(calc '%.3f' "$(field "$j" tape_bytes) / 1e6")" \
       "$(calc '%.3f' "$(field "$j" peak_rss_bytes) / 1e6")" "$paper"
   done

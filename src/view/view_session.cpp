@@ -317,6 +317,10 @@ void Session::remember_file() {
 }
 
 void Session::poll_file() {
+    // Under the edits' lock from the look at the file on: save() writes the file and remembers
+    // its new time and size under the same lock, so its own write is never taken for someone
+    // else's (which reloaded the saved scene as a new version, between a save and an undo).
+    std::lock_guard edits(edit_mutex_);
     struct stat st;
     if (::stat(path_.c_str(), &st) != 0) return;  // being replaced; look again later
     const int64_t mtime = int64_t(st.st_mtim.tv_sec) * 1000000000 + st.st_mtim.tv_nsec;
@@ -326,7 +330,6 @@ void Session::poll_file() {
         file_mtime_ns_ = mtime;
         file_size_ = int64_t(st.st_size);
     }
-    std::lock_guard edits(edit_mutex_);
     try {
         auto scene = std::make_shared<const Scene>(load_scene(path_));
         {
