@@ -488,7 +488,7 @@ void refine_cells(const Scene& sc, std::span<const uint32_t> tape, const CellBox
     // (it reads the root's value), else only the candidates' subtrees, often a few words of a
     // long tape. The results are the same as cell by cell: every entry a decision reads is
     // evaluated, and ranges do not depend on whether values are computed.
-    bool subset = false, linked = false;
+    bool subset = false;
     std::vector<uint32_t>& needed = s.refine_needed;
     for (uint32_t at = 0; at < total && open != 0;) {
         const bool first = at == 0;
@@ -522,7 +522,6 @@ void refine_cells(const Scene& sc, std::span<const uint32_t> tape, const CellBox
             {s.lane_value.data(), s.lane_lo.data(), s.lane_hi.data(), s.lane_decision.data(),
              stride, values_needed ? OperatorMode::kRefine : OperatorMode::kRefineRanges},
             s, subset ? std::span<const uint32_t>(needed) : std::span<const uint32_t>());
-        linked = linked || !subset;
         at += per;
         bool any_candidates = false, any_far = false;
         for (uint32_t k = 0; k < m; ++k) {
@@ -576,11 +575,10 @@ void refine_cells(const Scene& sc, std::span<const uint32_t> tape, const CellBox
             any_far = any_far || cs.above || cs.below;
         }
         // The next batch: only the open cells' candidates' subtrees while no far-field test is
-        // open (their marks borrow s.alive, which compaction sets afresh).
+        // open (their marks borrow s.alive, which compaction sets afresh; s.left and s.right
+        // link the tape since the first batch, which always walks the whole of it).
         subset = false;
         if (open != 0 && !any_far && at < total && any_candidates) {
-            if (!linked) link_tape(sc, tape, s);
-            linked = true;
             uint8_t* mark = s.alive.data();
             std::fill_n(mark, n, uint8_t(0));
             for (uint32_t rest = open; rest != 0; rest &= rest - 1)
