@@ -1,7 +1,9 @@
 // The tracer's pruned field (src/render/trace_fields.hpp): its convex blocks, which let a
-// convex step run on to a block's exit, against a brute-force reading of the grid.
+// convex step run on to a block's exit, against a brute-force reading of the grid; its short
+// tapes' evaluation against eval_tape.
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cstdint>
 #include <vector>
 
@@ -95,6 +97,41 @@ TEST(TraceFields, ConvexBlocksHoldOneConvexPrimitive) {
             EXPECT_GT(mixed, 100u);
         }
     }
+}
+
+// tape_value's short paths (one primitive; one operator on two; two operators on three, in both
+// post-orders) give eval_tape's value bit for bit, for every sign of every word, and longer
+// tapes go to eval_tape itself. The tapes are built from a random scene's nodes: any primitive
+// and operator words make a valid tape of these shapes.
+TEST(TraceFields, ShortTapesEqualEvalTape) {
+    const Scene sc = test::random_scene(77, test::varied_spec(1, 24));
+    std::vector<uint32_t> prims, ops;
+    for (uint32_t n = 0; n < sc.size(); ++n) (sc.is_primitive(n) ? prims : ops).push_back(n);
+    ASSERT_GE(prims.size(), 3u);
+    ASSERT_GE(ops.size(), 2u);
+    Rng r(5);
+    const auto pick = [&](const std::vector<uint32_t>& from) {
+        return math::tape_word(from[size_t(r.uniform() * float(from.size())) % from.size()],
+                               r.uniform() < 0.5f);
+    };
+    // 'p': a primitive's word, 'o': an operator's (post-order, operands first)
+    const char* shapes[] = {"p", "ppo", "ppopo", "pppoo", "ppopopo", "pppoopo"};
+    std::vector<float> stack(64);
+    uint32_t compared = 0;
+    for (const char* shape : shapes)
+        for (uint32_t t = 0; t < 200; ++t) {
+            std::vector<uint32_t> tape;
+            for (const char* c = shape; *c != 0; ++c) tape.push_back(pick(*c == 'p' ? prims : ops));
+            for (uint32_t k = 0; k < 8; ++k) {
+                const vec3 p = test::random_in_box(r, sc.aabb.min, sc.aabb.max);
+                const float want = eval_tape(sc, tape, p, stack.data());
+                const float got = tape_value(sc, tape, p, stack.data());
+                ASSERT_EQ(std::bit_cast<uint32_t>(got), std::bit_cast<uint32_t>(want))
+                    << shape << ": " << got << " against " << want;
+                ++compared;
+            }
+        }
+    EXPECT_EQ(compared, 6u * 200u * 8u);
 }
 
 }  // namespace
