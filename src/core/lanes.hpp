@@ -8,12 +8,13 @@
 // results are bit for bit those of one point at a time (and of the Vulkan kernels, which share
 // sdf_math.h). Callers compile these loops inside functions marked flatten, once for the baseline
 // instruction set and, on x86-64, once for AVX2 (8 lanes per instruction) and once for AVX-512
-// (16), and choose at run time (lane_isa() in eval.hpp).
+// (16), and choose at run time (lane_isa() in eval.hpp): run_for_isa below.
 #pragma once
 
 #include <cstdint>
 #include <utility>
 
+#include "sdfprune/eval.hpp"  // LaneIsa
 #include "sdfprune/scene.hpp"
 
 // The x86-64 instruction sets of the lane loops, as function attributes. GCC would keep AVX-512
@@ -75,6 +76,41 @@ void primitive_values_any(uint32_t kind, const math::PrimitiveParams& prm, const
                           const float* y, const float* z, uint32_t lanes, float* v) {
     primitive_values_of<W>(kind, prm, x, y, z, lanes, v,
                            std::make_integer_sequence<uint32_t, math::kPrimitiveKindCount>());
+}
+
+// Runs `body` compiled for the instruction set `isa` (lane_isa()'s choice): one instance of each
+// runner per body, each with the body and everything it calls inlined (flatten), for the
+// baseline and, on x86-64, for AVX2 and AVX-512. The body takes W: 1 for a single point or box
+// (`lanes` == 1: no loop), else kBlock.
+template <class Body>
+void run_widths(uint32_t lanes, const Body& body) {
+    if (lanes == 1)
+        body.template operator()<1>();
+    else
+        body.template operator()<kBlock>();
+}
+template <class Body>
+[[gnu::flatten]] void run_baseline(uint32_t lanes, const Body& body) {
+    run_widths(lanes, body);
+}
+#if SDFPRUNE_X86_LANES
+template <class Body>
+[[SDFPRUNE_AVX2_LANES_TARGET, gnu::flatten]] void run_avx2(uint32_t lanes, const Body& body) {
+    run_widths(lanes, body);
+}
+template <class Body>
+[[SDFPRUNE_AVX512_LANES_TARGET, gnu::flatten]] void run_avx512(uint32_t lanes, const Body& body) {
+    run_widths(lanes, body);
+}
+#endif
+template <class Body>
+void run_for_isa(LaneIsa isa, uint32_t lanes, const Body& body) {
+#if SDFPRUNE_X86_LANES
+    if (isa == LaneIsa::kAvx512) return run_avx512(lanes, body);
+    if (isa == LaneIsa::kAvx2) return run_avx2(lanes, body);
+#endif
+    (void)isa;
+    run_baseline(lanes, body);
 }
 
 }  // namespace sdfprune::lanes

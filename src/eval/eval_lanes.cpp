@@ -37,34 +37,6 @@ void eval_rows(const Scene& sc, std::span<const uint32_t> tape, const PointLanes
     }
 }
 
-inline void eval_any_rows(const Scene& sc, std::span<const uint32_t> tape, const PointLanes& p,
-                          uint32_t lanes, float* stack) {
-    if (lanes == 1)
-        eval_rows<1>(sc, tape, p, lanes, stack);
-    else
-        eval_rows<lanes::kBlock>(sc, tape, p, lanes, stack);
-}
-
-#if SDFPRUNE_X86_LANES
-[[SDFPRUNE_AVX2_LANES_TARGET, gnu::flatten]] void eval_rows_avx2(const Scene& sc,
-                                                                 std::span<const uint32_t> tape,
-                                                                 const PointLanes& p,
-                                                                 uint32_t lanes, float* stack) {
-    eval_any_rows(sc, tape, p, lanes, stack);
-}
-[[SDFPRUNE_AVX512_LANES_TARGET, gnu::flatten]] void eval_rows_avx512(const Scene& sc,
-                                                                     std::span<const uint32_t> tape,
-                                                                     const PointLanes& p,
-                                                                     uint32_t lanes, float* stack) {
-    eval_any_rows(sc, tape, p, lanes, stack);
-}
-#endif
-
-[[gnu::flatten]] void eval_rows_baseline(const Scene& sc, std::span<const uint32_t> tape,
-                                         const PointLanes& p, uint32_t lanes, float* stack) {
-    eval_any_rows(sc, tape, p, lanes, stack);
-}
-
 // The instruction set in use: chosen on first use, or by set_lane_isa.
 std::atomic<int> g_lane_isa{-1};
 
@@ -110,14 +82,8 @@ void eval_tape_lanes(const Scene& sc, std::span<const uint32_t> tape, PointLanes
         p.y[i] = p.y[count - 1];
         p.z[i] = p.z[count - 1];
     }
-#if SDFPRUNE_X86_LANES
-    if (const LaneIsa isa = lane_isa(); isa == LaneIsa::kAvx512)
-        eval_rows_avx512(sc, tape, p, lanes, stack);
-    else if (isa == LaneIsa::kAvx2)
-        eval_rows_avx2(sc, tape, p, lanes, stack);
-    else
-#endif
-        eval_rows_baseline(sc, tape, p, lanes, stack);
+    lanes::run_for_isa(lane_isa(), lanes,
+                       [&]<uint32_t W>() { eval_rows<W>(sc, tape, p, lanes, stack); });
     std::copy_n(stack, count, out);
 }
 

@@ -257,54 +257,16 @@ void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLa
     }
 }
 
-// evaluate_lanes for one box (no loops) or for whole blocks.
-inline void evaluate_any_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLanes& c,
-                               vec3 half, float radius, CellBounds bounds, LaneArrays out,
-                               CellScratch& s, std::span<const uint32_t> only) {
-    if (c.lanes == 1)
-        evaluate_lanes<1>(sc, tape, c, half, radius, bounds, out, s, only);
-    else
-        evaluate_lanes<kBlock>(sc, tape, c, half, radius, bounds, out, s, only);
-}
-
 // evaluate_lanes compiled once per instruction set, each with everything it calls inlined
-// (flatten): for the baseline, and on x86-64 for AVX2 and AVX-512 (lanes.hpp), chosen at run
-// time. No FMA: the same operations, rounded the same way, so all give the same results bit for
-// bit (PruneLanes tests compare them).
-#if SDFPRUNE_X86_LANES
-[[SDFPRUNE_AVX2_LANES_TARGET, gnu::flatten]] void evaluate_lanes_avx2(
-    const Scene& sc, std::span<const uint32_t> tape, const BoxLanes& c, vec3 half, float radius,
-    CellBounds bounds, LaneArrays out, CellScratch& s, std::span<const uint32_t> only) {
-    evaluate_any_lanes(sc, tape, c, half, radius, bounds, out, s, only);
-}
-[[SDFPRUNE_AVX512_LANES_TARGET, gnu::flatten]] void evaluate_lanes_avx512(
-    const Scene& sc, std::span<const uint32_t> tape, const BoxLanes& c, vec3 half, float radius,
-    CellBounds bounds, LaneArrays out, CellScratch& s, std::span<const uint32_t> only) {
-    evaluate_any_lanes(sc, tape, c, half, radius, bounds, out, s, only);
-}
-#endif
-
-[[gnu::flatten]] void evaluate_lanes_baseline(const Scene& sc, std::span<const uint32_t> tape,
-                                              const BoxLanes& c, vec3 half, float radius,
-                                              CellBounds bounds, LaneArrays out, CellScratch& s,
-                                              std::span<const uint32_t> only) {
-    evaluate_any_lanes(sc, tape, c, half, radius, bounds, out, s, only);
-}
-
+// (lanes::run_for_isa): for the baseline, and on x86-64 for AVX2 and AVX-512, chosen at run time.
+// No FMA: the same operations, rounded the same way, so all give the same results bit for bit
+// (PruneLanes tests compare them).
 void evaluate_boxes(const Scene& sc, std::span<const uint32_t> tape, const BoxLanes& c, vec3 half,
                     float radius, CellBounds bounds, LaneArrays out, CellScratch& s,
                     std::span<const uint32_t> only = {}) {
-#if SDFPRUNE_X86_LANES
-    switch (lane_isa()) {
-        case LaneIsa::kAvx512:
-            return evaluate_lanes_avx512(sc, tape, c, half, radius, bounds, out, s, only);
-        case LaneIsa::kAvx2:
-            return evaluate_lanes_avx2(sc, tape, c, half, radius, bounds, out, s, only);
-        case LaneIsa::kBaseline:
-            break;
-    }
-#endif
-    evaluate_lanes_baseline(sc, tape, c, half, radius, bounds, out, s, only);
+    lanes::run_for_isa(lane_isa(), c.lanes, [&]<uint32_t W>() {
+        evaluate_lanes<W>(sc, tape, c, half, radius, bounds, out, s, only);
+    });
 }
 
 }  // namespace
