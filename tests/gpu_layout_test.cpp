@@ -257,7 +257,9 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(GpuCounters, octant_capacity),
              SDFPRUNE_MEMBER(GpuCounters, near_words), SDFPRUNE_MEMBER(GpuCounters, refine_cells),
              SDFPRUNE_MEMBER(GpuCounters, near_lo), SDFPRUNE_MEMBER(GpuCounters, near_hi),
-             SDFPRUNE_MEMBER(GpuCounters, long_jobs), SDFPRUNE_MEMBER(GpuCounters, more_jobs)},
+             SDFPRUNE_MEMBER(GpuCounters, long_jobs), SDFPRUNE_MEMBER(GpuCounters, more_jobs),
+             SDFPRUNE_MEMBER(GpuCounters, copy_cells), SDFPRUNE_MEMBER(GpuCounters, walk_cells),
+             SDFPRUNE_MEMBER(GpuCounters, walk_placed)},
             Scope::kKernel),
         mirror<TraceParams>(
             "TraceParams", {"trace"},
@@ -290,7 +292,8 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(PrunePush, budget),       SDFPRUNE_MEMBER(PrunePush, refine),
              SDFPRUNE_MEMBER(PrunePush, octant_start), SDFPRUNE_MEMBER(PrunePush, list_start),
              SDFPRUNE_MEMBER(PrunePush, lane_tape),    SDFPRUNE_MEMBER(PrunePush, wide_split),
-             SDFPRUNE_MEMBER(PrunePush, more_start),   SDFPRUNE_MEMBER(PrunePush, group_base)},
+             SDFPRUNE_MEMBER(PrunePush, more_start),   SDFPRUNE_MEMBER(PrunePush, group_base),
+             SDFPRUNE_MEMBER(PrunePush, order_start)},
             Scope::kPush),
         mirror<ExpandPush>(
             "Push", {"expand"},

@@ -427,6 +427,108 @@ TEST(Gpu, RefinementsSecondPassTakesTheOpenCells) {
     }
 }
 
+// The finest cells where refinement has nothing to try (refine_need on the CPU: no operator of
+// the cell's tape whose operands at its centre pass blend_may_decide, and no far-field test
+// that might pass), and those with tapes too long to refine, are listed apart and only copied:
+// as many as the CPU counts from the tapes and centre values it makes before refinement (its
+// grid with refine 1), and the cells are the same as the CPU's. With and without the far field
+// (then only the operators count); the demo scene (smooth and hard operators) and a random one.
+uint64_t cells_refinement_copies(const Scene& sc, const PruneOptions& o) {
+    PruneOptions before = o;
+    before.refine = 1;
+    const PrunedGrid grid = prune(sc, before);
+    const uint32_t N = grid.resolution(), finest = grid.level_count() - 1;
+    const vec3 cell_size = (sc.aabb.max - sc.aabb.min) / float(N);
+    const vec3 half = cell_size * 0.5f;
+    CellScratch s;
+    uint64_t copies = 0;
+    for (uint32_t z = 0; z < N; ++z)
+        for (uint32_t y = 0; y < N; ++y)
+            for (uint32_t x = 0; x < N; ++x) {
+                const PrunedGrid::CellRef at = grid.descend(x, y, z, finest);
+                const PrunedCell& c = grid.level_cells(at.level)[at.index];
+                if (at.level != finest || c.tape == PrunedCell::kFarField) continue;
+                const std::span<const uint32_t> tape =
+                    grid.tape_pool().subspan(c.tape + 2, grid.tape_pool()[c.tape]);
+                if (tape.size() > math::kRefineMaxTape) {
+                    ++copies;
+                    continue;
+                }
+                const CellBox box{
+                    sc.aabb.min +
+                        vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * cell_size,
+                    half, math::length(half)};
+                evaluate_cell(sc, tape, box, o.bounds, s);
+                bool may_decide = false;
+                for (uint32_t e = 0; e < tape.size(); ++e) {
+                    const uint32_t node = math::tape_node(tape[e]);
+                    if (!sc.is_primitive(node))
+                        may_decide = may_decide ||
+                                     math::blend_may_decide(s.value[s.left[e]], s.value[s.right[e]],
+                                                            sc.blend[node]);
+                }
+                const RefineNeed need =
+                    refine_need(sc, tape, box, o.far_field, o.far_field_c, c.value, may_decide);
+                copies += need.any ? 0 : 1;
+            }
+    return copies;
+}
+
+TEST(Gpu, RefinementOnlyCopiesTheCellsItHasNothingToTry) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Scene demo = builtin_scene("demo");
+    test::RandomSceneSpec spec = test::varied_spec(5, 40);
+    const Scene random = test::random_scene(9100, spec);
+    struct Case {
+        const Scene* sc;
+        uint32_t resolution;
+        bool far_field;
+        const char* what;
+    } cases[] = {{&demo, 32, true, "demo 32³"},
+                 {&demo, 64, true, "demo 64³"},
+                 {&demo, 32, false, "demo 32³, no far field"},
+                 {&random, 32, true, "random scene 32³"}};
+    // Teams: the wide kernel does not look for operators refinement might decide.
+    ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.what);
+        PruneOptions o;
+        o.resolution = c.resolution;
+        o.far_field = c.far_field;
+        const gpu::Grid gpu = gpu::prune(*dev, *c.sc, o);
+        const gpu::GpuStepShape& st = gpu.stats().steps.back();
+        ASSERT_EQ(st.mode, 3u);
+        EXPECT_EQ(st.copy_jobs, cells_refinement_copies(*c.sc, o));
+        EXPECT_GT(st.copy_jobs, 0u);
+        EXPECT_LT(st.copy_jobs, st.jobs);
+        expect_matches_cpu(*c.sc, prune(*c.sc, o), gpu, *dev, c.what);
+    }
+    ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+}
+
+// Refinement's lane pass takes its cells to decide again sorted by walk class, longest tapes
+// first, after an order pass (one dispatch more); the cells are the same as in the order they
+// were listed (SDFPRUNE_VULKAN_REFINE_ORDER=0), bit for bit on every device, and the CPU's.
+TEST(Gpu, RefinementOrderChangesNoCell) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Scene sc = builtin_scene("demo");
+    PruneOptions o;
+    o.resolution = 64;
+    const gpu::Grid ordered = gpu::prune(*dev, sc, o);
+    ::setenv("SDFPRUNE_VULKAN_REFINE_ORDER", "0", 1);
+    const gpu::Grid listed = gpu::prune(*dev, sc, o);
+    ::unsetenv("SDFPRUNE_VULKAN_REFINE_ORDER");
+    const gpu::GpuStepShape &a = ordered.stats().steps.back(), &b = listed.stats().steps.back();
+    ASSERT_EQ(a.mode, 3u);
+    ASSERT_EQ(b.mode, 3u);
+    EXPECT_EQ(a.dispatches, b.dispatches + 1);
+    EXPECT_EQ(a.jobs, b.jobs);
+    EXPECT_EQ(a.copy_jobs, b.copy_jobs);
+    EXPECT_EQ(a.more_jobs, b.more_jobs);
+    expect_same_device_cells(ordered, listed, "ordered against listed");
+    expect_matches_cpu(sc, prune(sc, o), ordered, *dev, "demo 64³, ordered");
+}
+
 // By default the top levels' steps, few jobs over long parent tapes, run wide: a workgroup
 // per parent tape (or, with fewer jobs than the device holds workgroups, up to 8 workgroups a
 // tape, a share of its boxes each), and its busiest lane walks less than a team's would. Every

@@ -255,9 +255,9 @@ TEST(PruneLanes, RefineCellEqualsEverySubBoxAlone) {
             for (uint32_t e = 0; e < n; ++e) {
                 const uint32_t node = math::tape_node(tape[e]);
                 if (!sc.is_primitive(node))
-                    may_decide =
-                        may_decide || blend_may_decide(one.value[one.left[e]],
-                                                       one.value[one.right[e]], sc.blend[node]);
+                    may_decide = may_decide ||
+                                 math::blend_may_decide(one.value[one.left[e]],
+                                                        one.value[one.right[e]], sc.blend[node]);
             }
             float constant = 0;
             const bool near = refine_cell(sc, tape, box, S, bounds, far_field, C, one.value[n - 1],

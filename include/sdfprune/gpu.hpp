@@ -102,6 +102,10 @@ struct GpuStepShape {
     double lanes_ms = 0;
     uint64_t long_jobs = 0;
     uint64_t more_jobs = 0;
+    // Refinement's jobs (within `jobs`) that it only copies: the cells where it has nothing to
+    // try (no operator a sub-box might decide, no far-field test that might pass), or tapes
+    // too long to refine. They are listed apart, so that their lanes do not wait on walks.
+    uint64_t copy_jobs = 0;
 };
 
 struct DevicePruneStats : PruneStats {

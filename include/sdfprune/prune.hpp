@@ -698,16 +698,6 @@ void refine_cells(const Scene& scene, std::span<const uint32_t> tape, const Cell
                   float far_field_c, const float* values, const bool* may_decide, CellScratch& s,
                   RefineResult* results);
 
-// Whether an operator of blend radius k whose operands are worth a and b (signs applied) at a
-// cell's centre might be decided in every sub-box of the cell (refine_cell). It must then be
-// decided in the sub-box holding the centre, whose operand ranges hold a and b, so one operand
-// lies below the other there by more than k (prune_decision) plus a margin that covers the
-// rounding of a and b. Operands within 0.9·k of each other, less a rounding allowance, never
-// are: the centre lies deep in the operator's blend.
-inline bool blend_may_decide(float a, float b, float k) {
-    return !(std::fabs(a - b) < 0.9f * k - 1e-5f * (std::fabs(a) + std::fabs(b)));
-}
-
 // The centre of sub-box (i, j, k) of a box with min corner `corner` split into sub-boxes of
 // half sizes `sub_half` ...
 inline vec3 sub_box_centre(vec3 corner, vec3 sub_half, uint32_t i, uint32_t j, uint32_t k) {

@@ -7,6 +7,7 @@
 // Include after scene.glsl and cells.glsl.
 
 const uint kTeam = 8u;  // boxes per job: lanes per team (gpu_prune.cpp: kPruneTeam)
+const uint kWalkClasses = 8u;  // refine_walk_class's (device_layout.hpp: kRefineWalkClasses)
 
 layout(std430, binding = 4) readonly buffer Blocks { Block blocks[]; };
 layout(std430, binding = 5) buffer Octants { Cell octants[]; };
@@ -28,6 +29,11 @@ layout(std430, binding = 7) buffer Counters {
     uint near_hi[3];
     uint long_jobs;  // entries of refinement's long list (prune_refine_lanes.comp)
     uint more_jobs;  // entries of the lane pass's second list (prune_refine_lanes.comp)
+    uint copy_cells;  // entries of refine_list that refinement only copies (list_near_cell)
+    // Per walk class (refine_walk_class) the cells listed to decide again, and in refinement's
+    // order pass the places of that class taken so far (prune_refine_lanes.comp).
+    uint walk_cells[kWalkClasses];
+    uint walk_placed[kWalkClasses];
 };
 // The kernel's scratch (its layout is the kernel's own). Coherent: lanes read what other lanes
 // of their workgroup wrote at earlier steps (a barrier between). In refinement, from
@@ -40,8 +46,9 @@ layout(std430, binding = 8) coherent buffer Scratch { uint scratch[]; };
 layout(std430, binding = 9) buffer OctantPool { uint octant_pool[]; };
 const uint kInOctantPool = 0x80000000u;
 // The finest near-field cells, the only ones refinement (mode 3) has work for: the step that
-// makes the finest cells (flag 4) appends each near one's index; mode 3 takes its jobs from
-// here (the far ones stay as they are: refinement rewrites the near ones in place).
+// makes the finest cells (flag 4) lists each near one's index (list_near_cell); mode 3 takes
+// its jobs from here (refine_job; the far ones stay as they are: refinement rewrites the near
+// ones in place).
 layout(std430, binding = 10) buffer RefineList { uint refine_list[]; };
 // The level's own pool, where its cells' tapes go; a main-pool reference read (tape_read) is a
 // parent's, in the last level's pool (binding 3). The parents' pool is freed after the level, so
@@ -63,7 +70,9 @@ layout(push_constant) uniform Push {
                      // (the finest cells before refinement: near ones listed in refine_list);
                      // 8: prune_refine.comp takes its jobs from the long list;
                      // 32: prune_refine_lanes.comp's second pass (its jobs: the more list);
-                     // 64: prune_refine_lanes.comp in one pass (every sub-box)
+                     // 64: prune_refine_lanes.comp in one pass (every sub-box);
+                     // 128: prune_refine_lanes.comp's order pass; 256: refinement's walks
+                     // taken from the order list (refine_job)
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's team jobs: [first_job, jobs)
     uint round;       // 0: start the jobs; later rounds resume them (prune.comp)
@@ -75,32 +84,31 @@ layout(push_constant) uniform Push {
     uint wide_split;    // prune_wide.comp: workgroups per job (a share of its kTeam boxes each)
     uint more_start;    // prune_refine_lanes.comp: where its more list starts in scratch
     uint group_base;    // prune_wide.comp: the dispatch's first workgroup among the step's
+    uint order_start;   // mode 3: where the order list starts in scratch (flags 128, 256)
 } pc;
 
-// The step's counters (near_jobs, near_words, max_len, max_depth), summed and maxed first in
-// shared memory by the workgroup's lanes, then added to the device's once per workgroup at its
-// end: one atomic per workgroup instead of one per cell, on four words that every workgroup of
-// the device would otherwise queue on. Every lane calls counts_begin() first and counts_end()
-// last, in uniform control flow.
-shared uint s_counts[4];
+// The step's counters (near_jobs, near_words, max_len, max_depth, then walk_cells), summed and
+// maxed first in shared memory by the workgroup's lanes, then added to the device's once per
+// workgroup at its end: one atomic per workgroup instead of one per cell, on words that every
+// workgroup of the device would otherwise queue on. Every lane calls counts_begin() first and
+// counts_end() last, in uniform control flow.
+const uint kCountWords = 4u + kWalkClasses;
+shared uint s_counts[kCountWords];
 void counts_begin() {
-    if (gl_LocalInvocationIndex == 0u) {
-        s_counts[0] = 0u;
-        s_counts[1] = 0u;
-        s_counts[2] = 0u;
-        s_counts[3] = 0u;
-    }
+    if (gl_LocalInvocationIndex < kCountWords) s_counts[gl_LocalInvocationIndex] = 0u;
     memoryBarrierShared();
     barrier();
 }
 void counts_end() {
     memoryBarrierShared();
     barrier();
-    if (gl_LocalInvocationIndex == 0u) {
-        if (s_counts[0] != 0u) atomicAdd(near_jobs, s_counts[0]);
-        if (s_counts[1] != 0u) atomicAdd(near_words, s_counts[1]);
-        if (s_counts[2] != 0u) atomicMax(max_len, s_counts[2]);
-        if (s_counts[3] != 0u) atomicMax(max_depth, s_counts[3]);
+    uint k = gl_LocalInvocationIndex;
+    if (k < kCountWords && s_counts[k] != 0u) {
+        if (k == 0u) atomicAdd(near_jobs, s_counts[0]);
+        if (k == 1u) atomicAdd(near_words, s_counts[1]);
+        if (k == 2u) atomicMax(max_len, s_counts[2]);
+        if (k == 3u) atomicMax(max_depth, s_counts[3]);
+        if (k >= 4u) atomicAdd(walk_cells[k - 4u], s_counts[k]);
     }
 }
 void note_len(uint len) { atomicMax(s_counts[2], len); }
@@ -211,9 +219,54 @@ void store(uint dest, bool near, float value, float constant, uint tape, uint wo
     if (near) {
         atomicAdd(s_counts[0], 1u);
         atomicAdd(s_counts[1], words + 2u);
-        if ((pc.flags & 4u) != 0u) refine_list[atomicAdd(refine_cells, 1u)] = dest;
     }
     cells[dest] = result;
+}
+
+// Whether refinement's far-field test might pass for a finest near cell whose tape (`len` words
+// at `tape`) is worth `value` at the centre (refine_need in src/prune/prune_cell.cpp: the far
+// field on, and refine_far_possible, with a lone primitive's similarity scale).
+bool refine_far_may_pass(uint tape, uint len, float value) {
+    if ((pc.flags & 1u) == 0u) return false;
+    vec3 half_cell = pc.csize.xyz * 0.5;
+    Node root = nodes[tape_node(tape_read(tape, 2u + len - 1u))];
+    float clearance = far_field_clearance(pc.csize.w, root.lipschitz, length(half_cell));
+    float sigma = len == 1u ? extras[root.primitive].bound0.w : 0.0;
+    return refine_far_possible(value, clearance, sigma, half_cell);
+}
+
+// Lists a near cell that the step making the finest cells (flag 4, modes 0 and 2) stored, with
+// its tape (`len` words at `tape`) and centre value, for refinement. From the list's front
+// (refine_cells), the cells it decides again; from its back, the last entry first
+// (copy_cells), those it only copies into the level's pool: where it has nothing to try
+// (refine_need), no operator of the tape that a sub-box might decide (`may_decide`: the compaction
+// found a kept operator whose operands at the centre pass blend_may_decide) and no far-field
+// test that might pass, or a tape too long to refine. Refinement's lanes then take the walks in
+// runs of neighbouring jobs and the copies in others, instead of copies beside walks in every
+// subgroup, where a subgroup takes as long as its longest lane.
+// A cell to decide again goes to the list with its walk class (bits 28-30, counted in
+// walk_cells), which refinement's order pass sorts the list by.
+const uint kCellBits = 0x0fffffffu;  // a list entry's cell (below 2^28: 16-byte cells in a buffer)
+const uint kCopyOnly = 0x80000000u;  // set on the entries of cells only copied (refine_job)
+uint refine_walk_class(uint len) { return min((len - 1u) / 4u, kWalkClasses - 1u); }
+void list_near_cell(uint dest, uint tape, uint len, float value, bool may_decide) {
+    if ((pc.flags & 4u) == 0u || pc.mode == 1u) return;
+    if (len <= kRefineMaxTape && (may_decide || refine_far_may_pass(tape, len, value))) {
+        uint c = refine_walk_class(len);
+        refine_list[atomicAdd(refine_cells, 1u)] = dest | (c << 28);
+        atomicAdd(s_counts[4u + c], 1u);
+    } else {
+        refine_list[uint(refine_list.length()) - 1u - atomicAdd(copy_cells, 1u)] = dest;
+    }
+}
+
+// Refinement's job k, below refine_cells + copy_cells: its list entry (the cell in kCellBits),
+// with kCopyOnly set where the cell is only copied (list_near_cell). The cells to decide again
+// come first, in the order pass's order where it ran (flag 256), longest walks first.
+uint refine_job(uint k) {
+    if (k < refine_cells)
+        return (pc.flags & 256u) != 0u ? scratch[pc.order_start + k] : refine_list[k];
+    return refine_list[uint(refine_list.length()) - 1u - (k - refine_cells)] | kCopyOnly;
 }
 
 // Box `lane` of team job `job` in modes 0–2: mode 0, kTeam cells of a block from the block's

@@ -9,9 +9,9 @@
 // its own sub-box (the next kSquad sub-boxes after each walk, while any are left), its
 // evaluation stack in registers and the thread's local memory. The lanes' decisions meet in one
 // shared word per entry, their far-field tests in one per lane; then one lane compacts the tape
-// (the top-down sweep of compact_tape) and writes it to the level's pool. Tapes longer than
-// kRefineMaxTape, and a lone primitive that cannot clear the far field (refine_far_possible),
-// have nothing to decide again: they are copied as they are, by all the squad's lanes.
+// (the top-down sweep of compact_tape) and writes it to the level's pool. The cells listed as
+// only copied (list_near_cell: tapes longer than kRefineMaxTape, or nothing that refinement might
+// change) are copied as they are, by all the squad's lanes.
 #include "scene.glsl"
 
 layout(local_size_x = 64) in;
@@ -67,11 +67,11 @@ void main() {
     float sub_R = length(sub_half);
 
     // The host records the dispatches for every finest cell; the jobs are the cells the lanes
-    // listed (flag 8), or without a lane pass every listed near cell (the same count in every
-    // lane: an earlier step wrote it). Every lane of a workgroup sees the same trip count
-    // (barriers inside).
+    // listed (flag 8), or without a lane pass every listed near cell (refine_job; the same count
+    // in every lane: an earlier step wrote it). Every lane of a workgroup sees the same trip
+    // count (barriers inside).
     bool listed = (pc.flags & 8u) != 0u;
-    uint jobs = min(pc.jobs, listed ? long_jobs : refine_cells);
+    uint jobs = min(pc.jobs, listed ? long_jobs : refine_cells + copy_cells);
     for (uint first = pc.first_job; first < jobs; first += squads) {
         uint job = first + squad;
         bool has_job = squad < squads && job < jobs;
@@ -79,7 +79,8 @@ void main() {
         Cell c0 = Cell(kFarField, 0u, 0.0, 0.0);
         bool evaluate = false, copy = false;
         if (has_job) {
-            cell = listed ? scratch[pc.list_start + job] : refine_list[job];
+            uint entry = listed ? scratch[pc.list_start + job] : refine_job(job);
+            cell = entry & kCellBits;
             c0 = cells[cell];
             if (c0.tape == kFarField) {
                 // Only near cells are listed; were one not, it is copied as it is.
@@ -87,7 +88,7 @@ void main() {
             } else {
                 parent = c0.tape;
                 len = tape_read(parent, 0u);
-                copy = refine_copies(parent, len, c0, radius, half_cell);
+                copy = (entry & kCopyOnly) != 0u || len > kRefineMaxTape;  // (the latter listed so)
                 evaluate = !copy;
             }
         }

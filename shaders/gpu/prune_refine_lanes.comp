@@ -12,8 +12,9 @@
 // and 13 KB of shared memory a workgroup, and ran 1.7× slower on an H100: BENCHMARKS.md, stop
 // 30.) Cells with longer tapes are listed for the squads, in the long
 // list (scratch[pc.list_start], counted in long_jobs).
-// Job k takes cell refine_list[k], for k below refine_cells (listed by the cells step); the
-// far-field cells were copied to binding 5 before, as they are.
+// Job k takes refinement's job k (refine_job), for k below refine_cells + copy_cells (listed by
+// the cells step): the cells to decide again, then those only copied, whose lanes copy alike;
+// the far-field cells stay in binding 5 as they are.
 #include "scene.glsl"
 
 layout(local_size_x = 64) in;
@@ -96,7 +97,49 @@ uint first_count(uint subs) {
 // A cell's refinement state between the passes (in the more list, kMoreWords a cell).
 const uint kMoreWords = 7u;  // device_layout.hpp: kRefineMoreWords
 
+// The order pass (push flag 128), before the first pass: the list's cells to decide again
+// (refine_cells of them, each with its walk class) sorted by class into the order list
+// (scratch[pc.order_start]), the longest walks first, so that the first pass's neighbouring
+// jobs, which a subgroup's lanes take together, walk tapes of about one length: a subgroup
+// walks as long as its longest lane's tape, and the lengths of refined tapes spread widely (on
+// molecule at 256³ from 1 to 31 words, 8 on average). A counting sort: each class's count was
+// summed as the cells were listed (walk_cells); a workgroup takes 64 entries at a time, counts
+// their classes in shared memory, takes room for each class with one atomic (walk_placed),
+// and writes every entry to its class's room. Within a class the order is the atomics': the
+// cells and their results do not depend on it.
+shared uint s_class_count[kWalkClasses], s_class_at[kWalkClasses];
+void order_walks() {
+    uint n = min(pc.jobs, refine_cells);
+    uint lane = gl_LocalInvocationID.x;
+    for (uint first = pc.first_job + gl_WorkGroupID.x * 64u; first < n;
+         first += gl_NumWorkGroups.x * 64u) {
+        if (lane < kWalkClasses) s_class_count[lane] = 0u;
+        memoryBarrierShared();
+        barrier();
+        bool has = first + lane < n;
+        uint entry = has ? refine_list[first + lane] : 0u;
+        uint c = (entry >> 28) & (kWalkClasses - 1u);
+        uint rank = has ? atomicAdd(s_class_count[c], 1u) : 0u;
+        memoryBarrierShared();
+        barrier();
+        if (lane < kWalkClasses) {
+            uint count = s_class_count[lane];
+            uint before = 0u;  // the places of the longer classes
+            for (uint d = lane + 1u; d < kWalkClasses; ++d) before += walk_cells[d];
+            s_class_at[lane] = count == 0u ? 0u : before + atomicAdd(walk_placed[lane], count);
+        }
+        memoryBarrierShared();
+        barrier();
+        if (has) scratch[pc.order_start + s_class_at[c] + rank] = entry;
+        barrier();  // the counts read before the next entries reset them
+    }
+}
+
 void main() {
+    if ((pc.flags & 128u) != 0u) {
+        order_walks();
+        return;
+    }
     counts_begin();
     vec3 half_cell = pc.csize.xyz * 0.5;
     float radius = length(half_cell);
@@ -115,9 +158,10 @@ void main() {
 
     // The host records the dispatches for every finest cell; the jobs are the listed ones only
     // (the second pass's: the more list's).
-    uint jobs = min(pc.jobs, second ? more_jobs : refine_cells);
+    uint jobs = min(pc.jobs, second ? more_jobs : refine_cells + copy_cells);
     for (uint job = pc.first_job + gl_GlobalInvocationID.x; job < jobs; job += pc.threads) {
         uint cell;
+        bool copy = false;
         uint far_flags = far_field ? 3u : 0u;
         float lowest = kInfinity, highest = -kInfinity;
         r_seen0 = r_seen1 = r_seen2 = r_kept = r_skipped = r_negated = 0u;
@@ -131,7 +175,9 @@ void main() {
             lowest = uintBitsToFloat(scratch[at + 5u]);
             highest = uintBitsToFloat(scratch[at + 6u]);
         } else {
-            cell = refine_list[job];
+            uint entry = refine_job(job);
+            copy = (entry & kCopyOnly) != 0u;
+            cell = entry & kCellBits;
         }
         Cell c0 = cells[cell];
         if (c0.tape == kFarField) {
@@ -141,22 +187,11 @@ void main() {
         uint parent = c0.tape;
         uint len = tape_read(parent, 0u);
         if (!second && len > lane_tape) {
-            scratch[pc.list_start + atomicAdd(long_jobs, 1u)] = cell;
+            scratch[pc.list_start + atomicAdd(long_jobs, 1u)] = cell | (copy ? kCopyOnly : 0u);
             continue;
         }
-        if (!second && refine_copies(parent, len, c0, radius, half_cell)) {
-            // A lone primitive (the only copied tape this short), as it is.
-            uint at = pool_allocate(false, 3u);
-            if (at == kFarField) {
-                store(cell, false, c0.value, 0.0, kFarField, 0u, c0);
-            } else {
-                tape_write(at, 1u);
-                tape_write(at + 1u, tape_read(parent, 1u));
-                tape_write(at + 2u, tape_read(parent, 2u));
-                note_len(1u);
-                note_depth(1u);
-                store(cell, true, c0.value, 0.0, at, 1u, c0);
-            }
+        if (copy) {
+            refine_copy(cell, parent, len, c0);
             continue;
         }
         for (uint k = 0u; k < len; ++k) r_word[k] = tape_read(parent, 2u + k);

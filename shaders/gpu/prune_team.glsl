@@ -57,16 +57,18 @@ const uint kStateWords = 16u;
 const uint kPhaseEvaluate = 0u, kPhaseSweep = 1u, kPhaseWrite = 2u, kPhaseDone = 3u;
 // State words: phase, i (next entry), top (stack size; in the write phase the next word),
 // out_len, prims, at (the new tape), value, constant (float bits), the parent's stack depth, the
-// new tape's stack depth now and at most.
-// An entry's word per lane: bits 0-1 its decision, then the sweep's flags: bits 2-3 alive (0
-// dead, 1 kept, 2 skipped), bit 4 negate.
+// new tape's stack depth now and at most, whether the sweep kept an operator that refinement
+// might decide (list_near_cell).
+// An entry's word per lane: bits 0-1 its decision, bit 5 whether its operands at the centre
+// pass blend_may_decide (operators), then the sweep's flags: bits 2-3 alive (0 dead, 1 kept,
+// 2 skipped), bit 4 negate.
 
 uint team_words() {
     return kStateWords * kTeam + pc.max_len * (1u + kTeam) + 4u * pc.max_stack * kTeam;
 }
 
-// An entry's sweep flags set, its decision bits kept.
-void set_sweep_flags(uint at, uint flags) { lane_scratch[at] = (lane_scratch[at] & 3u) | flags; }
+// An entry's sweep flags set, its decision bits (0-1 and 5) kept.
+void set_sweep_flags(uint at, uint flags) { lane_scratch[at] = (lane_scratch[at] & 35u) | flags; }
 // The sweep's flags of a tape's root (its last entry, `len` words at `parent`): alive, with its
 // own sign.
 uint root_sweep_flags(uint parent, uint len) {
@@ -124,6 +126,7 @@ void main() {
         uint phase = kPhaseDone, i = 0u, top = 0u, out_len = 0u, prims = 0u, at = 0u;
         uint pdepth = 0u, depth = 0u, depth_max = 0u;
         float value = 0.0, constant = 0.0;
+        bool may_decide = false;
         if (walk && pc.round == 0u) {
             phase = kPhaseEvaluate;
         } else if (walk) {
@@ -140,6 +143,7 @@ void main() {
             pdepth = lane_scratch[st + 8u * kTeam];
             depth = lane_scratch[st + 9u * kTeam];
             depth_max = lane_scratch[st + 10u * kTeam];
+            may_decide = lane_scratch[st + 11u * kTeam] != 0u;
         }
 
         barrier();  // the previous job's last reads of s_busy are done
@@ -191,6 +195,7 @@ void main() {
                         // this very step, and reads its own write, with no barrier between.
                         lane_scratch[lbase + i] = lane_scratch[sl + 3u * kTeam];
                         x = combine_operator(nd, R, interval, false, left, tx, decision);
+                        if (blend_may_decide(left.x, tx.x, nd.blend)) decision |= 32u;
                     }
                     if (tape_negated(w)) x = negate_range(x);
                     // The decision, its sweep flags cleared for stage 3.
@@ -246,6 +251,7 @@ void main() {
                     uint d = fl & 3u;
                     if (d == kKeepBoth) {
                         ++out_len;
+                        may_decide = may_decide || (fl & 32u) != 0u;
                         uint nl = tape_negated(tape_read(parent, 2u + l)) ? 1u : 0u;
                         uint nr = tape_negated(tape_read(parent, 2u + r)) ? 1u : 0u;
                         set_sweep_flags(dbase + l * kTeam + lane, (1u << 2) | (nl << 4));
@@ -265,6 +271,7 @@ void main() {
                         note_depth(pdepth);
                         phase = kPhaseDone;
                         store(dest, true, value, constant, parent, out_len, kNoCell);
+                        list_near_cell(dest, parent, out_len, value, may_decide);
                     } else {
                         at = pool_allocate(transient, out_len + 2u);
                         if (at == kFarField) {
@@ -295,6 +302,7 @@ void main() {
                     note_depth(depth_max);
                     phase = kPhaseDone;
                     store(dest, true, value, constant, at, out_len, kNoCell);
+                    list_near_cell(dest, at, out_len, value, may_decide);
                 }
             }
             if (phase != kPhaseDone) atomicAdd(s_busy[s & 1u], 1u);
@@ -317,6 +325,7 @@ void main() {
             lane_scratch[st + 8u * kTeam] = pdepth;
             lane_scratch[st + 9u * kTeam] = depth;
             lane_scratch[st + 10u * kTeam] = depth_max;
+            lane_scratch[st + 11u * kTeam] = may_decide ? 1u : 0u;
         }
     }
     counts_end();

@@ -611,6 +611,7 @@ void main() {
                 note_depth(s_depth[box]);
                 s_state[box] = 0u;
                 store(dest, true, s_value[box], 0.0, parent, out_len, Cell(0u, 0u, 0.0, 0.0));
+                list_near_cell(dest, parent, out_len, s_value[box], true);
             } else {
 #ifdef PRUNE_WIDE_SUBGROUPS
                 // One append per subgroup: the boxes' places by a prefix sum.
@@ -655,6 +656,9 @@ void main() {
         if (id < g_boxes && s_state[box] == 2u) {
             note_depth(s_depth[box]);
             store(dest, true, s_value[box], 0.0, s_at[box], s_len[box], Cell(0u, 0u, 0.0, 0.0));
+            // (Every tape refined: this kernel does not look for operators refinement might
+            // decide, which only saves work.)
+            list_near_cell(dest, s_at[box], s_len[box], s_value[box], true);
         }
         sync_all();
     }

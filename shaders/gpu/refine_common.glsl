@@ -134,13 +134,25 @@ vec3 refine_cell_centre(uint cell) {
     return centre;
 }
 
-// Whether a near cell's tape of `len` words is copied as it is rather than refined: longer than
-// kRefineMaxTape, or a lone primitive that cannot clear the far field (refine_far_possible).
-bool refine_copies(uint parent, uint len, Cell c0, float radius, vec3 half_cell) {
-    if (len > kRefineMaxTape) return true;
-    if (len != 1u) return false;
-    Node lone = nodes[tape_node(tape_read(parent, 2u))];
-    float clearance = far_field_clearance(pc.csize.w, lone.lipschitz, radius);
-    float sigma = extras[lone.primitive].bound0.w;
-    return (pc.flags & 1u) == 0u || !refine_far_possible(c0.value, clearance, sigma, half_cell);
+// A listed cell's tape (`len` words at `parent`) copied as it is into the level's pool by one
+// lane, its deepest stack counted (a primitive pushes, an operator pops two and pushes one), and
+// the cell `c0` stored with it (refinement's copies: list_near_cell).
+void refine_copy(uint cell, uint parent, uint len, Cell c0) {
+    uint at = pool_allocate(false, len + 2u);
+    if (at == kFarField) {
+        store(cell, false, c0.value, 0.0, kFarField, 0u, c0);
+        return;
+    }
+    tape_write(at, len);
+    tape_write(at + 1u, tape_read(parent, 1u));
+    uint depth = 0u, depth_max = 0u;
+    for (uint k = 0u; k < len; ++k) {
+        uint w = tape_read(parent, 2u + k);
+        tape_write(at + 2u + k, w);
+        depth = is_primitive(tape_node(w)) ? depth + 1u : depth - 1u;
+        depth_max = max(depth_max, depth);
+    }
+    note_len(len);
+    note_depth(depth_max);
+    store(cell, true, c0.value, 0.0, at, len, c0);
 }

@@ -278,6 +278,16 @@ SDFPRUNE_FN uint prune_decision(float s, float k, float a_lo, float a_hi, float 
 // cells near blends.
 SDFPRUNE_CONST uint kRefineMaxTape = 128u;
 
+// Whether an operator of blend radius k whose operands are worth a and b (signs applied) at a
+// cell's centre might be decided in every sub-box of the cell (refinement). It must then be
+// decided in the sub-box holding the centre, whose operand ranges hold a and b, so one operand
+// lies below the other there by more than k (prune_decision) plus a margin that covers the
+// rounding of a and b. Operands within 0.9·k of each other, less a rounding allowance, never
+// are: the centre lies deep in the operator's blend. (A hard operator, k = 0, always might.)
+SDFPRUNE_FN bool blend_may_decide(float a, float b, float k) {
+    return !(abs(a - b) < 0.9f * k - 1e-5f * (abs(a) + abs(b)));
+}
+
 // Lower (x) and upper (y) bound of an undecided operator over a cell from its operands' ranges.
 // Every operator is non-decreasing in both operands (d/da of the smooth min is in [1/2, 1]), so
 // its range over a box of operand values is spanned by the box's two extreme corners.

@@ -39,10 +39,15 @@ struct GpuGridParams {  // GridParams
 // more_jobs: the cells the lane pass's first walks left to its second (its more list).
 // long_jobs: the entries of refinement's long list, the cells its lane pass
 // (prune_refine_lanes.comp) leaves to the squads after it.
+// copy_cells: the entries at the back of refinement's list, the cells it only copies.
+// walk_cells: the cells listed to decide again, per walk class; walk_placed: the order pass's
+// places taken per class (prune_refine_lanes.comp).
+inline constexpr uint32_t kRefineWalkClasses = 8;  // prune_common.glsl: kWalkClasses
 struct GpuCounters {
     uint32_t pool_used, pool_capacity, overflow, max_len, near_jobs, next_blocks, max_depth;
     uint32_t octant_used, octant_capacity, near_words, refine_cells;
-    uint32_t near_lo[3], near_hi[3], long_jobs, more_jobs, pad;
+    uint32_t near_lo[3], near_hi[3], long_jobs, more_jobs, copy_cells;
+    uint32_t walk_cells[kRefineWalkClasses], walk_placed[kRefineWalkClasses];
 };
 // prune.comp: kStateWords, the words of a lane's job state in its team's scratch; kTeam, the
 // lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step
@@ -71,7 +76,7 @@ struct PrunePush {                                  // prune.comp and prune_wide
     vec4 origin, csize;
     uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
     uint32_t round, budget, refine, octant_start, list_start, lane_tape, wide_split;
-    uint32_t more_start, group_base;
+    uint32_t more_start, group_base, order_start;
 };
 struct ExpandPush {  // expand.comp: Push
     uint32_t factor, cells_count, next_factor, bound_only;
@@ -109,8 +114,9 @@ static_assert(sizeof(GpuNode) == 16 && sizeof(GpuPrimitiveExtra) == 48);
 static_assert(sizeof(math::PrimitiveParams) == 96 && offsetof(math::PrimitiveParams, a) == 48);
 static_assert(sizeof(PrunedCell) == 16 && offsetof(PrunedCell, value) == 8);
 static_assert(sizeof(GpuBlock) == 16 && sizeof(GpuLevel) == 16 && sizeof(GpuGridParams) == 64);
-static_assert(sizeof(GpuCounters) == 80 && offsetof(GpuCounters, near_lo) == 44 &&
-              offsetof(GpuCounters, long_jobs) == 68);
+static_assert(sizeof(GpuCounters) == 144 && offsetof(GpuCounters, near_lo) == 44 &&
+              offsetof(GpuCounters, long_jobs) == 68 && offsetof(GpuCounters, copy_cells) == 76 &&
+              offsetof(GpuCounters, walk_placed) == 112);
 static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) <= 128);
 static_assert(sizeof(TraceParams) == 192 && sizeof(DiscretizeParams) == 96);
 static_assert(sizeof(GpuPixel) == 32 && sizeof(SlicePush) == 32);

@@ -135,6 +135,8 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
             std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), kLaneTapeMax);
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_REFINE_SECOND_PASS"); env && *env)
         refine_second_pass = std::atoi(env) != 0;
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_REFINE_ORDER"); env && *env)
+        refine_order = std::atoi(env) != 0;
     origin = sc.aabb.min;
     extent = sc.aabb.max - sc.aabb.min;
     L = sc.lipschitz[sc.root()];
@@ -294,7 +296,8 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             steps = plan_step(lv, 0, b0, blocks_in, blocks_in * lv.per_block, *lv.cells, *lv.cells,
                               lv.refine);
         }
-        lv.listed_cells = 0;
+        lv.listed_cells = lv.copied_cells = 0;
+        lv.walk_cells.fill(0);
         // (the finest level's final cells, after its last slice: bounded, for near_box; on a
         // one-level grid near_box is the scene's box)
         const bool bound = lv.finest && last && res.size() > 1;
@@ -313,6 +316,8 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             // refined in place is never refined twice. The cells' longest tape and deepest
             // stack size its teams.
             lv.listed_cells = sc->refine_cells;
+            lv.copied_cells = sc->copy_cells;
+            std::copy_n(sc->walk_cells, kRefineWalkClasses, lv.walk_cells.begin());
             const uint64_t room = uint64_t(g.pool_words) + sc->near_words;
             if (room > capacity) resize(g.pool, capacity, room, g.pool_words);
             max_len = std::max(sc->max_len, 1u);
@@ -347,6 +352,8 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
         start.octant_used = uint32_t(octant_keep);
         start.octant_capacity = uint32_t(octant_capacity);
         start.refine_cells = lv.listed_cells;
+        start.copy_cells = lv.copied_cells;
+        std::copy_n(lv.walk_cells.begin(), kRefineWalkClasses, start.walk_cells);
         for (int a = 0; a < 3; ++a) {
             start.near_lo[a] = std::numeric_limits<uint32_t>::max();
             start.near_hi[a] = 0;
@@ -412,14 +419,26 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
     for (Step& s : steps) {
         // Jobs counted on the device: refinement's, the listed cells, and the long list's, the
         // jobs a lane pass left (their dispatches were recorded for all, those past the list's
-        // end returning at once).
+        // end returning at once). The cells only copied walk no tape (the longest walk is the
+        // other jobs'), but the long list's copies, which are not counted apart.
+        if (s.order_pass) {
+            // Its time is the lane pass's; its jobs are the lane pass's cells.
+            s.shape.gpu_ms = s.shape.lanes_ms =
+                ctx.stamp_ms(s.last_stamp) - ctx.stamp_ms(s.first_stamp);
+            add_shape(lv, s.shape);
+            continue;
+        }
         if (s.push.mode == 3) {
-            const uint64_t jobs = s.listed        ? counter->long_jobs
-                                  : s.second_pass ? counter->more_jobs
-                                                  : counter->refine_cells;
-            if (!s.listed && !s.second_pass) s.shape.jobs = jobs;
+            const uint64_t walked = s.listed        ? counter->long_jobs
+                                    : s.second_pass ? counter->more_jobs
+                                                    : counter->refine_cells;
+            const uint64_t jobs = walked + (s.listed || s.second_pass ? 0 : counter->copy_cells);
+            if (!s.listed && !s.second_pass) {
+                s.shape.jobs = jobs;
+                s.shape.copy_jobs = counter->copy_cells;
+            }
             s.shape.lanes = std::min(jobs, s.teams) * s.shape.lanes_per_tape;
-            s.shape.longest_walk_words = ceil_div(jobs, s.teams) * s.job_walk;
+            s.shape.longest_walk_words = ceil_div(walked, s.teams) * s.job_walk;
         }
         s.shape.gpu_ms = ctx.stamp_ms(s.last_stamp) - ctx.stamp_ms(s.first_stamp);
         if (s.kernel == KernelId::kPruneRefineLanes) {
@@ -455,6 +474,7 @@ void Pruner::add_shape(const Level& lv, const GpuStepShape& shape) {
     same->lanes_ms += shape.lanes_ms;
     same->long_jobs += shape.long_jobs;
     same->more_jobs += shape.more_jobs;
+    same->copy_jobs += shape.copy_jobs;
 }
 
 // Records a step's dispatches; the pools' words in use before the level start them.

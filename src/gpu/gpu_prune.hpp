@@ -3,6 +3,7 @@
 // lanes and squads). Internal to src/gpu.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <optional>
@@ -41,6 +42,9 @@ struct Step {
     // The lane pass's second pass (push flag 32): its jobs are the cells its first pass listed
     // in the more list, past the first sub-boxes.
     bool second_pass = false;
+    // The lane pass's order pass (push flag 128), before it: the list's cells to decide again
+    // sorted by walk class into the order list, from which the passes take them (flag 256).
+    bool order_pass = false;
     GpuStepShape shape;
     uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
 };
@@ -55,8 +59,11 @@ struct Level {
     bool finest = false, refine = false;
     bool split = false;  // octants first (as prune.cpp)
     Buffer *cells = nullptr, *octants = nullptr, *next = nullptr;
-    size_t first_shape = 0;     // the level's steps' shapes in the statistics
-    uint32_t listed_cells = 0;  // refinement's list, from the run that made the cells
+    size_t first_shape = 0;  // the level's steps' shapes in the statistics
+    // Refinement's list, from the run that made the cells: the cells it decides again (and
+    // their count per walk class), and those it only copies (prune_common.glsl: list_near_cell).
+    uint32_t listed_cells = 0, copied_cells = 0;
+    std::array<uint32_t, kRefineWalkClasses> walk_cells{};
 };
 
 class Pruner {
@@ -82,6 +89,7 @@ class Pruner {
                     uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient);
     Step plan_refine_lanes(const Step& squads, bool second_pass) const;
     Step plan_refine_more(const Step& lanes) const;
+    Step plan_refine_order(const Step& lanes, uint64_t listed) const;
     void plan_squads(const Level& lv, Step& s);
     PrunePush push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
                        uint32_t budget) const;
@@ -143,6 +151,9 @@ class Pruner {
     // The lane pass walks every cell's first sub-boxes, then the others of the cells that need
     // them in a second pass; SDFPRUNE_VULKAN_REFINE_SECOND_PASS=0: all of them in one pass.
     bool refine_second_pass = true;
+    // The lane pass takes its cells longest tapes first, in an order pass before it;
+    // SDFPRUNE_VULKAN_REFINE_ORDER=0: in the order they were listed.
+    bool refine_order = true;
     vec3 origin, extent;
     float L = 1;
     uint32_t flags = 0;  // the push constants' (prune_common.glsl)

@@ -43,14 +43,24 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
         return {teams};
     // Scratch: the long list (a word a cell), then the more list (kRefineMoreWords a listed
     // near cell), where the lane pass takes two passes: unless set off, or the lists would not
-    // fit a buffer.
+    // fit a buffer; then the order list (a word a listed near cell), unless set off or it would
+    // not fit.
     const uint64_t more_bytes = 4 * kRefineMoreWords * uint64_t(lv.listed_cells);
     const bool more = refine_second_pass &&
                       uint64_t(opt.refine) * opt.refine * opt.refine > kRefineFirstBoxes &&
                       4 * teams.team_jobs + more_bytes <= ctx.max_buffer_bytes();
+    const uint64_t order_at = teams.team_jobs + (more ? more_bytes / 4 : 0);
+    const bool order = refine_order && lv.listed_cells > 0 &&
+                       4 * (order_at + lv.listed_cells) <= ctx.max_buffer_bytes();
     Step lanes = plan_refine_lanes(teams, more);
-    hold(scratch, 4 * teams.team_jobs + (more ? more_bytes : 0));
-    std::vector<Step> steps{lanes};
+    hold(scratch, 4 * (order ? order_at + lv.listed_cells : order_at));
+    std::vector<Step> steps;
+    if (order) {
+        lanes.push.order_start = uint32_t(order_at);
+        lanes.push.flags |= 256u;
+        steps.push_back(plan_refine_order(lanes, lv.listed_cells));
+    }
+    steps.push_back(lanes);
     if (more) steps.push_back(plan_refine_more(lanes));
     if (max_len <= refine_lane_tape) return steps;
     teams.listed = true;
@@ -179,6 +189,7 @@ PrunePush Pruner::push_for(const Level& lv, uint32_t mode, uint32_t threads, uin
                      0,
                      1,
                      0,
+                     0,
                      0};
 }
 
@@ -217,6 +228,27 @@ Step Pruner::plan_refine_lanes(const Step& squads, bool second_pass) const {
     s.shape.lanes_per_tape = 1;
     s.shape.lanes = lanes;
     s.shape.longest_walk_words = ceil_div(cells, lanes) * walk;
+    return s;
+}
+
+// The lane pass's order pass (prune_refine_lanes.comp, push flag 128): the `listed` cells to
+// decide again sorted by walk class into the order list, 64 a workgroup at a time; a
+// workgroup takes at most 64 entries per dispatch and lavapipe loop (4 M cells a dispatch).
+Step Pruner::plan_refine_order(const Step& lanes, uint64_t listed) const {
+    Step s = lanes;
+    s.order_pass = true;
+    s.push.flags = (s.push.flags & ~256u) | 128u;
+    s.first_team_job = 0;
+    s.team_jobs = listed;
+    s.groups = uint32_t(std::min<uint64_t>(ceil_div(listed, kWorkgroupSize), ctx.max_workgroups()));
+    s.threads = s.groups * kWorkgroupSize;
+    s.teams = s.threads;
+    s.rounds = 1;
+    s.per_dispatch = ctx.loop_limited() ? uint64_t(s.groups) * kWorkgroupSize : listed;
+    s.job_walk = 0;
+    s.shape.jobs = 0;  // the lane pass's (one shape, add_shape)
+    s.shape.lanes = 0;
+    s.shape.longest_walk_words = 0;
     return s;
 }
 

@@ -651,8 +651,9 @@ void compact_lanes(const Scene& sc, std::span<const uint32_t> tape, const uint32
         if (const uint32_t open = keep & ~may_decide; values && open != 0) {
             const float k = sc.blend[math::tape_node(tape[i])];
             for (uint32_t c = 0; c < kL; ++c)
-                if ((open >> c & 1) != 0 && blend_may_decide(values[size_t(l) * stride + c],
-                                                             values[size_t(r) * stride + c], k))
+                if ((open >> c & 1) != 0 &&
+                    math::blend_may_decide(values[size_t(l) * stride + c],
+                                           values[size_t(r) * stride + c], k))
                     may_decide |= 1u << c;
         }
     }

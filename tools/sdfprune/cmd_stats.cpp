@@ -230,7 +230,8 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                                              .add("gpu_ms", st.gpu_ms)
                                              .add("lanes_ms", st.lanes_ms)
                                              .add("long_jobs", st.long_jobs)
-                                             .add("more_jobs", st.more_jobs));
+                                             .add("more_jobs", st.more_jobs)
+                                             .add("copy_jobs", st.copy_jobs));
                      j.add("device", device->name())
                          .add("wall_ms", device_grid->stats().wall_ms)
                          .add("submissions", device_grid->stats().submissions)
@@ -305,10 +306,10 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          st.lanes_per_tape, (unsigned long long)st.longest_walk_words, st.gpu_ms);
                      if (st.mode == 3)  // refinement: its lane pass
                          std::printf(
-                             " (lane pass %.2f ms, %llu cells past the first sub-boxes, "
-                             "%llu left to squads)",
-                             st.lanes_ms, (unsigned long long)st.more_jobs,
-                             (unsigned long long)st.long_jobs);
+                             " (%llu only copied; lane pass %.2f ms, %llu cells past the first "
+                             "sub-boxes, %llu left to squads)",
+                             (unsigned long long)st.copy_jobs, st.lanes_ms,
+                             (unsigned long long)st.more_jobs, (unsigned long long)st.long_jobs);
                      std::printf("\n");
                  }
              } else
