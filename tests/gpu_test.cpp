@@ -185,7 +185,8 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
         // it fits (prune_wide.comp: a workgroup per parent tape), with subgroup operations
         // where the device has them, and without. Refinement: by default a lane per cell for
         // the tapes of up to 32 words (their longest) and squads for the rest, then squads alone,
-        // then lanes up to 16 words, then lanes up to 4 words.
+        // then lanes up to 16 words, then lanes up to 4 words (with the cells steps' teams
+        // taking their octants in order of tape length, SDFPRUNE_VULKAN_TEAM_ORDER=1).
         for (int variant = 0; variant < 4; ++variant) {
             ::setenv("SDFPRUNE_VULKAN_WIDE", variant == 3 ? "0" : variant > 0 ? "1" : "", 1);
             ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE",
@@ -194,16 +195,18 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
                      : variant == 3 ? "4"
                                     : "",
                      1);
+            ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", variant == 3 ? "1" : "", 1);
             const gpu::Grid gpu = gpu::prune(variant == 2 ? plain : *dev, sc, o);
             ::unsetenv("SDFPRUNE_VULKAN_WIDE");
             ::unsetenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE");
+            ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
             if (variant == 2) {
                 EXPECT_FALSE(gpu.stats().subgroups);
             }
             const std::string how =
                 what + (variant == 1   ? ", wide, refinement on squads"
                         : variant == 2 ? ", wide without subgroups, refinement's lanes up to 16"
-                        : variant == 3 ? ", teams, refinement's lanes up to 4 words"
+                        : variant == 3 ? ", teams in order, refinement's lanes up to 4 words"
                                        : "");
             const bool exact = exact_device(*dev);
             expect_same_stats(cpu.stats(), gpu.stats(), how, exact);
@@ -459,16 +462,8 @@ uint64_t cells_refinement_copies(const Scene& sc, const PruneOptions& o) {
                         vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * cell_size,
                     half, math::length(half)};
                 evaluate_cell(sc, tape, box, o.bounds, s);
-                bool may_decide = false;
-                for (uint32_t e = 0; e < tape.size(); ++e) {
-                    const uint32_t node = math::tape_node(tape[e]);
-                    if (!sc.is_primitive(node))
-                        may_decide = may_decide ||
-                                     math::blend_may_decide(s.value[s.left[e]], s.value[s.right[e]],
-                                                            sc.blend[node]);
-                }
-                const RefineNeed need =
-                    refine_need(sc, tape, box, o.far_field, o.far_field_c, c.value, may_decide);
+                const RefineNeed need = refine_need(sc, tape, box, o.far_field, o.far_field_c,
+                                                    c.value, tape_may_decide(sc, tape, s));
                 copies += need.any ? 0 : 1;
             }
     return copies;
@@ -527,6 +522,38 @@ TEST(Gpu, RefinementOrderChangesNoCell) {
     EXPECT_EQ(a.more_jobs, b.more_jobs);
     expect_same_device_cells(ordered, listed, "ordered against listed");
     expect_matches_cpu(sc, prune(sc, o), ordered, *dev, "demo 64³, ordered");
+}
+
+// With SDFPRUNE_VULKAN_TEAM_ORDER=1 the cells steps' teams take their octants longest tapes
+// first, after two order passes (two dispatches more in each split level's cells step run in
+// teams); the cells are the same as block by block (the default), and the CPU's. In teams (the
+// order is theirs), and by default (the top levels wide).
+TEST(Gpu, TeamJobOrderChangesNoCell) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Scene sc = builtin_scene("demo");
+    PruneOptions o;
+    o.resolution = 64;
+    for (const bool teams_only : {true, false}) {
+        SCOPED_TRACE(teams_only ? "teams" : "default");
+        if (teams_only) ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
+        ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", "1", 1);
+        const gpu::Grid ordered = gpu::prune(*dev, sc, o);
+        ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
+        const gpu::Grid blocks = gpu::prune(*dev, sc, o);
+        ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+        const std::vector<gpu::GpuStepShape>&a = ordered.stats().steps, &b = blocks.stats().steps;
+        ASSERT_EQ(a.size(), b.size());
+        uint32_t ordered_steps = 0;
+        for (size_t i = 0; i < a.size(); ++i) {
+            EXPECT_EQ(a[i].jobs, b[i].jobs) << "step " << i;
+            const bool in_order = a[i].mode == 2 && !a[i].wide;
+            EXPECT_EQ(a[i].dispatches, b[i].dispatches + (in_order ? 2 : 0)) << "step " << i;
+            ordered_steps += in_order ? 1 : 0;
+        }
+        EXPECT_GT(ordered_steps, 0u);
+        expect_same_device_cells(ordered, blocks, "ordered against block by block");
+        expect_matches_cpu(sc, prune(sc, o), ordered, *dev, "demo 64³, teams in order");
+    }
 }
 
 // By default the top levels' steps, few jobs over long parent tapes, run wide: a workgroup
@@ -1279,6 +1306,12 @@ TEST(Gpu, LevelsTooLargeForOneBufferArePrunedInSlices) {
     for (const gpu::GpuStepShape& s : gpu.stats().steps)
         EXPECT_TRUE(seen.insert({s.level, s.mode}).second)
             << "level " << s.level << " mode " << s.mode << " reported twice";
+    // The cells steps' teams taking their octants in order of tape length, slice by slice.
+    ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", "1", 1);
+    const gpu::Grid ordered = gpu::prune(*small, sc, o);
+    ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
+    EXPECT_GT(ordered.stats().slices, levels) << "no level was sliced";
+    expect_matches_cpu(sc, cpu, ordered, *small, "city 32³ in slices, teams in order");
     // On the device as it is, the same scene needs a slice a level.
     const gpu::Grid whole = gpu::prune(*dev, sc, o);
     EXPECT_EQ(whole.stats().slices, levels);

@@ -679,6 +679,10 @@ struct RefineNeed {
 };
 RefineNeed refine_need(const Scene& scene, std::span<const uint32_t> tape, const CellBox& box,
                        bool far_field, float far_field_c, float value, bool may_decide);
+// refine_need's `may_decide` for a whole tape evaluated at a cell's centre into `s`
+// (evaluate_cell): whether some operator's operands there pass blend_may_decide. (Pruning
+// finds it for the operators its compaction keeps: compact_siblings' `decidable`.)
+bool tape_may_decide(const Scene& scene, std::span<const uint32_t> tape, const CellScratch& s);
 
 // refine_cell for `count` <= kSiblingLanes cells of one size that share one `tape` (values[j]
 // and may_decide[j]: cell j's), in one pass over the tape per batch of sub-boxes, the cells'

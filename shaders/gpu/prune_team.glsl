@@ -5,7 +5,7 @@
 //   mode 0: kTeam cells of a block, from the block's tape
 //   mode 1: the 8 octants of a block, from the block's tape (not stored as cells)
 //   mode 2: kTeam cells of an octant, from the octant's tape (or far-field from a far octant)
-// (Refinement, mode 3, is prune_refine.comp's.)
+// (Refinement, mode 3, is prune_refine.comp's.) Modes 4 and 5 order mode 2's jobs (below).
 // The kernel runs in steps, the same for every lane of a workgroup: at each step a team that
 // evaluates stages the next kWindow words of its tape in shared memory, then every lane advances
 // its phase by at most kWindow entries (evaluation from the window; the far-field test; the
@@ -88,7 +88,69 @@ void store_slot(uint at, vec3 x, uint entry) {
     lane_scratch[at + 3u * kTeam] = entry;
 }
 
+// Mode 2's jobs in order (push flag 512): a workgroup's 8 teams run as long as their longest
+// walk, and in block order they take the 8 octants of one block, whose tapes differ widely in
+// length (molecule's finest level: from 1 word to 597, or none where the octant is far-field).
+// Two passes before the cells step (modes 4 and 5, a counting sort, as refinement's order pass)
+// list the step's octants by class of tape length, the longest first (class 0: far-field, last),
+// in the order list (pc.order_start in scratch, rank 0 the first); its jobs then take the
+// octants in that order. Within a class the order is the atomics': the cells do not depend on
+// it. An octant's class: 0 far-field, else 1 + 2k (+ 1 in the upper half of the octave) for a
+// tape of 2^k to 2^(k+1) − 1 words.
+uint octant_class(uint octant) {
+    Cell o = octants[octant];
+    if (o.tape == kFarField) return 0u;
+    uint len = tape_read(o.tape, 0u);
+    uint k = uint(findMSB(len));
+    uint upper = k > 0u && len >= (3u << (k - 1u)) ? 1u : 0u;
+    return min(1u + 2u * k + upper, kOrderClasses - 1u);
+}
+shared uint s_order_count[kOrderClasses], s_order_at[kOrderClasses];
+// Mode 4 counts the octants [pc.order_first, pc.order_first + pc.jobs) per class (order_count);
+// mode 5 places each at its class's room, 64 a workgroup at a time (order_placed).
+void order_octants() {
+    uint lane = gl_LocalInvocationID.x;
+    bool place = pc.mode == 5u;
+    for (uint first = pc.first_job + gl_WorkGroupID.x * 64u; first < pc.jobs;
+         first += gl_NumWorkGroups.x * 64u) {
+        if (lane < kOrderClasses) s_order_count[lane] = 0u;
+        memoryBarrierShared();
+        barrier();
+        bool has = first + lane < pc.jobs;
+        uint c = has ? octant_class(pc.order_first + first + lane) : 0u;
+        uint rank = has ? atomicAdd(s_order_count[c], 1u) : 0u;
+        memoryBarrierShared();
+        barrier();
+        if (lane < kOrderClasses) {
+            uint count = s_order_count[lane];
+            if (!place && count != 0u) atomicAdd(order_count[lane], count);
+            if (place) {
+                uint before = 0u;  // the places of the longer classes
+                for (uint d = lane + 1u; d < kOrderClasses; ++d) before += order_count[d];
+                s_order_at[lane] = count == 0u ? 0u : before + atomicAdd(order_placed[lane], count);
+            }
+        }
+        memoryBarrierShared();
+        barrier();
+        if (place && has)
+            lane_scratch[pc.order_start + s_order_at[c] + rank] = pc.order_first + first + lane;
+        barrier();  // the counts read before the next octants reset them
+    }
+}
+// Team job j of mode 2 under flag 512: the job at the same place of its octant (a team takes
+// kTeam of the octant's cells) of the octant of rank j / per_team in the order list.
+uint ordered_job(uint j) {
+    uint hf = pc.factor / 2u;
+    uint per_team = (hf * hf * hf + kTeam - 1u) / kTeam;
+    uint octant = lane_scratch[pc.order_start + j / per_team - pc.order_first];
+    return octant * per_team + j % per_team;
+}
+
 void main() {
+    if (pc.mode >= 4u) {
+        order_octants();
+        return;
+    }
     counts_begin();
     uint tl = gl_LocalInvocationID.x / kTeam, lane = gl_LocalInvocationID.x % kTeam;
     uint team = gl_WorkGroupID.x * kTeams + tl;
@@ -108,6 +170,7 @@ void main() {
     for (uint first = pc.first_job; first < pc.jobs; first += teams) {
         uint job = first + team;
         bool has_job = team < teams && job < pc.jobs;
+        if (has_job && (pc.flags & 512u) != 0u) job = ordered_job(job);
         // This lane's box and the team's parent tape; `valid`: the lane stores a result.
         bool valid = has_job, walk = has_job;
         uint parent = 0u, dest = 0u;

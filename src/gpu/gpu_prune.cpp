@@ -137,6 +137,8 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
         refine_second_pass = std::atoi(env) != 0;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_REFINE_ORDER"); env && *env)
         refine_order = std::atoi(env) != 0;
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_TEAM_ORDER"); env && *env)
+        team_order = std::atoi(env) != 0;
     origin = sc.aabb.min;
     extent = sc.aabb.max - sc.aabb.min;
     L = sc.lipschitz[sc.root()];

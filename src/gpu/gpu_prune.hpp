@@ -45,6 +45,7 @@ struct Step {
     // The lane pass's order pass (push flag 128), before it: the list's cells to decide again
     // sorted by walk class into the order list, from which the passes take them (flag 256).
     bool order_pass = false;
+    uint64_t scratch_words = 0;  // the scratch its teams (or wide workgroups) take
     GpuStepShape shape;
     uint32_t first_stamp = 0, last_stamp = 0;  // Context::stamp() around its dispatches
 };
@@ -90,6 +91,7 @@ class Pruner {
     Step plan_refine_lanes(const Step& squads, bool second_pass) const;
     Step plan_refine_more(const Step& lanes) const;
     Step plan_refine_order(const Step& lanes, uint64_t listed) const;
+    Step plan_octant_order(const Step& cells, uint64_t octant_count, uint32_t mode) const;
     void plan_squads(const Level& lv, Step& s);
     PrunePush push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
                        uint32_t budget) const;
@@ -154,6 +156,10 @@ class Pruner {
     // The lane pass takes its cells longest tapes first, in an order pass before it;
     // SDFPRUNE_VULKAN_REFINE_ORDER=0: in the order they were listed.
     bool refine_order = true;
+    // SDFPRUNE_VULKAN_TEAM_ORDER=1: the cells' team jobs take their octants longest tapes
+    // first, after two order passes; by default block by block (on lavapipe the order made
+    // the finest cells step slower; on a GPU it is not measured yet: BENCHMARKS.md, stop 39).
+    bool team_order = false;
     vec3 origin, extent;
     float L = 1;
     uint32_t flags = 0;  // the push constants' (prune_common.glsl)

@@ -413,6 +413,16 @@ RefineNeed refine_need(const Scene& sc, std::span<const uint32_t> tape, const Ce
     return need;
 }
 
+bool tape_may_decide(const Scene& sc, std::span<const uint32_t> tape, const CellScratch& s) {
+    for (uint32_t e = 0; e < uint32_t(tape.size()); ++e) {
+        const uint32_t node = math::tape_node(tape[e]);
+        if (!sc.is_primitive(node) &&
+            math::blend_may_decide(s.value[s.left[e]], s.value[s.right[e]], sc.blend[node]))
+            return true;
+    }
+    return false;
+}
+
 void refine_cells(const Scene& sc, std::span<const uint32_t> tape, const CellBox* boxes,
                   uint32_t count, uint32_t S, CellBounds bounds, bool far_field, float far_field_c,
                   const float* values, const bool* may_decide, CellScratch& s,

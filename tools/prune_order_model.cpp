@@ -1,0 +1,180 @@
+// prune_order_model.cpp — a model of how long the Vulkan backend's finest pruning steps wait on
+// their longest walk, computed on the CPU, so that a change of their job order can be judged
+// without a GPU (issue 13). Two steps, each run by groups of lanes that take neighbouring jobs
+// and walk as long as the group's longest tape:
+//   - the finest level's cells step in teams (shaders/gpu/prune_team.glsl): a workgroup's 8
+//     teams take 8 jobs, each the cells of one octant pruned from the octant's tape (none
+//     where the octant is far-field). Block by block, the 8 octants of a block; in order, the
+//     octants sorted by class of tape length (octant_class, the order passes);
+//   - refinement's lane pass (shaders/gpu/prune_refine_lanes.comp): a subgroup's 32 lanes take
+//     32 cells, each walking its own tape (at most 32 words). Before: every near cell listed,
+//     a lone primitive that cannot turn far-field copied (0); apart: the cells with nothing to
+//     try (refine_need) copied apart; ordered: the others sorted by walk class.
+// For each, the sum over the groups of the group's longest tape, and the ideal (the words over
+// the group's lanes). The tapes are the CPU's, which the GPU's equal: the octants' pruned from
+// their blocks' tapes (the coarse level's, kept), the cells' as the grid without refinement
+// has them. The orders are the level's storage order, about the order the device lists the
+// blocks and cells in (its atomics spread the cells further).
+// Usage: sdfprune_order_model SCENE [GRID]
+#include <algorithm>
+#include <bit>
+#include <cstdio>
+#include <cstdlib>
+#include <exception>
+#include <utility>
+#include <vector>
+
+#include "sdfprune/io.hpp"
+#include "sdfprune/prune.hpp"
+
+using namespace sdfprune;
+
+namespace {
+
+constexpr uint32_t kTeams = 8, kSubgroup = 32, kLaneTape = 32;
+
+// prune_team.glsl: octant_class (0: far-field); prune_common.glsl: refine_walk_class.
+uint32_t octant_class(uint32_t len) {
+    if (len == 0) return 0;
+    const uint32_t k = uint32_t(std::bit_width(len)) - 1;
+    const uint32_t upper = k > 0 && len >= (3u << (k - 1)) ? 1 : 0;
+    return std::min(1 + 2 * k + upper, 31u);
+}
+uint32_t walk_class(uint32_t len) {
+    return std::min((len - 1) / 4, 7u);
+}
+
+// Sum over groups of `group` consecutive jobs of the group's longest tape.
+uint64_t group_steps(const std::vector<uint32_t>& lengths, uint32_t group) {
+    uint64_t steps = 0;
+    for (size_t i = 0; i < lengths.size(); i += group)
+        steps += *std::max_element(lengths.begin() + i,
+                                   lengths.begin() + std::min(lengths.size(), i + group));
+    return steps;
+}
+
+template <class Class>
+std::vector<uint32_t> ordered(std::vector<uint32_t> lengths, Class cls) {
+    std::stable_sort(lengths.begin(), lengths.end(),
+                     [&](uint32_t a, uint32_t b) { return cls(a) > cls(b); });
+    return lengths;
+}
+
+uint64_t ideal(const std::vector<uint32_t>& lengths, uint32_t group) {
+    uint64_t words = 0;
+    for (const uint32_t len : lengths) words += len;
+    return (words + group - 1) / group;
+}
+
+std::span<const uint32_t> tape_of(const PrunedGrid& grid, const PrunedCell& c) {
+    return grid.tape_pool().subspan(c.tape + 2, grid.tape_pool()[c.tape]);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    if (argc < 2 || argc > 3) {
+        std::fprintf(stderr, "usage: %s SCENE [GRID]\n", argv[0]);
+        return 2;
+    }
+    try {
+        const Scene sc = load_scene(argv[1]);
+        PruneOptions o;
+        if (argc == 3) o.resolution = uint32_t(std::strtoul(argv[2], nullptr, 10));
+        o.refine = 1;           // the cells' tapes before refinement
+        o.coarse_tapes = true;  // the blocks' tapes
+        const PrunedGrid grid = prune(sc, o);
+        const uint32_t finest = grid.level_count() - 1, N = grid.resolution();
+        if (finest == 0 || grid.level_factor(finest - 1) % 2 != 0) {
+            std::fprintf(stderr, "the grid's finest level is not split in octants\n");
+            return 2;
+        }
+        const uint32_t f = grid.level_factor(finest - 1), hf = f / 2;
+        const vec3 cell_size = (sc.aabb.max - sc.aabb.min) / float(N), half = cell_size * 0.5f;
+        CellScratch s;
+        std::vector<uint32_t> scratch_tape;
+
+        // The finest level's blocks (its parents' near cells) in storage order, and their
+        // octants' tape lengths.
+        std::vector<std::pair<uint32_t, uint32_t>> blocks;  // (storage index, finest origin)
+        const uint32_t P = grid.level_resolution(finest - 1);
+        std::vector<uint32_t> origin_of(grid.level_cells(finest - 1).size(), ~0u);
+        for (uint32_t z = 0; z < P; ++z)
+            for (uint32_t y = 0; y < P; ++y)
+                for (uint32_t x = 0; x < P; ++x) {
+                    const PrunedGrid::CellRef at = grid.descend(x * f, y * f, z * f, finest - 1);
+                    if (at.level == finest - 1 &&
+                        grid.level_cells(at.level)[at.index].tape != PrunedCell::kFarField)
+                        origin_of[at.index] = (z * P + y) * P + x;
+                }
+        std::vector<uint32_t> octants;
+        for (uint32_t i = 0; i < origin_of.size(); ++i) {
+            if (origin_of[i] == ~0u) continue;
+            const uint32_t x = origin_of[i] % P * f, y = origin_of[i] / P % P * f,
+                           z = origin_of[i] / (P * P) * f;
+            const std::span<const uint32_t> parent = tape_of(grid, grid.level_cells(finest - 1)[i]);
+            for (uint32_t oc = 0; oc < 8; ++oc) {
+                const vec3 corner(float(x + (oc & 1) * hf), float(y + (oc >> 1 & 1) * hf),
+                                  float(z + (oc >> 2 & 1) * hf));
+                const CellBox box{sc.aabb.min + (corner + vec3(0.5f * float(hf))) * cell_size,
+                                  half * float(hf), math::length(half) * float(hf)};
+                evaluate_cell(sc, parent, box, o.bounds, s);
+                float constant = 0;
+                if (o.far_field && !is_near_field(sc, parent, box, o.far_field_c, s, constant)) {
+                    octants.push_back(0);
+                    continue;
+                }
+                scratch_tape.clear();
+                compact_tape(sc, parent, s, scratch_tape);
+                octants.push_back(uint32_t(std::min(scratch_tape.size(), parent.size())));
+            }
+        }
+
+        // Refinement's cells of at most kLaneTape words, in storage order.
+        std::vector<int> before(grid.level_cells(finest).size(), -1), walked(before);
+        for (uint32_t z = 0; z < N; ++z)
+            for (uint32_t y = 0; y < N; ++y)
+                for (uint32_t x = 0; x < N; ++x) {
+                    const PrunedGrid::CellRef at = grid.descend(x, y, z, finest);
+                    const PrunedCell& c = grid.level_cells(at.level)[at.index];
+                    if (at.level != finest || c.tape == PrunedCell::kFarField) continue;
+                    const std::span<const uint32_t> tape = tape_of(grid, c);
+                    if (tape.size() > kLaneTape) continue;  // the squads'
+                    const CellBox box{sc.aabb.min + vec3(x + 0.5f, y + 0.5f, z + 0.5f) * cell_size,
+                                      half, math::length(half)};
+                    evaluate_cell(sc, tape, box, o.bounds, s);
+                    const RefineNeed need = refine_need(sc, tape, box, o.far_field, o.far_field_c,
+                                                        c.value, tape_may_decide(sc, tape, s));
+                    const int len = int(tape.size());
+                    before[at.index] = len == 1 && !need.far ? 0 : len;
+                    if (need.any) walked[at.index] = len;
+                }
+        const auto present = [](const std::vector<int>& v) {
+            std::vector<uint32_t> out;
+            for (const int x : v)
+                if (x >= 0) out.push_back(uint32_t(x));
+            return out;
+        };
+        const std::vector<uint32_t> all = present(before), apart = present(walked);
+
+        std::printf("%s at %u³\n", argv[1], N);
+        std::printf(
+            "  cells step (teams, %zu octants of %zu blocks): group walk steps: block by block "
+            "%llu, ordered %llu, ideal %llu\n",
+            octants.size(), octants.size() / 8, (unsigned long long)group_steps(octants, kTeams),
+            (unsigned long long)group_steps(ordered(octants, octant_class), kTeams),
+            (unsigned long long)ideal(octants, kTeams));
+        std::printf(
+            "  refinement's lane pass (%zu cells walked of %zu near cells of at most %u "
+            "words): subgroup walk steps: before %llu, listed apart %llu, ordered %llu, ideal "
+            "%llu\n",
+            apart.size(), all.size(), kLaneTape, (unsigned long long)group_steps(all, kSubgroup),
+            (unsigned long long)group_steps(apart, kSubgroup),
+            (unsigned long long)group_steps(ordered(apart, walk_class), kSubgroup),
+            (unsigned long long)ideal(apart, kSubgroup));
+        return 0;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "sdfprune_order_model: %s\n", e.what());
+        return 2;
+    }
+}
