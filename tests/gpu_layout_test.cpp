@@ -265,9 +265,7 @@ const std::vector<Mirror>& mirrors() {
                              SDFPRUNE_MEMBER(GpuCounters, more_jobs),
                              SDFPRUNE_MEMBER(GpuCounters, copy_cells),
                              SDFPRUNE_MEMBER(GpuCounters, walk_cells),
-                             SDFPRUNE_MEMBER(GpuCounters, walk_placed),
-                             SDFPRUNE_MEMBER(GpuCounters, order_count),
-                             SDFPRUNE_MEMBER(GpuCounters, order_placed)},
+                             SDFPRUNE_MEMBER(GpuCounters, walk_placed)},
                             Scope::kKernel),
         mirror<TraceParams>(
             "TraceParams", {"trace"},

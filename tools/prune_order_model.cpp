@@ -4,8 +4,9 @@
 // and walk as long as the group's longest tape:
 //   - the finest level's cells step in teams (shaders/gpu/prune_team.glsl): a workgroup's 8
 //     teams take 8 jobs, each the cells of one octant pruned from the octant's tape (none
-//     where the octant is far-field). Block by block, the 8 octants of a block; in order, the
-//     octants sorted by class of tape length (octant_class, the order passes);
+//     where the octant is far-field). Block by block, the 8 octants of a block; in windows,
+//     each window of 256 octants sorted by class of tape length (octant_class, the order
+//     pass, SDFPRUNE_VULKAN_TEAM_ORDER=1); and, for comparison, the whole step sorted;
 //   - refinement's lane pass (shaders/gpu/prune_refine_lanes.comp): a subgroup's 32 lanes take
 //     32 cells, each walking its own tape (at most 32 words). Before: every near cell listed,
 //     a lone primitive that cannot turn far-field copied (0); apart: the cells with nothing to
@@ -31,7 +32,7 @@ using namespace sdfprune;
 
 namespace {
 
-constexpr uint32_t kTeams = 8, kSubgroup = 32, kLaneTape = 32;
+constexpr uint32_t kTeams = 8, kSubgroup = 32, kLaneTape = 32, kOrderWindow = 256;
 
 // prune_team.glsl: octant_class (0: far-field); prune_common.glsl: refine_walk_class.
 uint32_t octant_class(uint32_t len) {
@@ -53,10 +54,14 @@ uint64_t group_steps(const std::vector<uint32_t>& lengths, uint32_t group) {
     return steps;
 }
 
+// `lengths` sorted by class, the highest first, each window of `window` apart (0: all at once).
 template <class Class>
-std::vector<uint32_t> ordered(std::vector<uint32_t> lengths, Class cls) {
-    std::stable_sort(lengths.begin(), lengths.end(),
-                     [&](uint32_t a, uint32_t b) { return cls(a) > cls(b); });
+std::vector<uint32_t> ordered(std::vector<uint32_t> lengths, Class cls, size_t window = 0) {
+    if (window == 0) window = std::max<size_t>(lengths.size(), 1);
+    for (size_t i = 0; i < lengths.size(); i += window)
+        std::stable_sort(lengths.begin() + i,
+                         lengths.begin() + std::min(lengths.size(), i + window),
+                         [&](uint32_t a, uint32_t b) { return cls(a) > cls(b); });
     return lengths;
 }
 
@@ -160,8 +165,9 @@ int main(int argc, char** argv) {
         std::printf("%s at %u³\n", argv[1], N);
         std::printf(
             "  cells step (teams, %zu octants of %zu blocks): group walk steps: block by block "
-            "%llu, ordered %llu, ideal %llu\n",
+            "%llu, in windows %llu, sorted whole %llu, ideal %llu\n",
             octants.size(), octants.size() / 8, (unsigned long long)group_steps(octants, kTeams),
+            (unsigned long long)group_steps(ordered(octants, octant_class, kOrderWindow), kTeams),
             (unsigned long long)group_steps(ordered(octants, octant_class), kTeams),
             (unsigned long long)ideal(octants, kTeams));
         std::printf(

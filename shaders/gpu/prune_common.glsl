@@ -8,7 +8,6 @@
 
 const uint kTeam = 8u;  // boxes per job: lanes per team (gpu_prune.cpp: kPruneTeam)
 const uint kWalkClasses = 8u;  // refine_walk_class's (device_layout.hpp: kRefineWalkClasses)
-const uint kOrderClasses = 32u;  // prune_team.glsl: octant_class's (kPruneOrderClasses)
 
 layout(std430, binding = 4) readonly buffer Blocks { Block blocks[]; };
 layout(std430, binding = 5) buffer Octants { Cell octants[]; };
@@ -35,10 +34,6 @@ layout(std430, binding = 7) buffer Counters {
     // order pass the places of that class taken so far (prune_refine_lanes.comp).
     uint walk_cells[kWalkClasses];
     uint walk_placed[kWalkClasses];
-    // The cells step's order passes (prune_team.glsl: order_octants): per octant class its
-    // octants, and the places of that class taken so far.
-    uint order_count[kOrderClasses];
-    uint order_placed[kOrderClasses];
 };
 // The kernel's scratch (its layout is the kernel's own). Coherent: lanes read what other lanes
 // of their workgroup wrote at earlier steps (a barrier between). In refinement, from
@@ -90,8 +85,8 @@ layout(push_constant) uniform Push {
     uint wide_split;    // prune_wide.comp: workgroups per job (a share of its kTeam boxes each)
     uint more_start;    // prune_refine_lanes.comp: where its more list starts in scratch
     uint group_base;    // prune_wide.comp: the dispatch's first workgroup among the step's
-    uint order_start;   // where the order list starts in scratch (flags 128, 256, 512; modes 4, 5)
-    uint order_first;   // modes 2 (flag 512), 4 and 5: the step's first octant
+    uint order_start;   // where the order list starts in scratch (flags 128, 256, 512; mode 4)
+    uint order_first;   // modes 2 (flag 512) and 4: the step's first octant
 } pc;
 
 // The step's counters (near_jobs, near_words, max_len, max_depth, then walk_cells), summed and

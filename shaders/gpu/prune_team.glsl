@@ -5,7 +5,7 @@
 //   mode 0: kTeam cells of a block, from the block's tape
 //   mode 1: the 8 octants of a block, from the block's tape (not stored as cells)
 //   mode 2: kTeam cells of an octant, from the octant's tape (or far-field from a far octant)
-// (Refinement, mode 3, is prune_refine.comp's.) Modes 4 and 5 order mode 2's jobs (below).
+// (Refinement, mode 3, is prune_refine.comp's.) Mode 4 orders mode 2's jobs (below).
 // The kernel runs in steps, the same for every lane of a workgroup: at each step a team that
 // evaluates stages the next kWindow words of its tape in shared memory, then every lane advances
 // its phase by at most kWindow entries (evaluation from the window; the far-field test; the
@@ -91,12 +91,16 @@ void store_slot(uint at, vec3 x, uint entry) {
 // Mode 2's jobs in order (push flag 512): a workgroup's 8 teams run as long as their longest
 // walk, and in block order they take the 8 octants of one block, whose tapes differ widely in
 // length (molecule's finest level: from 1 word to 597, or none where the octant is far-field).
-// Two passes before the cells step (modes 4 and 5, a counting sort, as refinement's order pass)
-// list the step's octants by class of tape length, the longest first (class 0: far-field, last),
-// in the order list (pc.order_start in scratch, rank 0 the first); its jobs then take the
-// octants in that order. Within a class the order is the atomics': the cells do not depend on
-// it. An octant's class: 0 far-field, else 1 + 2k (+ 1 in the upper half of the octave) for a
-// tape of 2^k to 2^(k+1) − 1 words.
+// A pass before the cells step (mode 4) sorts each window of kOrderWindow octants, 32
+// neighbouring blocks', by class of tape length, the longest first (class 0: far-field, last),
+// into the order list (pc.order_start in scratch, rank 0 the first); its jobs then take the
+// octants in that order. A window keeps the octants of a workgroup's teams near each other (the
+// nodes their tapes read alike) and takes most of what a sort of the whole step would
+// (tools/prune_order_model.cpp). Within a class the order is the atomics': the cells do not
+// depend on it. An octant's class: 0 far-field, else 1 + 2k (+ 1 in the upper half of the
+// octave) for a tape of 2^k to 2^(k+1) − 1 words.
+const uint kOrderClasses = 32u;
+const uint kOrderWindow = 256u;  // gpu_prune_plan.cpp: kPruneOrderWindow
 uint octant_class(uint octant) {
     Cell o = octants[octant];
     if (o.tape == kFarField) return 0u;
@@ -105,36 +109,42 @@ uint octant_class(uint octant) {
     uint upper = k > 0u && len >= (3u << (k - 1u)) ? 1u : 0u;
     return min(1u + 2u * k + upper, kOrderClasses - 1u);
 }
-shared uint s_order_count[kOrderClasses], s_order_at[kOrderClasses];
-// Mode 4 counts the octants [pc.order_first, pc.order_first + pc.jobs) per class (order_count);
-// mode 5 places each at its class's room, 64 a workgroup at a time (order_placed).
+shared uint s_order_count[kOrderClasses];
+// Mode 4: the octants [pc.order_first, pc.order_first + pc.jobs), a window a workgroup at a time
+// (kOrderWindow / 64 octants a lane): a counting sort in shared memory.
 void order_octants() {
+    const uint kPerLane = kOrderWindow / 64u;
     uint lane = gl_LocalInvocationID.x;
-    bool place = pc.mode == 5u;
-    for (uint first = pc.first_job + gl_WorkGroupID.x * 64u; first < pc.jobs;
-         first += gl_NumWorkGroups.x * 64u) {
+    for (uint w0 = pc.first_job + gl_WorkGroupID.x * kOrderWindow; w0 < pc.jobs;
+         w0 += gl_NumWorkGroups.x * kOrderWindow) {
         if (lane < kOrderClasses) s_order_count[lane] = 0u;
         memoryBarrierShared();
         barrier();
-        bool has = first + lane < pc.jobs;
-        uint c = has ? octant_class(pc.order_first + first + lane) : 0u;
-        uint rank = has ? atomicAdd(s_order_count[c], 1u) : 0u;
+        uint cls[kPerLane], rank[kPerLane];
+        for (uint k = 0u; k < kPerLane; ++k) {
+            uint i = w0 + k * 64u + lane;
+            cls[k] = i < pc.jobs ? octant_class(pc.order_first + i) : 0u;
+            rank[k] = i < pc.jobs ? atomicAdd(s_order_count[cls[k]], 1u) : 0u;
+        }
         memoryBarrierShared();
         barrier();
-        if (lane < kOrderClasses) {
-            uint count = s_order_count[lane];
-            if (!place && count != 0u) atomicAdd(order_count[lane], count);
-            if (place) {
-                uint before = 0u;  // the places of the longer classes
-                for (uint d = lane + 1u; d < kOrderClasses; ++d) before += order_count[d];
-                s_order_at[lane] = count == 0u ? 0u : before + atomicAdd(order_placed[lane], count);
+        if (lane == 0u) {  // each class's first place in the window, the longest first
+            uint at = 0u;
+            for (uint c = kOrderClasses; c > 0u; --c) {
+                uint count = s_order_count[c - 1u];
+                s_order_count[c - 1u] = at;
+                at += count;
             }
         }
         memoryBarrierShared();
         barrier();
-        if (place && has)
-            lane_scratch[pc.order_start + s_order_at[c] + rank] = pc.order_first + first + lane;
-        barrier();  // the counts read before the next octants reset them
+        for (uint k = 0u; k < kPerLane; ++k) {
+            uint i = w0 + k * 64u + lane;
+            if (i < pc.jobs)
+                lane_scratch[pc.order_start + w0 + s_order_count[cls[k]] + rank[k]] =
+                    pc.order_first + i;
+        }
+        barrier();  // the places read before the next window resets them
     }
 }
 // Team job j of mode 2 under flag 512: the job at the same place of its octant (a team takes

@@ -43,15 +43,11 @@ struct GpuGridParams {  // GridParams
 // walk_cells: the cells listed to decide again, per walk class; walk_placed: the order pass's
 // places taken per class (prune_refine_lanes.comp).
 inline constexpr uint32_t kRefineWalkClasses = 8;  // prune_common.glsl: kWalkClasses
-// order_count, order_placed: the cells step's order passes' (prune_team.glsl: order_octants),
-// per class of octant tape length.
-inline constexpr uint32_t kPruneOrderClasses = 32;  // prune_common.glsl: kOrderClasses
 struct GpuCounters {
     uint32_t pool_used, pool_capacity, overflow, max_len, near_jobs, next_blocks, max_depth;
     uint32_t octant_used, octant_capacity, near_words, refine_cells;
     uint32_t near_lo[3], near_hi[3], long_jobs, more_jobs, copy_cells;
     uint32_t walk_cells[kRefineWalkClasses], walk_placed[kRefineWalkClasses];
-    uint32_t order_count[kPruneOrderClasses], order_placed[kPruneOrderClasses];
 };
 // prune.comp: kStateWords, the words of a lane's job state in its team's scratch; kTeam, the
 // lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step
@@ -62,6 +58,8 @@ struct GpuCounters {
 inline constexpr uint64_t kPruneStateWords = 16;
 inline constexpr uint64_t kPruneTeam = 8;
 inline constexpr uint64_t kPruneWindow = 64;
+// prune.comp, mode 4: the octants a workgroup sorts together (prune_team.glsl: kOrderWindow).
+inline constexpr uint64_t kPruneOrderWindow = 256;
 inline constexpr uint64_t kRefineSquad = 32;
 inline constexpr uint32_t kLaneTapeMax = 32;
 inline constexpr uint32_t kRefineLaneTape = 32;
@@ -118,7 +116,7 @@ static_assert(sizeof(GpuNode) == 16 && sizeof(GpuPrimitiveExtra) == 48);
 static_assert(sizeof(math::PrimitiveParams) == 96 && offsetof(math::PrimitiveParams, a) == 48);
 static_assert(sizeof(PrunedCell) == 16 && offsetof(PrunedCell, value) == 8);
 static_assert(sizeof(GpuBlock) == 16 && sizeof(GpuLevel) == 16 && sizeof(GpuGridParams) == 64);
-static_assert(sizeof(GpuCounters) == 400 && offsetof(GpuCounters, near_lo) == 44 &&
+static_assert(sizeof(GpuCounters) == 144 && offsetof(GpuCounters, near_lo) == 44 &&
               offsetof(GpuCounters, long_jobs) == 68 && offsetof(GpuCounters, copy_cells) == 76 &&
               offsetof(GpuCounters, walk_placed) == 112);
 static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) <= 128);

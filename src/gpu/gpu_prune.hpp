@@ -91,7 +91,7 @@ class Pruner {
     Step plan_refine_lanes(const Step& squads, bool second_pass) const;
     Step plan_refine_more(const Step& lanes) const;
     Step plan_refine_order(const Step& lanes, uint64_t listed) const;
-    Step plan_octant_order(const Step& cells, uint64_t octant_count, uint32_t mode) const;
+    Step plan_octant_order(const Step& cells, uint64_t octant_count) const;
     void plan_squads(const Level& lv, Step& s);
     PrunePush push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
                        uint32_t budget) const;

@@ -41,15 +41,14 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
     Step teams = plan_teams(lv, mode, first_block, blocks, jobs, octants, cells, transient);
     if (mode == 2 && !teams.wide && team_order) {
         // The cells' jobs in order of their octants' tape lengths, listed past the teams'
-        // scratch by two passes before them (prune_team.glsl: order_octants), where it fits.
+        // scratch by a pass before them (prune_team.glsl: order_octants), where it fits.
         const uint64_t octant_count = blocks * 8, at = teams.scratch_words;
         if (octant_count > 0 && 4 * (at + octant_count) <= ctx.max_buffer_bytes()) {
             hold(scratch, 4 * (at + octant_count));
             teams.push.flags |= 512u;
             teams.push.order_start = uint32_t(at);
             teams.push.order_first = uint32_t(first_block * 8);
-            return {plan_octant_order(teams, octant_count, 4),
-                    plan_octant_order(teams, octant_count, 5), teams};
+            return {plan_octant_order(teams, octant_count), teams};
         }
     }
     if (mode != 3 || refine_lane_tape == 0 || 4 * teams.team_jobs > ctx.max_buffer_bytes())
@@ -180,21 +179,22 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
     return s;
 }
 
-// The cells step's order passes (prune_team.glsl: order_octants; `mode` 4 counts, 5 places):
-// the step's `octant_count` octants, 64 a workgroup at a time, one loop a dispatch under a
-// loop limit (lavapipe). Their time and dispatches are the cells step's (one shape).
-Step Pruner::plan_octant_order(const Step& cells, uint64_t octant_count, uint32_t mode) const {
+// The cells step's order pass (prune_team.glsl: order_octants, mode 4): the step's
+// `octant_count` octants, a window of kPruneOrderWindow a workgroup at a time, one window a
+// workgroup and dispatch under a loop limit (lavapipe). Its time and dispatches are the cells
+// step's (one shape).
+Step Pruner::plan_octant_order(const Step& cells, uint64_t octant_count) const {
     Step s = cells;
-    s.push.mode = mode;
+    s.push.mode = 4;
     s.first_team_job = 0;
     s.team_jobs = octant_count;
-    s.groups =
-        uint32_t(std::min<uint64_t>(ceil_div(octant_count, kWorkgroupSize), ctx.max_workgroups()));
+    s.groups = uint32_t(
+        std::min<uint64_t>(ceil_div(octant_count, kPruneOrderWindow), ctx.max_workgroups()));
     s.threads = s.groups * kWorkgroupSize;
     s.push.threads = s.threads;
     s.teams = s.threads;
     s.rounds = 1;
-    s.per_dispatch = ctx.loop_limited() ? uint64_t(s.groups) * kWorkgroupSize : octant_count;
+    s.per_dispatch = ctx.loop_limited() ? uint64_t(s.groups) * kPruneOrderWindow : octant_count;
     s.job_walk = 0;
     s.shape.jobs = 0;
     s.shape.lanes = 0;
