@@ -16,6 +16,7 @@ export LD_LIBRARY_PATH=/tmp/libs${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
 [ -d .dev/scenes ] && export SDFPRUNE_SCENES=$PWD/.dev/scenes
 mkdir -p build
 cp .dev/bin/sdfprune .dev/bin/sdfprune_tests build/
+[ -f .dev/bin/sdfprune.base ] && cp .dev/bin/sdfprune.base build/
 cli=$(cat .dev/cli_path)
 if [ "$(realpath -m "$cli")" != "$(realpath -m build/sdfprune)" ]; then
   mkdir -p "$(dirname "$cli")"
