@@ -185,8 +185,8 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
         // it fits (prune_wide.comp: a workgroup per parent tape), with subgroup operations
         // where the device has them, and without. Refinement: by default a lane per cell for
         // the tapes of up to 32 words (their longest) and squads for the rest, then squads alone,
-        // then lanes up to 16 words, then lanes up to 4 words (with the cells steps' teams
-        // taking their octants in order of tape length, SDFPRUNE_VULKAN_TEAM_ORDER=1).
+        // then lanes up to 16 words, then lanes up to 4 words (with the teams taking their
+        // jobs block by block, SDFPRUNE_VULKAN_TEAM_ORDER=0).
         for (int variant = 0; variant < 4; ++variant) {
             ::setenv("SDFPRUNE_VULKAN_WIDE", variant == 3 ? "0" : variant > 0 ? "1" : "", 1);
             ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE",
@@ -195,7 +195,7 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
                      : variant == 3 ? "4"
                                     : "",
                      1);
-            ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", variant == 3 ? "1" : "", 1);
+            ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", variant == 3 ? "0" : "", 1);
             const gpu::Grid gpu = gpu::prune(variant == 2 ? plain : *dev, sc, o);
             ::unsetenv("SDFPRUNE_VULKAN_WIDE");
             ::unsetenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE");
@@ -206,7 +206,7 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
             const std::string how =
                 what + (variant == 1   ? ", wide, refinement on squads"
                         : variant == 2 ? ", wide without subgroups, refinement's lanes up to 16"
-                        : variant == 3 ? ", teams in order, refinement's lanes up to 4 words"
+                        : variant == 3 ? ", teams block by block, refinement's lanes up to 4 words"
                                        : "");
             const bool exact = exact_device(*dev);
             expect_same_stats(cpu.stats(), gpu.stats(), how, exact);
@@ -524,11 +524,10 @@ TEST(Gpu, RefinementOrderChangesNoCell) {
     expect_matches_cpu(sc, prune(sc, o), ordered, *dev, "demo 64³, ordered");
 }
 
-// With SDFPRUNE_VULKAN_TEAM_ORDER=1 the cells steps' teams take their octants longest tapes
-// first within windows of 32 neighbouring blocks, after an order pass (a dispatch more in each
-// split level's cells step run in teams); the cells are the same as block by block (the
-// default), and the CPU's. In teams (the
-// order is theirs), and by default (the top levels wide).
+// The octants' and cells' steps in teams take their parents (blocks, octants) longest tapes
+// first within windows of 256, after an order pass (a dispatch more in each such step); the
+// cells are the same as block by block (SDFPRUNE_VULKAN_TEAM_ORDER=0), and the CPU's. In teams
+// (the order is theirs), and by default (the top levels wide).
 TEST(Gpu, TeamJobOrderChangesNoCell) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = builtin_scene("demo");
@@ -537,17 +536,17 @@ TEST(Gpu, TeamJobOrderChangesNoCell) {
     for (const bool teams_only : {true, false}) {
         SCOPED_TRACE(teams_only ? "teams" : "default");
         if (teams_only) ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
-        ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", "1", 1);
         const gpu::Grid ordered = gpu::prune(*dev, sc, o);
-        ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
+        ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", "0", 1);
         const gpu::Grid blocks = gpu::prune(*dev, sc, o);
+        ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
         ::unsetenv("SDFPRUNE_VULKAN_WIDE");
         const std::vector<gpu::GpuStepShape>&a = ordered.stats().steps, &b = blocks.stats().steps;
         ASSERT_EQ(a.size(), b.size());
         uint32_t ordered_steps = 0;
         for (size_t i = 0; i < a.size(); ++i) {
             EXPECT_EQ(a[i].jobs, b[i].jobs) << "step " << i;
-            const bool in_order = a[i].mode == 2 && !a[i].wide;
+            const bool in_order = (a[i].mode == 1 || a[i].mode == 2) && !a[i].wide;
             EXPECT_EQ(a[i].dispatches, b[i].dispatches + (in_order ? 1 : 0)) << "step " << i;
             ordered_steps += in_order ? 1 : 0;
         }
@@ -1307,12 +1306,12 @@ TEST(Gpu, LevelsTooLargeForOneBufferArePrunedInSlices) {
     for (const gpu::GpuStepShape& s : gpu.stats().steps)
         EXPECT_TRUE(seen.insert({s.level, s.mode}).second)
             << "level " << s.level << " mode " << s.mode << " reported twice";
-    // The cells steps' teams taking their octants in order of tape length, slice by slice.
-    ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", "1", 1);
-    const gpu::Grid ordered = gpu::prune(*small, sc, o);
+    // The teams taking their jobs block by block (SDFPRUNE_VULKAN_TEAM_ORDER=0), slice by slice.
+    ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", "0", 1);
+    const gpu::Grid blocks = gpu::prune(*small, sc, o);
     ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
-    EXPECT_GT(ordered.stats().slices, levels) << "no level was sliced";
-    expect_matches_cpu(sc, cpu, ordered, *small, "city 32³ in slices, teams in order");
+    EXPECT_GT(blocks.stats().slices, levels) << "no level was sliced";
+    expect_matches_cpu(sc, cpu, blocks, *small, "city 32³ in slices, teams block by block");
     // On the device as it is, the same scene needs a slice a level.
     const gpu::Grid whole = gpu::prune(*dev, sc, o);
     EXPECT_EQ(whole.stats().slices, levels);

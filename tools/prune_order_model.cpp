@@ -1,11 +1,14 @@
 // prune_order_model.cpp — a model of how long the Vulkan backend's finest pruning steps wait on
 // their longest walk, computed on the CPU, so that a change of their job order can be judged
-// without a GPU (issue 13). Two steps, each run by groups of lanes that take neighbouring jobs
-// and walk as long as the group's longest tape:
+// without a GPU (issue 13). Three steps, each run by groups of lanes that take neighbouring
+// jobs and walk as long as the group's longest tape:
+//   - the finest level's octants step in teams: a workgroup's 8 teams take 8 blocks, each
+//     walking its block's tape. In storage order, or sorted by class in windows of 256 (the
+//     order pass, SDFPRUNE_VULKAN_TEAM_ORDER=1), or the whole step sorted;
 //   - the finest level's cells step in teams (shaders/gpu/prune_team.glsl): a workgroup's 8
 //     teams take 8 jobs, each the cells of one octant pruned from the octant's tape (none
 //     where the octant is far-field). Block by block, the 8 octants of a block; in windows,
-//     each window of 256 octants sorted by class of tape length (octant_class, the order
+//     each window of 256 octants sorted by class of tape length (parent_class, the order
 //     pass, SDFPRUNE_VULKAN_TEAM_ORDER=1); and, for comparison, the whole step sorted;
 //   - refinement's lane pass (shaders/gpu/prune_refine_lanes.comp): a subgroup's 32 lanes take
 //     32 cells, each walking its own tape (at most 32 words). Before: every near cell listed,
@@ -34,8 +37,8 @@ namespace {
 
 constexpr uint32_t kTeams = 8, kSubgroup = 32, kLaneTape = 32, kOrderWindow = 256;
 
-// prune_team.glsl: octant_class (0: far-field); prune_common.glsl: refine_walk_class.
-uint32_t octant_class(uint32_t len) {
+// prune_team.glsl: parent_class (0: far-field); prune_common.glsl: refine_walk_class.
+uint32_t parent_class(uint32_t len) {
     if (len == 0) return 0;
     const uint32_t k = uint32_t(std::bit_width(len)) - 1;
     const uint32_t upper = k > 0 && len >= (3u << (k - 1)) ? 1 : 0;
@@ -112,12 +115,13 @@ int main(int argc, char** argv) {
                         grid.level_cells(at.level)[at.index].tape != PrunedCell::kFarField)
                         origin_of[at.index] = (z * P + y) * P + x;
                 }
-        std::vector<uint32_t> octants;
+        std::vector<uint32_t> octants, block_lengths;
         for (uint32_t i = 0; i < origin_of.size(); ++i) {
             if (origin_of[i] == ~0u) continue;
             const uint32_t x = origin_of[i] % P * f, y = origin_of[i] / P % P * f,
                            z = origin_of[i] / (P * P) * f;
             const std::span<const uint32_t> parent = tape_of(grid, grid.level_cells(finest - 1)[i]);
+            block_lengths.push_back(uint32_t(parent.size()));
             for (uint32_t oc = 0; oc < 8; ++oc) {
                 const vec3 corner(float(x + (oc & 1) * hf), float(y + (oc >> 1 & 1) * hf),
                                   float(z + (oc >> 2 & 1) * hf));
@@ -164,11 +168,19 @@ int main(int argc, char** argv) {
 
         std::printf("%s at %u³\n", argv[1], N);
         std::printf(
+            "  octants step (teams, %zu blocks): group walk steps: in storage order %llu, in "
+            "windows %llu, sorted whole %llu, ideal %llu\n",
+            block_lengths.size(), (unsigned long long)group_steps(block_lengths, kTeams),
+            (unsigned long long)group_steps(ordered(block_lengths, parent_class, kOrderWindow),
+                                            kTeams),
+            (unsigned long long)group_steps(ordered(block_lengths, parent_class), kTeams),
+            (unsigned long long)ideal(block_lengths, kTeams));
+        std::printf(
             "  cells step (teams, %zu octants of %zu blocks): group walk steps: block by block "
             "%llu, in windows %llu, sorted whole %llu, ideal %llu\n",
             octants.size(), octants.size() / 8, (unsigned long long)group_steps(octants, kTeams),
-            (unsigned long long)group_steps(ordered(octants, octant_class, kOrderWindow), kTeams),
-            (unsigned long long)group_steps(ordered(octants, octant_class), kTeams),
+            (unsigned long long)group_steps(ordered(octants, parent_class, kOrderWindow), kTeams),
+            (unsigned long long)group_steps(ordered(octants, parent_class), kTeams),
             (unsigned long long)ideal(octants, kTeams));
         std::printf(
             "  refinement's lane pass (%zu cells walked of %zu near cells of at most %u "

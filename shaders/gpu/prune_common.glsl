@@ -72,8 +72,9 @@ layout(push_constant) uniform Push {
                      // 32: prune_refine_lanes.comp's second pass (its jobs: the more list);
                      // 64: prune_refine_lanes.comp in one pass (every sub-box);
                      // 128: prune_refine_lanes.comp's order pass; 256: refinement's walks
-                     // taken from the order list (refine_job); 512: mode 2's team jobs taken
-                     // from the order list (prune_team.glsl: ordered_job)
+                     // taken from the order list (refine_job); 512: modes 1 and 2's team jobs
+                     // taken from the order list (prune_team.glsl: ordered_job); 1024: mode 4
+                     // orders blocks (else octants)
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's team jobs: [first_job, jobs)
     uint round;       // 0: start the jobs; later rounds resume them (prune.comp)
@@ -86,7 +87,7 @@ layout(push_constant) uniform Push {
     uint more_start;    // prune_refine_lanes.comp: where its more list starts in scratch
     uint group_base;    // prune_wide.comp: the dispatch's first workgroup among the step's
     uint order_start;   // where the order list starts in scratch (flags 128, 256, 512; mode 4)
-    uint order_first;   // modes 2 (flag 512) and 4: the step's first octant
+    uint order_first;   // modes 1, 2 (flag 512) and 4: the step's first parent (block, octant)
 } pc;
 
 // The step's counters (near_jobs, near_words, max_len, max_depth, then walk_cells), summed and

@@ -5,7 +5,7 @@
 //   mode 0: kTeam cells of a block, from the block's tape
 //   mode 1: the 8 octants of a block, from the block's tape (not stored as cells)
 //   mode 2: kTeam cells of an octant, from the octant's tape (or far-field from a far octant)
-// (Refinement, mode 3, is prune_refine.comp's.) Mode 4 orders mode 2's jobs (below).
+// (Refinement, mode 3, is prune_refine.comp's.) Mode 4 orders modes 1 and 2's jobs (below).
 // The kernel runs in steps, the same for every lane of a workgroup: at each step a team that
 // evaluates stages the next kWindow words of its tape in shared memory, then every lane advances
 // its phase by at most kWindow entries (evaluation from the window; the far-field test; the
@@ -88,31 +88,32 @@ void store_slot(uint at, vec3 x, uint entry) {
     lane_scratch[at + 3u * kTeam] = entry;
 }
 
-// Mode 2's jobs in order (push flag 512): a workgroup's 8 teams run as long as their longest
-// walk, and in block order they take the 8 octants of one block, whose tapes differ widely in
-// length (molecule's finest level: from 1 word to 597, or none where the octant is far-field).
-// A pass before the cells step (mode 4) sorts each window of kOrderWindow octants, 32
-// neighbouring blocks', by class of tape length, the longest first (class 0: far-field, last),
-// into the order list (pc.order_start in scratch, rank 0 the first); its jobs then take the
-// octants in that order. A window keeps the octants of a workgroup's teams near each other (the
-// nodes their tapes read alike) and takes most of what a sort of the whole step would
-// (tools/prune_order_model.cpp). Within a class the order is the atomics': the cells do not
-// depend on it. An octant's class: 0 far-field, else 1 + 2k (+ 1 in the upper half of the
-// octave) for a tape of 2^k to 2^(k+1) − 1 words.
+// Jobs in order (push flag 512, modes 1 and 2): a workgroup's 8 teams run as long as their
+// longest walk, and in block order they take the 8 octants of one block (mode 2), whose tapes
+// differ widely in length (molecule's finest level: from 1 word to 597, or none where the
+// octant is far-field), or 8 neighbouring blocks (mode 1). A pass before the step (mode 4)
+// sorts each window of kOrderWindow of the step's parents (octants; blocks with flag 1024), 32
+// neighbouring blocks' octants, by class of tape length, the longest first (class 0:
+// far-field, last), into the order list (pc.order_start in scratch, rank 0 the first); the
+// step's jobs then take the parents in that order. A window keeps the parents of a workgroup's
+// teams near each other (the nodes their tapes read alike) and takes most of what a sort of
+// the whole step would (tools/prune_order_model.cpp). Within a class the order is the
+// atomics': the cells do not depend on it. A parent's class: 0 far-field, else 1 + 2k (+ 1 in
+// the upper half of the octave) for a tape of 2^k to 2^(k+1) − 1 words.
 const uint kOrderClasses = 32u;
-const uint kOrderWindow = 256u;  // gpu_prune_plan.cpp: kPruneOrderWindow
-uint octant_class(uint octant) {
-    Cell o = octants[octant];
-    if (o.tape == kFarField) return 0u;
-    uint len = tape_read(o.tape, 0u);
+const uint kOrderWindow = 256u;  // device_layout.hpp: kPruneOrderWindow
+uint parent_class(uint parent) {
+    uint tape = (pc.flags & 1024u) != 0u ? blocks[parent].tape : octants[parent].tape;
+    if (tape == kFarField) return 0u;
+    uint len = tape_read(tape, 0u);
     uint k = uint(findMSB(len));
     uint upper = k > 0u && len >= (3u << (k - 1u)) ? 1u : 0u;
     return min(1u + 2u * k + upper, kOrderClasses - 1u);
 }
 shared uint s_order_count[kOrderClasses];
-// Mode 4: the octants [pc.order_first, pc.order_first + pc.jobs), a window a workgroup at a time
-// (kOrderWindow / 64 octants a lane): a counting sort in shared memory.
-void order_octants() {
+// Mode 4: the parents [pc.order_first, pc.order_first + pc.jobs), a window a workgroup at a
+// time (kOrderWindow / 64 parents a lane): a counting sort in shared memory.
+void order_parents() {
     const uint kPerLane = kOrderWindow / 64u;
     uint lane = gl_LocalInvocationID.x;
     for (uint w0 = pc.first_job + gl_WorkGroupID.x * kOrderWindow; w0 < pc.jobs;
@@ -123,7 +124,7 @@ void order_octants() {
         uint cls[kPerLane], rank[kPerLane];
         for (uint k = 0u; k < kPerLane; ++k) {
             uint i = w0 + k * 64u + lane;
-            cls[k] = i < pc.jobs ? octant_class(pc.order_first + i) : 0u;
+            cls[k] = i < pc.jobs ? parent_class(pc.order_first + i) : 0u;
             rank[k] = i < pc.jobs ? atomicAdd(s_order_count[cls[k]], 1u) : 0u;
         }
         memoryBarrierShared();
@@ -147,18 +148,19 @@ void order_octants() {
         barrier();  // the places read before the next window resets them
     }
 }
-// Team job j of mode 2 under flag 512: the job at the same place of its octant (a team takes
-// kTeam of the octant's cells) of the octant of rank j / per_team in the order list.
+// Team job j under flag 512: the job at the same place of its parent (in mode 2 a team takes
+// kTeam of an octant's cells; in mode 1 a block is one job) of the parent of rank j / per_team
+// in the order list.
 uint ordered_job(uint j) {
     uint hf = pc.factor / 2u;
-    uint per_team = (hf * hf * hf + kTeam - 1u) / kTeam;
-    uint octant = lane_scratch[pc.order_start + j / per_team - pc.order_first];
-    return octant * per_team + j % per_team;
+    uint per_team = pc.mode == 2u ? (hf * hf * hf + kTeam - 1u) / kTeam : 1u;
+    uint parent = lane_scratch[pc.order_start + j / per_team - pc.order_first];
+    return parent * per_team + j % per_team;
 }
 
 void main() {
     if (pc.mode >= 4u) {
-        order_octants();
+        order_parents();
         return;
     }
     counts_begin();

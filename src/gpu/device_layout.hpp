@@ -58,7 +58,7 @@ struct GpuCounters {
 inline constexpr uint64_t kPruneStateWords = 16;
 inline constexpr uint64_t kPruneTeam = 8;
 inline constexpr uint64_t kPruneWindow = 64;
-// prune.comp, mode 4: the octants a workgroup sorts together (prune_team.glsl: kOrderWindow).
+// prune.comp, mode 4: the parents a workgroup sorts together (prune_team.glsl: kOrderWindow).
 inline constexpr uint64_t kPruneOrderWindow = 256;
 inline constexpr uint64_t kRefineSquad = 32;
 inline constexpr uint32_t kLaneTapeMax = 32;

@@ -91,7 +91,7 @@ class Pruner {
     Step plan_refine_lanes(const Step& squads, bool second_pass) const;
     Step plan_refine_more(const Step& lanes) const;
     Step plan_refine_order(const Step& lanes, uint64_t listed) const;
-    Step plan_octant_order(const Step& cells, uint64_t octant_count) const;
+    Step plan_job_order(const Step& step, uint64_t parents) const;
     void plan_squads(const Level& lv, Step& s);
     PrunePush push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
                        uint32_t budget) const;
@@ -156,10 +156,10 @@ class Pruner {
     // The lane pass takes its cells longest tapes first, in an order pass before it;
     // SDFPRUNE_VULKAN_REFINE_ORDER=0: in the order they were listed.
     bool refine_order = true;
-    // SDFPRUNE_VULKAN_TEAM_ORDER=1: the cells' team jobs take their octants longest tapes
-    // first, after two order passes; by default block by block (on lavapipe the order made
-    // the finest cells step slower; on a GPU it is not measured yet: BENCHMARKS.md, stop 39).
-    bool team_order = false;
+    // The octants' and cells' team jobs take their parents (blocks, octants) longest tapes
+    // first, after an order pass; SDFPRUNE_VULKAN_TEAM_ORDER=0: block by block (not measured
+    // on a GPU yet: BENCHMARKS.md, stop 39).
+    bool team_order = true;
     vec3 origin, extent;
     float L = 1;
     uint32_t flags = 0;  // the push constants' (prune_common.glsl)

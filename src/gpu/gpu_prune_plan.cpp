@@ -39,16 +39,17 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
                                     uint64_t blocks, uint64_t jobs, const Buffer& octants,
                                     const Buffer& cells, bool transient) {
     Step teams = plan_teams(lv, mode, first_block, blocks, jobs, octants, cells, transient);
-    if (mode == 2 && !teams.wide && team_order) {
-        // The cells' jobs in order of their octants' tape lengths, listed past the teams'
-        // scratch by a pass before them (prune_team.glsl: order_octants), where it fits.
-        const uint64_t octant_count = blocks * 8, at = teams.scratch_words;
-        if (octant_count > 0 && 4 * (at + octant_count) <= ctx.max_buffer_bytes()) {
-            hold(scratch, 4 * (at + octant_count));
+    if ((mode == 1 || mode == 2) && !teams.wide && team_order) {
+        // The jobs in order of their parents' tape lengths (the blocks', the octants'), listed
+        // past the teams' scratch by a pass before them (prune_team.glsl: order_parents), where
+        // it fits.
+        const uint64_t parents = mode == 1 ? blocks : blocks * 8, at = teams.scratch_words;
+        if (parents > 0 && 4 * (at + parents) <= ctx.max_buffer_bytes()) {
+            hold(scratch, 4 * (at + parents));
             teams.push.flags |= 512u;
             teams.push.order_start = uint32_t(at);
-            teams.push.order_first = uint32_t(first_block * 8);
-            return {plan_octant_order(teams, octant_count), teams};
+            teams.push.order_first = uint32_t(mode == 1 ? first_block : first_block * 8);
+            return {plan_job_order(teams, parents), teams};
         }
     }
     if (mode != 3 || refine_lane_tape == 0 || 4 * teams.team_jobs > ctx.max_buffer_bytes())
@@ -179,22 +180,23 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
     return s;
 }
 
-// The cells step's order pass (prune_team.glsl: order_octants, mode 4): the step's
-// `octant_count` octants, a window of kPruneOrderWindow a workgroup at a time, one window a
-// workgroup and dispatch under a loop limit (lavapipe). Its time and dispatches are the cells
-// step's (one shape).
-Step Pruner::plan_octant_order(const Step& cells, uint64_t octant_count) const {
-    Step s = cells;
+// The order pass of a step in teams (prune_team.glsl: order_parents, mode 4; flag 1024 for the
+// octants step's blocks): its `parents`, a window of kPruneOrderWindow a workgroup at a time,
+// one window a workgroup and dispatch under a loop limit (lavapipe). Its time and dispatches
+// are the step's (one shape).
+Step Pruner::plan_job_order(const Step& step, uint64_t parents) const {
+    Step s = step;
+    if (s.push.mode == 1) s.push.flags |= 1024u;
     s.push.mode = 4;
     s.first_team_job = 0;
-    s.team_jobs = octant_count;
-    s.groups = uint32_t(
-        std::min<uint64_t>(ceil_div(octant_count, kPruneOrderWindow), ctx.max_workgroups()));
+    s.team_jobs = parents;
+    s.groups =
+        uint32_t(std::min<uint64_t>(ceil_div(parents, kPruneOrderWindow), ctx.max_workgroups()));
     s.threads = s.groups * kWorkgroupSize;
     s.push.threads = s.threads;
     s.teams = s.threads;
     s.rounds = 1;
-    s.per_dispatch = ctx.loop_limited() ? uint64_t(s.groups) * kPruneOrderWindow : octant_count;
+    s.per_dispatch = ctx.loop_limited() ? uint64_t(s.groups) * kPruneOrderWindow : parents;
     s.job_walk = 0;
     s.shape.jobs = 0;
     s.shape.lanes = 0;
