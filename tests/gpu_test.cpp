@@ -461,10 +461,7 @@ uint64_t cells_refinement_copies(const Scene& sc, const PruneOptions& o) {
                     sc.aabb.min +
                         vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * cell_size,
                     half, math::length(half)};
-                evaluate_cell(sc, tape, box, o.bounds, s);
-                const RefineNeed need = refine_need(sc, tape, box, o.far_field, o.far_field_c,
-                                                    c.value, tape_may_decide(sc, tape, s));
-                copies += need.any ? 0 : 1;
+                copies += refine_need_of_tape(sc, tape, box, o, c.value, s).any ? 0 : 1;
             }
     return copies;
 }

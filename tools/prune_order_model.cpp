@@ -151,9 +151,7 @@ int main(int argc, char** argv) {
                     if (tape.size() > kLaneTape) continue;  // the squads'
                     const CellBox box{sc.aabb.min + vec3(x + 0.5f, y + 0.5f, z + 0.5f) * cell_size,
                                       half, math::length(half)};
-                    evaluate_cell(sc, tape, box, o.bounds, s);
-                    const RefineNeed need = refine_need(sc, tape, box, o.far_field, o.far_field_c,
-                                                        c.value, tape_may_decide(sc, tape, s));
+                    const RefineNeed need = refine_need_of_tape(sc, tape, box, o, c.value, s);
                     const int len = int(tape.size());
                     before[at.index] = len == 1 && !need.far ? 0 : len;
                     if (need.any) walked[at.index] = len;

@@ -679,10 +679,14 @@ struct RefineNeed {
 };
 RefineNeed refine_need(const Scene& scene, std::span<const uint32_t> tape, const CellBox& box,
                        bool far_field, float far_field_c, float value, bool may_decide);
-// refine_need's `may_decide` for a whole tape evaluated at a cell's centre into `s`
-// (evaluate_cell): whether some operator's operands there pass blend_may_decide. (Pruning
-// finds it for the operators its compaction keeps: compact_siblings' `decidable`.)
-bool tape_may_decide(const Scene& scene, std::span<const uint32_t> tape, const CellScratch& s);
+// refine_need for a finest near cell's `tape` taken alone, as tools and tests that look at
+// pruned tapes need it: evaluates the tape at the box's centre into `s` (evaluate_cell, with
+// `options`' bounds) and takes `may_decide` from every operator of it (blend_may_decide on
+// its operands' values there). Pruning finds that for the operators its compaction keeps
+// (compact_siblings' `decidable`), the same on a compacted tape.
+RefineNeed refine_need_of_tape(const Scene& scene, std::span<const uint32_t> tape,
+                               const CellBox& box, const PruneOptions& options, float value,
+                               CellScratch& s);
 
 // refine_cell for `count` <= kSiblingLanes cells of one size that share one `tape` (values[j]
 // and may_decide[j]: cell j's), in one pass over the tape per batch of sub-boxes, the cells'

@@ -175,6 +175,8 @@ void main() {
     uint win = tl * kWindow;                   // the team's window in shared memory
     bool interval = (pc.flags & 2u) != 0u;
     bool transient = pc.mode == 1u || (pc.flags & 4u) != 0u;
+    // The step lists its near cells for refinement (list_near_cell), which reads bit 5.
+    bool lists = pc.mode != 1u && (pc.flags & 4u) != 0u;
     const Cell kNoCell = Cell(kFarField, 0u, 0.0, 0.0);  // store()'s, for refinement only
 
     // Every lane of a workgroup sees the same trip count (barriers inside); teams past
@@ -270,7 +272,7 @@ void main() {
                         // this very step, and reads its own write, with no barrier between.
                         lane_scratch[lbase + i] = lane_scratch[sl + 3u * kTeam];
                         x = combine_operator(nd, R, interval, false, left, tx, decision);
-                        if (blend_may_decide(left.x, tx.x, nd.blend)) decision |= 32u;
+                        if (lists && blend_may_decide(left.x, tx.x, nd.blend)) decision |= 32u;
                     }
                     if (tape_negated(w)) x = negate_range(x);
                     // The decision, its sweep flags cleared for stage 3.

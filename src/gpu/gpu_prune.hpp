@@ -90,6 +90,7 @@ class Pruner {
                     uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient);
     Step plan_refine_lanes(const Step& squads, bool second_pass) const;
     Step plan_refine_more(const Step& lanes) const;
+    Step plan_order_pass(const Step& step, uint64_t items, uint64_t per_group) const;
     Step plan_refine_order(const Step& lanes, uint64_t listed) const;
     Step plan_job_order(const Step& step, uint64_t parents) const;
     void plan_squads(const Level& lv, Step& s);

@@ -180,27 +180,33 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
     return s;
 }
 
-// The order pass of a step in teams (prune_team.glsl: order_parents, mode 4; flag 1024 for the
-// octants step's blocks): its `parents`, a window of kPruneOrderWindow a workgroup at a time,
-// one window a workgroup and dispatch under a loop limit (lavapipe). Its time and dispatches
-// are the step's (one shape).
-Step Pruner::plan_job_order(const Step& step, uint64_t parents) const {
+// An order pass before `step` (its kernel's, with the push constants the caller then sets): a
+// counting sort of `items` entries, `per_group` a workgroup at a time, one such tile a
+// workgroup and dispatch under a loop limit (lavapipe). It walks no tape; its time and
+// dispatches are the step's (one shape).
+Step Pruner::plan_order_pass(const Step& step, uint64_t items, uint64_t per_group) const {
     Step s = step;
-    if (s.push.mode == 1) s.push.flags |= 1024u;
-    s.push.mode = 4;
     s.first_team_job = 0;
-    s.team_jobs = parents;
-    s.groups =
-        uint32_t(std::min<uint64_t>(ceil_div(parents, kPruneOrderWindow), ctx.max_workgroups()));
+    s.team_jobs = items;
+    s.groups = uint32_t(std::min<uint64_t>(ceil_div(items, per_group), ctx.max_workgroups()));
     s.threads = s.groups * kWorkgroupSize;
     s.push.threads = s.threads;
     s.teams = s.threads;
     s.rounds = 1;
-    s.per_dispatch = ctx.loop_limited() ? uint64_t(s.groups) * kPruneOrderWindow : parents;
+    s.per_dispatch = ctx.loop_limited() ? uint64_t(s.groups) * per_group : items;
     s.job_walk = 0;
     s.shape.jobs = 0;
     s.shape.lanes = 0;
     s.shape.longest_walk_words = 0;
+    return s;
+}
+
+// The order pass of a step in teams (prune_team.glsl: order_parents, mode 4; flag 1024 for the
+// octants step's blocks): its `parents`, a window of kPruneOrderWindow a workgroup at a time.
+Step Pruner::plan_job_order(const Step& step, uint64_t parents) const {
+    Step s = plan_order_pass(step, parents, kPruneOrderWindow);
+    if (step.push.mode == 1) s.push.flags |= 1024u;
+    s.push.mode = 4;
     return s;
 }
 
@@ -271,23 +277,11 @@ Step Pruner::plan_refine_lanes(const Step& squads, bool second_pass) const {
 }
 
 // The lane pass's order pass (prune_refine_lanes.comp, push flag 128): the `listed` cells to
-// decide again sorted by walk class into the order list, 64 a workgroup at a time; a
-// workgroup takes at most 64 entries per dispatch and lavapipe loop (4 M cells a dispatch).
+// decide again sorted by walk class into the order list, 64 a workgroup at a time.
 Step Pruner::plan_refine_order(const Step& lanes, uint64_t listed) const {
-    Step s = lanes;
+    Step s = plan_order_pass(lanes, listed, kWorkgroupSize);
     s.order_pass = true;
     s.push.flags = (s.push.flags & ~256u) | 128u;
-    s.first_team_job = 0;
-    s.team_jobs = listed;
-    s.groups = uint32_t(std::min<uint64_t>(ceil_div(listed, kWorkgroupSize), ctx.max_workgroups()));
-    s.threads = s.groups * kWorkgroupSize;
-    s.teams = s.threads;
-    s.rounds = 1;
-    s.per_dispatch = ctx.loop_limited() ? uint64_t(s.groups) * kWorkgroupSize : listed;
-    s.job_walk = 0;
-    s.shape.jobs = 0;  // the lane pass's (one shape, add_shape)
-    s.shape.lanes = 0;
-    s.shape.longest_walk_words = 0;
     return s;
 }
 

@@ -413,14 +413,17 @@ RefineNeed refine_need(const Scene& sc, std::span<const uint32_t> tape, const Ce
     return need;
 }
 
-bool tape_may_decide(const Scene& sc, std::span<const uint32_t> tape, const CellScratch& s) {
-    for (uint32_t e = 0; e < uint32_t(tape.size()); ++e) {
+RefineNeed refine_need_of_tape(const Scene& sc, std::span<const uint32_t> tape, const CellBox& box,
+                               const PruneOptions& opt, float value, CellScratch& s) {
+    evaluate_cell(sc, tape, box, opt.bounds, s);
+    bool may_decide = false;
+    for (uint32_t e = 0; e < uint32_t(tape.size()) && !may_decide; ++e) {
         const uint32_t node = math::tape_node(tape[e]);
-        if (!sc.is_primitive(node) &&
-            math::blend_may_decide(s.value[s.left[e]], s.value[s.right[e]], sc.blend[node]))
-            return true;
+        may_decide =
+            !sc.is_primitive(node) &&
+            math::blend_may_decide(s.value[s.left[e]], s.value[s.right[e]], sc.blend[node]);
     }
-    return false;
+    return refine_need(sc, tape, box, opt.far_field, opt.far_field_c, value, may_decide);
 }
 
 void refine_cells(const Scene& sc, std::span<const uint32_t> tape, const CellBox* boxes,
