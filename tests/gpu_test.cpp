@@ -261,6 +261,32 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
 // pruning's. (Teams only: SDFPRUNE_VULKAN_WIDE=0.)
 void expect_same_device_cells(const gpu::Grid& a, const gpu::Grid& b, const std::string& what);
 
+// A pruning with the environment variable `name` set to `value` (a setting read by the pruner)
+// for its duration.
+gpu::Grid prune_with_env(gpu::Device& dev, const Scene& sc, const PruneOptions& o, const char* name,
+                         const char* value) {
+    struct Setting {
+        const char* name;
+        ~Setting() { ::unsetenv(name); }
+    } setting{name};
+    ::setenv(name, value, 1);
+    return gpu::prune(dev, sc, o);
+}
+
+// A right-deep chain of `depth` smooth unions of small spheres on a helix: its evaluation
+// stack is as deep as the chain, its tapes long.
+Scene right_deep_chain(uint32_t depth) {
+    SceneBuilder b;
+    Shape chain = b.sphere(0.05f).translated(vec3(0.9f, 0, 0));
+    for (uint32_t i = 1; i <= depth; ++i) {
+        const float a = float(i) * 0.0031f;
+        const Shape s =
+            b.sphere(0.04f).translated(vec3(std::cos(a), std::sin(a), 0.1f * std::sin(3 * a)));
+        chain = smooth_union(s, chain, 0.02f);
+    }
+    return b.build(chain);
+}
+
 TEST(Gpu, StepShapesFollowTheLevels) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = builtin_scene("demo");
@@ -507,9 +533,7 @@ TEST(Gpu, RefinementOrderChangesNoCell) {
     PruneOptions o;
     o.resolution = 64;
     const gpu::Grid ordered = gpu::prune(*dev, sc, o);
-    ::setenv("SDFPRUNE_VULKAN_REFINE_ORDER", "0", 1);
-    const gpu::Grid listed = gpu::prune(*dev, sc, o);
-    ::unsetenv("SDFPRUNE_VULKAN_REFINE_ORDER");
+    const gpu::Grid listed = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_REFINE_ORDER", "0");
     const gpu::GpuStepShape &a = ordered.stats().steps.back(), &b = listed.stats().steps.back();
     ASSERT_EQ(a.mode, 3u);
     ASSERT_EQ(b.mode, 3u);
@@ -534,9 +558,7 @@ TEST(Gpu, TeamJobOrderChangesNoCell) {
         SCOPED_TRACE(teams_only ? "teams" : "default");
         if (teams_only) ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
         const gpu::Grid ordered = gpu::prune(*dev, sc, o);
-        ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", "0", 1);
-        const gpu::Grid blocks = gpu::prune(*dev, sc, o);
-        ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
+        const gpu::Grid blocks = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_TEAM_ORDER", "0");
         ::unsetenv("SDFPRUNE_VULKAN_WIDE");
         const std::vector<gpu::GpuStepShape>&a = ordered.stats().steps, &b = blocks.stats().steps;
         ASSERT_EQ(a.size(), b.size());
@@ -550,6 +572,63 @@ TEST(Gpu, TeamJobOrderChangesNoCell) {
         EXPECT_GT(ordered_steps, 0u);
         expect_same_device_cells(ordered, blocks, "ordered against block by block");
         expect_matches_cpu(sc, prune(sc, o), ordered, *dev, "demo 64³, teams in order");
+    }
+}
+
+// The steps' counters live in device memory, set at each submission's start and copied to a
+// host-visible mirror at its end; with SDFPRUNE_VULKAN_HOST_COUNTERS=1 the kernels' atomics hit
+// the host-visible buffer itself. Either way the same grid, statistics and submissions.
+TEST(Gpu, CountersInDeviceOrHostMemoryGiveOneGrid) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Scene sc = builtin_scene("demo");
+    PruneOptions o;
+    o.resolution = 64;
+    const gpu::Grid device_counters = gpu::prune(*dev, sc, o);
+    const gpu::Grid host_counters =
+        prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_HOST_COUNTERS", "1");
+    EXPECT_EQ(device_counters.stats().submissions, host_counters.stats().submissions);
+    EXPECT_EQ(device_counters.stats().pool_grows, host_counters.stats().pool_grows);
+    expect_same_stats(host_counters.stats(), device_counters.stats(), "counters in device memory");
+    expect_same_device_cells(device_counters, host_counters, "counters in device memory");
+    expect_matches_cpu(sc, prune(sc, o), device_counters, *dev, "demo 64³");
+}
+
+// A step in teams whose jobs' tapes sum to less than the longest tape per team has each job
+// claim scratch for its own tape (prune_team.glsl: claim_entries) instead of every team
+// holding room for the longest: less scratch, the same cells as with room for the longest
+// (SDFPRUNE_VULKAN_TEAM_CLAIMS=0) and the CPU's. In teams throughout, on the demo scene and
+// on a right-deep chain of 12,000 whose long tapes lavapipe prunes over resumed rounds (a
+// job's claim kept in its team's state between them).
+TEST(Gpu, TeamClaimsChangeNoCell) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    struct Case {
+        std::string what;
+        Scene sc;
+        uint32_t resolution;
+    };
+    std::vector<Case> cases;
+    cases.push_back({"demo 64³", builtin_scene("demo"), 64});
+    cases.push_back({"chain of 12,000 at 16³", right_deep_chain(12000), 16});
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.what);
+        PruneOptions o;
+        o.resolution = c.resolution;
+        ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
+        const gpu::Grid claims = gpu::prune(*dev, c.sc, o);
+        const gpu::Grid longest = prune_with_env(*dev, c.sc, o, "SDFPRUNE_VULKAN_TEAM_CLAIMS", "0");
+        ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+        const std::vector<gpu::GpuStepShape>&a = claims.stats().steps, &b = longest.stats().steps;
+        ASSERT_EQ(a.size(), b.size());
+        uint32_t smaller = 0;
+        for (size_t i = 0; i < a.size(); ++i) {
+            EXPECT_EQ(a[i].jobs, b[i].jobs) << "step " << i;
+            EXPECT_LE(a[i].scratch_bytes, b[i].scratch_bytes) << "step " << i;
+            smaller += a[i].scratch_bytes < b[i].scratch_bytes ? 1 : 0;
+        }
+        EXPECT_GT(smaller, 0u);
+        expect_same_stats(longest.stats(), claims.stats(), "claims against room for the longest");
+        expect_same_device_cells(claims, longest, "claims against room for the longest");
+        expect_matches_cpu(c.sc, prune(c.sc, o), claims, *dev, c.what);
     }
 }
 
@@ -870,15 +949,7 @@ TEST(Gpu, DeepChainPrunes) {
     // (lavapipe ends an invocation's loops after 65,535 iterations in all: there the longer
     // tapes are pruned over several resumed rounds.)
     for (uint32_t depth : {3000u, 12000u}) {
-        SceneBuilder b;
-        Shape chain = b.sphere(0.05f).translated(vec3(0.9f, 0, 0));
-        for (uint32_t i = 1; i <= depth; ++i) {
-            const float a = float(i) * 0.0031f;
-            const Shape s =
-                b.sphere(0.04f).translated(vec3(std::cos(a), std::sin(a), 0.1f * std::sin(3 * a)));
-            chain = smooth_union(s, chain, 0.02f);
-        }
-        const Scene sc = b.build(chain);
+        const Scene sc = right_deep_chain(depth);
         ASSERT_EQ(sc.max_stack, depth + 1);
         PruneOptions o;
         o.resolution = 16;

@@ -106,6 +106,11 @@ struct GpuStepShape {
     // try (no operator a sub-box might decide, no far-field test that might pass), or tapes
     // too long to refine. They are listed apart, so that their lanes do not wait on walks.
     uint64_t copy_jobs = 0;
+    // The scratch the step's lanes hold (modes 0-2; the most of a level's slices): in teams,
+    // each team's state and stack and each job's tape entries, room for the parents' longest
+    // tape in every team, or where the jobs' tapes sum to less, what they claim at most (each
+    // job room for its own); when wide, every workgroup's in all its buffers.
+    uint64_t scratch_bytes = 0;
 };
 
 struct DevicePruneStats : PruneStats {

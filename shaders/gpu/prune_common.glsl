@@ -34,6 +34,7 @@ layout(std430, binding = 7) buffer Counters {
     // order pass the places of that class taken so far (prune_refine_lanes.comp).
     uint walk_cells[kWalkClasses];
     uint walk_placed[kWalkClasses];
+    uint scratch_claimed;  // scratch words the jobs of a team step claimed (prune_team.glsl)
 };
 // The kernel's scratch (its layout is the kernel's own). Coherent: lanes read what other lanes
 // of their workgroup wrote at earlier steps (a barrier between). In refinement, from
@@ -88,6 +89,7 @@ layout(push_constant) uniform Push {
     uint group_base;    // prune_wide.comp: the dispatch's first workgroup among the step's
     uint order_start;   // where the order list starts in scratch (flags 128, 256, 512; mode 4)
     uint order_first;   // modes 1, 2 (flag 512) and 4: the step's first parent (block, octant)
+    uint claim_words;   // modes 0-2 in teams: the words its jobs may claim (0: no claims)
 } pc;
 
 // The step's counters (near_jobs, near_words, max_len, max_depth, then walk_cells), summed and

@@ -34,10 +34,15 @@ const uint kWindow = 64u;  // tape entries a lane advances per step (gpu_prune.c
 
 #include "prune_common.glsl"
 
-// Per team (see team_words): the lanes' job state (kStateWords each), each parent-tape entry's
-// left operand (one word, the same in every lane), each entry's decision and sweep flags (one
-// word per lane), then 4 words per stack slot and lane (value, lo, hi, entry). Lane l's
-// word of item k is at k · kTeam + l.
+// Per team (team_words): the lanes' job state (kStateWords each) and 4 words per stack slot and
+// lane (value, lo, hi, entry), then per entry of its job's parent tape (len words) the entry's
+// left operand (one word, the same in every lane) and its decision and sweep flags (one word
+// per lane). Lane l's word of item k is at k · kTeam + l. A team's entries are sized for the
+// step's longest parent tape, or, where the jobs' tapes are known to sum to less
+// (pc.claim_words > 0, gpu_prune_plan.cpp), each job claims room for its own tape's entries
+// from the area past the teams' (claim_entries): molecule's level-3 octants, 31,556 jobs on as
+// many teams, whose tapes reach 199 words but sum to 2.9 million, take 105 MB of scratch
+// instead of 250 on an H100.
 
 // The team's scratch, through a second view of the scratch buffer (binding 12, the same buffer
 // as binding 8) without `coherent`: a lane reads only words it wrote itself (its state, its
@@ -58,13 +63,14 @@ const uint kPhaseEvaluate = 0u, kPhaseSweep = 1u, kPhaseWrite = 2u, kPhaseDone =
 // State words: phase, i (next entry), top (stack size; in the write phase the next word),
 // out_len, prims, at (the new tape), value, constant (float bits), the parent's stack depth, the
 // new tape's stack depth now and at most, whether the sweep kept an operator that refinement
-// might decide (list_near_cell).
+// might decide (list_near_cell), where the job's entries are (lbase).
 // An entry's word per lane: bits 0-1 its decision, bit 5 whether its operands at the centre
 // pass blend_may_decide (operators), then the sweep's flags: bits 2-3 alive (0 dead, 1 kept,
 // 2 skipped), bit 4 negate.
 
+uint team_fixed_words() { return kStateWords * kTeam + 4u * pc.max_stack * kTeam; }
 uint team_words() {
-    return kStateWords * kTeam + pc.max_len * (1u + kTeam) + 4u * pc.max_stack * kTeam;
+    return team_fixed_words() + (pc.claim_words != 0u ? 0u : pc.max_len * (1u + kTeam));
 }
 
 // An entry's sweep flags set, its decision bits (0-1 and 5) kept.
@@ -74,6 +80,35 @@ void set_sweep_flags(uint at, uint flags) { lane_scratch[at] = (lane_scratch[at]
 uint root_sweep_flags(uint parent, uint len) {
     uint root_neg = tape_negated(tape_read(parent, 2u + len - 1u)) ? 1u : 0u;
     return (1u << 2) | (root_neg << 4);
+}
+
+// Each team's claim (claim_entries): its job's entries' words, then their first word.
+shared uint s_claim[kTeams];
+const uint kNoClaim = 0xffffffffu;
+// The first word of the entries of this team's job (round 0), whose tape has `len` words (0
+// where it walks none; `lead`: the team's first lane): claimed for the workgroup's 8 teams at once, with one atomic, past the
+// teams' scratch (pc.threads / kTeam of them); kNoClaim where the claims would pass
+// pc.claim_words (the host's bound on them: a bug, which it reports). Every lane calls it.
+uint claim_entries(uint tl, bool lead, uint len) {
+    if (lead) s_claim[tl] = len * (1u + kTeam);
+    memoryBarrierShared();
+    barrier();
+    if (gl_LocalInvocationID.x == 0u) {
+        uint sum = 0u;
+        for (uint t = 0u; t < kTeams; ++t) {
+            uint need = s_claim[t];
+            s_claim[t] = sum;
+            sum += need;
+        }
+        uint first = sum == 0u ? 0u : atomicAdd(scratch_claimed, sum);
+        bool over = first + sum > pc.claim_words || first + sum < first;
+        if (over) atomicOr(overflow, 4u);
+        uint base = (pc.threads / kTeam) * team_fixed_words() + first;
+        for (uint t = 0u; t < kTeams; ++t) s_claim[t] = over ? kNoClaim : base + s_claim[t];
+    }
+    memoryBarrierShared();
+    barrier();
+    return s_claim[tl];
 }
 
 // A stack slot's words (value, lo, hi, entry) at `at`, `at` + kTeam, ... (one lane's).
@@ -169,9 +204,7 @@ void main() {
     uint teams = pc.threads / kTeam;
     uint tbase = team * team_words();
     uint st = tbase + lane;                    // state word k at st + k · kTeam
-    uint lbase = tbase + kStateWords * kTeam;  // entry e's left operand at lbase + e
-    uint dbase = lbase + pc.max_len;           // entry e's decision and flags at dbase + e · kTeam
-    uint sbase = dbase + pc.max_len * kTeam;   // stack slot j, word c at sbase + (4j + c) · kTeam
+    uint sbase = tbase + kStateWords * kTeam;  // stack slot j, word c at sbase + (4j + c) · kTeam
     uint win = tl * kWindow;                   // the team's window in shared memory
     bool interval = (pc.flags & 2u) != 0u;
     bool transient = pc.mode == 1u || (pc.flags & 4u) != 0u;
@@ -200,6 +233,16 @@ void main() {
 
         // The lane's state: new, or from the previous round.
         uint len = walk ? tape_read(parent, 0u) : 0u;
+        // The entries: entry e's left operand at lbase + e, its decision and flags at dbase +
+        // e · kTeam (past the team's stack, or claimed).
+        uint lbase = sbase + 4u * pc.max_stack * kTeam;
+        if (pc.claim_words != 0u) {
+            lbase = pc.round == 0u ? claim_entries(tl, lane == 0u, len)
+                    : walk         ? lane_scratch[st + 12u * kTeam]
+                                   : 0u;
+            if (lbase == kNoClaim) walk = valid = false;  // (the host reports it)
+        }
+        uint dbase = lbase + len;
         uint phase = kPhaseDone, i = 0u, top = 0u, out_len = 0u, prims = 0u, at = 0u;
         uint pdepth = 0u, depth = 0u, depth_max = 0u;
         float value = 0.0, constant = 0.0;
@@ -403,6 +446,7 @@ void main() {
             lane_scratch[st + 9u * kTeam] = depth;
             lane_scratch[st + 10u * kTeam] = depth_max;
             lane_scratch[st + 11u * kTeam] = may_decide ? 1u : 0u;
+            lane_scratch[st + 12u * kTeam] = lbase;
         }
     }
     counts_end();

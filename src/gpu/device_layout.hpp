@@ -48,6 +48,7 @@ struct GpuCounters {
     uint32_t octant_used, octant_capacity, near_words, refine_cells;
     uint32_t near_lo[3], near_hi[3], long_jobs, more_jobs, copy_cells;
     uint32_t walk_cells[kRefineWalkClasses], walk_placed[kRefineWalkClasses];
+    uint32_t scratch_claimed;
 };
 // prune.comp: kStateWords, the words of a lane's job state in its team's scratch; kTeam, the
 // lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step
@@ -78,7 +79,7 @@ struct PrunePush {                                  // prune.comp and prune_wide
     vec4 origin, csize;
     uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
     uint32_t round, budget, refine, octant_start, list_start, lane_tape, wide_split;
-    uint32_t more_start, group_base, order_start, order_first;
+    uint32_t more_start, group_base, order_start, order_first, claim_words;
 };
 struct ExpandPush {  // expand.comp: Push
     uint32_t factor, cells_count, next_factor, bound_only;
@@ -116,9 +117,10 @@ static_assert(sizeof(GpuNode) == 16 && sizeof(GpuPrimitiveExtra) == 48);
 static_assert(sizeof(math::PrimitiveParams) == 96 && offsetof(math::PrimitiveParams, a) == 48);
 static_assert(sizeof(PrunedCell) == 16 && offsetof(PrunedCell, value) == 8);
 static_assert(sizeof(GpuBlock) == 16 && sizeof(GpuLevel) == 16 && sizeof(GpuGridParams) == 64);
-static_assert(sizeof(GpuCounters) == 144 && offsetof(GpuCounters, near_lo) == 44 &&
+static_assert(sizeof(GpuCounters) == 148 && offsetof(GpuCounters, near_lo) == 44 &&
               offsetof(GpuCounters, long_jobs) == 68 && offsetof(GpuCounters, copy_cells) == 76 &&
-              offsetof(GpuCounters, walk_placed) == 112);
+              offsetof(GpuCounters, walk_placed) == 112 &&
+              offsetof(GpuCounters, scratch_claimed) == 144);
 static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) <= 128);
 static_assert(sizeof(TraceParams) == 192 && sizeof(DiscretizeParams) == 96);
 static_assert(sizeof(GpuPixel) == 32 && sizeof(SlicePush) == 32);

@@ -45,6 +45,13 @@ GpuGridParams DeviceGrid::grid_params() const {
 }
 
 namespace pruning {
+namespace {
+// An on/off setting from the environment: `fallback` where `name` is unset or empty.
+bool env_flag(const char* name, bool fallback) {
+    const char* env = std::getenv(name);
+    return env && *env ? std::atoi(env) != 0 : fallback;
+}
+}  // namespace
 
 Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, DeviceGrid& grid)
     : ctx(device.context()),
@@ -56,8 +63,10 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
       local(ctx),
       max_pool_words(std::min<uint64_t>(ctx.max_buffer_bytes() / 4, 0xfffffff0u)),
       node_spans(local.slot()),
-      counters(local.create(sizeof(GpuCounters), true)),
-      counter(static_cast<GpuCounters*>(counters.mapped)),
+      host_counters(env_flag("SDFPRUNE_VULKAN_HOST_COUNTERS", false)),
+      counters(local.create(sizeof(GpuCounters), host_counters)),
+      counters_mirror(host_counters ? counters : local.create(sizeof(GpuCounters), true)),
+      counter(static_cast<GpuCounters*>(counters_mirror.mapped)),
       blocks(local.create(sizeof(GpuBlock))),
       scratch(local.slot()),
       octant_pool(local.create(octant_capacity * 4)),
@@ -133,12 +142,10 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE"); env && *env)
         refine_lane_tape =
             std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), kLaneTapeMax);
-    if (const char* env = std::getenv("SDFPRUNE_VULKAN_REFINE_SECOND_PASS"); env && *env)
-        refine_second_pass = std::atoi(env) != 0;
-    if (const char* env = std::getenv("SDFPRUNE_VULKAN_REFINE_ORDER"); env && *env)
-        refine_order = std::atoi(env) != 0;
-    if (const char* env = std::getenv("SDFPRUNE_VULKAN_TEAM_ORDER"); env && *env)
-        team_order = std::atoi(env) != 0;
+    refine_second_pass = env_flag("SDFPRUNE_VULKAN_REFINE_SECOND_PASS", refine_second_pass);
+    refine_order = env_flag("SDFPRUNE_VULKAN_REFINE_ORDER", refine_order);
+    team_order = env_flag("SDFPRUNE_VULKAN_TEAM_ORDER", team_order);
+    team_claims = env_flag("SDFPRUNE_VULKAN_TEAM_CLAIMS", team_claims);
     origin = sc.aabb.min;
     extent = sc.aabb.max - sc.aabb.min;
     L = sc.lipschitz[sc.root()];
@@ -275,6 +282,7 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             // not redone for want of room (generated car-chase and city at 256³ with
             // --lipschitz-bounds were, their finest pool sized by the last level's share),
             // unless the bound passes the device's largest buffer.
+            lv.parent_tape_words = parent_words;  // (all the level's blocks': a bound)
             steps = plan_step(lv, 1, b0, blocks_in, blocks_in * 8, *lv.octants, *lv.cells, false);
             sc = run_steps(lv, steps, false, 0, blocks_in > 1);
             if (!sc) {
@@ -292,9 +300,11 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             } else if (g.pool_words + cells_bound > capacity) {
                 resize(g.pool, capacity, g.pool_words + cells_bound, g.pool_words);
             }
+            lv.parent_tape_words = sc->near_words;  // the octants'
             steps = plan_step(lv, 2, b0, blocks_in, blocks_in * lv.per_block, *lv.octants,
                               *lv.cells, lv.refine);
         } else {
+            lv.parent_tape_words = parent_words;
             steps = plan_step(lv, 0, b0, blocks_in, blocks_in * lv.per_block, *lv.cells, *lv.cells,
                               lv.refine);
         }
@@ -360,8 +370,11 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
             start.near_lo[a] = std::numeric_limits<uint32_t>::max();
             start.near_hi[a] = 0;
         }
-        *counter = start;
         ctx.begin();
+        if (host_counters)
+            *counter = start;
+        else
+            ctx.update(counters, &start, sizeof(start));
         for (Step& s : steps) {
             // The longest tape and deepest stack read back: the cells' (the next parents'),
             // not the octants'; and after refinement, the refined cells' deepest stack (what
@@ -387,6 +400,7 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
             ctx.dispatch(KernelId::kExpand, {&blocks, bound, lv.next, &counters}, &push,
                          sizeof(push), ctx.groups_for(lv.total));
         }
+        if (!host_counters) ctx.copy(counters, counters_mirror, sizeof(GpuCounters));
         gpu_ms += ctx.submit();
         ++st.submissions;
         if (!counter->overflow) break;
@@ -400,6 +414,8 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
         // which grow() reports.
         const bool refining =
             std::any_of(steps.begin(), steps.end(), [](const Step& s) { return s.push.mode == 3; });
+        if ((counter->overflow & 4u) != 0)
+            throw std::logic_error("Vulkan: a step's jobs claimed more scratch than planned");
         if (refining && !(main_over && capacity >= max_pool_words))
             throw std::logic_error("Vulkan: refinement overflowed a pool made room for");
         const auto need = [](uint32_t used, uint64_t cap) {
@@ -477,6 +493,7 @@ void Pruner::add_shape(const Level& lv, const GpuStepShape& shape) {
     same->long_jobs += shape.long_jobs;
     same->more_jobs += shape.more_jobs;
     same->copy_jobs += shape.copy_jobs;
+    same->scratch_bytes = std::max(same->scratch_bytes, shape.scratch_bytes);
 }
 
 // Records a step's dispatches; the pools' words in use before the level start them.
@@ -548,10 +565,26 @@ void Pruner::presize(Buffer& pool, uint64_t& cap, uint64_t used, uint64_t bound)
     if (want > cap) resize(pool, cap, want, used);
 }
 
-void Pruner::hold(Buffer& b, uint64_t bytes) {
+void Pruner::hold(Buffer& b, uint64_t bytes, uint64_t grow_to) {
     if (b.size >= bytes) return;
+    const uint64_t size = (bytes + 15) & ~uint64_t(15);
+    if (b.buffer && b.capacity >= size) {  // (a buffer is made as large as its capacity)
+        b.size = size;
+        return;
+    }
     ctx.destroy(b);
+    if (grow_to > bytes) {
+        try {
+            b = ctx.create_buffer(grow_to);
+            return;
+        } catch (const GpuError&) {  // (no memory for more: as much as asked)
+        }
+    }
     b = ctx.create_buffer(bytes);
+}
+
+void Pruner::hold_scratch(uint64_t bytes) {
+    hold(scratch, bytes, std::min(2 * scratch.capacity, ctx.prune_scratch_budget_bytes()));
 }
 
 // All levels' cells in one buffer, for the lookups of the tracing and discretizing kernels,

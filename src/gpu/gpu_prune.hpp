@@ -65,6 +65,9 @@ struct Level {
     // their count per walk class), and those it only copies (prune_common.glsl: list_near_cell).
     uint32_t listed_cells = 0, copied_cells = 0;
     std::array<uint32_t, kRefineWalkClasses> walk_cells{};
+    // The words of the tapes (headers included) of the parents whose jobs the next step in
+    // teams takes, summed over them, at most (its jobs' claims: gpu_prune_plan.cpp).
+    uint64_t parent_tape_words = 0;
 };
 
 class Pruner {
@@ -101,8 +104,14 @@ class Pruner {
     void resize(Buffer& pool, uint64_t& cap, uint64_t words, uint64_t keep);
     void grow(Buffer& pool, uint64_t& cap, uint64_t need, uint64_t keep);
     void presize(Buffer& pool, uint64_t& cap, uint64_t used, uint64_t bound);
-    // Makes b hold at least `bytes` (a new buffer if it is smaller; its contents are not kept).
-    void hold(Buffer& b, uint64_t bytes);
+    // Makes b hold at least `bytes`: within its capacity, or a new buffer of at least
+    // `grow_to` bytes (its contents are not kept).
+    void hold(Buffer& b, uint64_t bytes, uint64_t grow_to = 0);
+    // hold() for the steps' scratch, which grows at least twofold (within a step's budget): a
+    // level's steps take more and more of it (molecule's finest level on an H100: 49, 118 and
+    // 141 MB for its cells before, its octants and its cells), and a new buffer costs a first
+    // call its allocation (about 0.02 ms per MB on an H100).
+    void hold_scratch(uint64_t bytes);
     void gather_cells();
 
     Context& ctx;
@@ -118,7 +127,14 @@ class Pruner {
     uint32_t scene_height = 0;                         // the root's height (prune_wide.comp)
     uint64_t capacity = 0, octant_capacity = 1 << 16;  // of g.pool and octant_pool, in words
     Buffer& node_spans;
+    // The steps' counters (prune_common.glsl: Counters), which every workgroup's atomics hit:
+    // in device memory, set at the start of each submission (Context::update) and copied to
+    // a host-visible mirror at its end, whence the host reads them (`counter`).
+    // SDFPRUNE_VULKAN_HOST_COUNTERS=1: the kernels' atomics on the host-visible buffer itself
+    // (before stop 40; system memory on NVIDIA's drivers), to compare on a GPU.
+    const bool host_counters;
     Buffer& counters;
+    Buffer& counters_mirror;
     GpuCounters* counter;
     Buffer& blocks;  // the current level's blocks
     Buffer& scratch;
@@ -157,6 +173,10 @@ class Pruner {
     // The lane pass takes its cells longest tapes first, in an order pass before it;
     // SDFPRUNE_VULKAN_REFINE_ORDER=0: in the order they were listed.
     bool refine_order = true;
+    // Where the jobs' tapes sum to less than the teams' longest, each job of a step in teams
+    // claims scratch for its own tape (prune_team.glsl: claim_entries);
+    // SDFPRUNE_VULKAN_TEAM_CLAIMS=0: every team holds room for the longest.
+    bool team_claims = true;
     // The octants' and cells' team jobs take their parents (blocks, octants) longest tapes
     // first, after an order pass; SDFPRUNE_VULKAN_TEAM_ORDER=0: block by block (not measured
     // on a GPU yet: BENCHMARKS.md, stop 39).

@@ -45,7 +45,7 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
         // it fits.
         const uint64_t parents = mode == 1 ? blocks : blocks * 8, at = teams.scratch_words;
         if (parents > 0 && 4 * (at + parents) <= ctx.max_buffer_bytes()) {
-            hold(scratch, 4 * (at + parents));
+            hold_scratch(4 * (at + parents));
             teams.push.flags |= 512u;
             teams.push.order_start = uint32_t(at);
             teams.push.order_first = uint32_t(mode == 1 ? first_block : first_block * 8);
@@ -66,7 +66,7 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
     const bool order = refine_order && lv.listed_cells > 0 &&
                        4 * (order_at + lv.listed_cells) <= ctx.max_buffer_bytes();
     Step lanes = plan_refine_lanes(teams, more);
-    hold(scratch, 4 * (order ? order_at + lv.listed_cells : order_at));
+    hold_scratch(4 * (order ? order_at + lv.listed_cells : order_at));
     std::vector<Step> steps;
     if (order) {
         lanes.push.order_start = uint32_t(order_at);
@@ -106,12 +106,11 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
         plan_squads(lv, s);
         return s;
     }
-    // A team's scratch: its lanes' state, per parent-tape entry a left operand and a word per
-    // lane (decision and sweep flags), per stack slot and lane 4 words.
-    const uint64_t team_bytes =
-        (kPruneStateWords * kPruneTeam + uint64_t(max_len) * (1 + kPruneTeam) +
-         4ull * max_depth * kPruneTeam) *
-        4;
+    // A team's scratch: its lanes' state, per stack slot and lane 4 words, per parent-tape
+    // entry a left operand and a word per lane (decision and sweep flags).
+    const uint64_t fixed_bytes = (kPruneStateWords + 4ull * max_depth) * kPruneTeam * 4;
+    const uint64_t entry_bytes = (1 + kPruneTeam) * 4;
+    const uint64_t team_bytes = fixed_bytes + uint64_t(max_len) * entry_bytes;
     // Teams in flight: as many as have jobs, their scratch fits the budget and the device runs
     // at once (more would only queue, their scratch held for nothing; the teams take the jobs
     // in a grid-stride loop). Only teams with jobs hold scratch, so one parent tape as long as
@@ -155,10 +154,24 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
     s.job_walk = 3 * max_len;
     s.shape.longest_walk_words = s.team_jobs == 0 ? 0 : ceil_div(s.team_jobs, s.teams) * s.job_walk;
     s.wide = false;
-    uint64_t scratch_bytes = s.teams * team_bytes;
+    // Each job's entries claimed for its own tape (prune_team.glsl: claim_entries), past the
+    // teams' state and stacks, where the jobs' tapes sum to less than a longest tape per team:
+    // the finer levels', where most teams take one job and most tapes are far shorter than the
+    // longest.
+    const uint64_t parent_jobs = mode == 1   ? 1
+                                 : mode == 2 ? teams_for(hf * hf * hf)
+                                             : teams_for(lv.per_block);
+    const uint64_t claim_bytes = parent_jobs * lv.parent_tape_words * entry_bytes;
+    if (team_claims && lv.parent_tape_words > 0 && claim_bytes / 4 <= 0xffffffffull &&
+        s.teams * fixed_bytes + claim_bytes < s.teams * team_bytes)
+        s.push.claim_words = uint32_t(claim_bytes / 4);
+    const auto teams_scratch = [&](const Step& t) {
+        return t.push.claim_words != 0 ? t.teams * fixed_bytes + claim_bytes : t.teams * team_bytes;
+    };
+    uint64_t scratch_bytes = teams_scratch(s);
     const Step teams = s;
     if (wide_override != 0 && ctx.can_run(KernelId::kPruneWide)) plan_wide(s, scratch_bytes);
-    hold(scratch, scratch_bytes);
+    hold_scratch(scratch_bytes);
     // A wide step's further scratch buffers (those it does not take are given back: only the
     // top levels' steps spread, and the finer levels need the memory). Where the device has
     // no memory left for them (a small GPU, a large scene), the pruning goes on with one
@@ -172,11 +185,12 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
         for (Buffer* b : more_scratch) ctx.destroy(*b);
         scratch_buffers_cap = 1;
         s = teams;
-        scratch_bytes = s.teams * team_bytes;
+        scratch_bytes = teams_scratch(s);
         plan_wide(s, scratch_bytes);
-        hold(scratch, scratch_bytes);
+        hold_scratch(scratch_bytes);
     }
     s.scratch_words = ceil_div(scratch_bytes, 4);
+    s.shape.scratch_bytes = scratch_bytes * s.scratch_buffers;
     return s;
 }
 
@@ -232,6 +246,7 @@ PrunePush Pruner::push_for(const Level& lv, uint32_t mode, uint32_t threads, uin
                      0,
                      0,
                      1,
+                     0,
                      0,
                      0,
                      0,
@@ -422,6 +437,7 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
     s.push.max_stack = scene_height;
     s.push.budget = 0;
     s.push.wide_split = uint32_t(split);
+    s.push.claim_words = 0;
     const bool runs =
         wide_runs_override == 1 ||
         (wide_runs_override != 0 && s.team_jobs <= kWideRunsJobs && rounds >= kWideRunsRounds);

@@ -601,6 +601,14 @@ void Context::copy(const Buffer& src, const Buffer& dst, uint64_t bytes, uint64_
     barrier();
 }
 
+void Context::update(const Buffer& dst, const void* data, uint64_t bytes, uint64_t offset) {
+    if (bytes == 0) return;
+    if (bytes % 4 != 0 || bytes > 65536)
+        throw std::logic_error("Context::update: a size that is no multiple of 4, or over 64 KiB");
+    vkCmdUpdateBuffer(cmd_, dst.buffer, offset, bytes, data);
+    barrier();
+}
+
 void Context::fill(const Buffer& dst, uint32_t value) {
     vkCmdFillBuffer(cmd_, dst.buffer, 0, dst.size, value);
     barrier();

@@ -164,6 +164,9 @@ class Context {
                   uint32_t push_bytes, uint32_t groups, bool then_barrier = true);
     void copy(const Buffer& src, const Buffer& dst, uint64_t bytes, uint64_t src_offset = 0,
               uint64_t dst_offset = 0);
+    // Writes `bytes` (a multiple of 4, at most 65,536) of `data` to dst from `offset`, from
+    // the command buffer itself (no staging buffer).
+    void update(const Buffer& dst, const void* data, uint64_t bytes, uint64_t offset = 0);
     void fill(const Buffer& dst, uint32_t value);
     // Fills `bytes` of dst from `offset` (both multiples of 4).
     void fill(const Buffer& dst, uint32_t value, uint64_t offset, uint64_t bytes);

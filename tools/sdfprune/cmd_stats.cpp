@@ -231,7 +231,8 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                                              .add("lanes_ms", st.lanes_ms)
                                              .add("long_jobs", st.long_jobs)
                                              .add("more_jobs", st.more_jobs)
-                                             .add("copy_jobs", st.copy_jobs));
+                                             .add("copy_jobs", st.copy_jobs)
+                                             .add("scratch_bytes", st.scratch_bytes));
                      j.add("device", device->name())
                          .add("wall_ms", device_grid->stats().wall_ms)
                          .add("submissions", device_grid->stats().submissions)
@@ -304,6 +305,8 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          st.dispatches, (unsigned long long)st.workgroups,
                          (unsigned long long)st.jobs, (unsigned long long)st.lanes,
                          st.lanes_per_tape, (unsigned long long)st.longest_walk_words, st.gpu_ms);
+                     if (st.scratch_bytes > 0)
+                         std::printf(", scratch %.1f MB", double(st.scratch_bytes) / 1e6);
                      if (st.mode == 3)  // refinement: its lane pass
                          std::printf(
                              " (%llu only copied; lane pass %.2f ms, %llu cells past the first "
