@@ -261,6 +261,19 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
 // pruning's. (Teams only: SDFPRUNE_VULKAN_WIDE=0.)
 void expect_same_device_cells(const gpu::Grid& a, const gpu::Grid& b, const std::string& what);
 
+// A device made with an environment variable set (for the figures it reads once).
+std::unique_ptr<gpu::Device> device_with_env(const char* name, const char* value) {
+    setenv(name, value, 1);
+    std::unique_ptr<gpu::Device> d;
+    try {
+        d = std::make_unique<gpu::Device>();
+    } catch (const gpu::GpuError& e) {
+        ADD_FAILURE() << "no Vulkan device (install mesa-vulkan-drivers): " << e.what();
+    }
+    unsetenv(name);
+    return d;
+}
+
 // A pruning with the environment variable `name` set to `value` (a setting read by the pruner)
 // for its duration.
 gpu::Grid prune_with_env(gpu::Device& dev, const Scene& sc, const PruneOptions& o, const char* name,
@@ -593,43 +606,54 @@ TEST(Gpu, CountersInDeviceOrHostMemoryGiveOneGrid) {
     expect_matches_cpu(sc, prune(sc, o), device_counters, *dev, "demo 64³");
 }
 
-// A step in teams whose jobs' tapes sum to less than the longest tape per team has each job
-// claim scratch for its own tape (prune_team.glsl: claim_entries) instead of every team
-// holding room for the longest: less scratch, the same cells as with room for the longest
-// (SDFPRUNE_VULKAN_TEAM_CLAIMS=0) and the CPU's. In teams throughout, on the demo scene and
-// on a right-deep chain of 12,000 whose long tapes lavapipe prunes over resumed rounds (a
-// job's claim kept in its team's state between them).
-TEST(Gpu, TeamClaimsChangeNoCell) {
+// A step whose jobs' tapes sum to less than the longest tape per team (or wide, per
+// workgroup) has each job claim scratch for its own tape (prune_team.glsl: claim_entries;
+// prune_wide.glsl: claim_items) instead of every team or workgroup holding room for the
+// longest: less scratch, the same cells as with room for the longest (SDFPRUNE_VULKAN_CLAIMS=0)
+// and the CPU's. In teams throughout and wide wherever the kernel fits (planned for as many
+// workgroups in flight as an H100's, so that they are not far fewer than the jobs), on the
+// demo scene, and in teams on a right-deep chain of 12,000 whose long tapes lavapipe prunes
+// over resumed rounds (a job's claim kept in its team's state between them).
+TEST(Gpu, ClaimsChangeNoCell) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     struct Case {
         std::string what;
         Scene sc;
         uint32_t resolution;
+        bool wide;  // wide too (the chain's tapes are too long for its jobs on lavapipe)
     };
     std::vector<Case> cases;
-    cases.push_back({"demo 64³", builtin_scene("demo"), 64});
-    cases.push_back({"chain of 12,000 at 16³", right_deep_chain(12000), 16});
-    for (const Case& c : cases) {
-        SCOPED_TRACE(c.what);
-        PruneOptions o;
-        o.resolution = c.resolution;
-        ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
-        const gpu::Grid claims = gpu::prune(*dev, c.sc, o);
-        const gpu::Grid longest = prune_with_env(*dev, c.sc, o, "SDFPRUNE_VULKAN_TEAM_CLAIMS", "0");
-        ::unsetenv("SDFPRUNE_VULKAN_WIDE");
-        const std::vector<gpu::GpuStepShape>&a = claims.stats().steps, &b = longest.stats().steps;
-        ASSERT_EQ(a.size(), b.size());
-        uint32_t smaller = 0;
-        for (size_t i = 0; i < a.size(); ++i) {
-            EXPECT_EQ(a[i].jobs, b[i].jobs) << "step " << i;
-            EXPECT_LE(a[i].scratch_bytes, b[i].scratch_bytes) << "step " << i;
-            smaller += a[i].scratch_bytes < b[i].scratch_bytes ? 1 : 0;
+    cases.push_back({"demo 64³", builtin_scene("demo"), 64, true});
+    cases.push_back({"chain of 12,000 at 16³", right_deep_chain(12000), 16, false});
+    const std::unique_ptr<gpu::Device> h100_like =
+        device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "270336");
+    ASSERT_TRUE(h100_like);
+    for (const Case& c : cases)
+        for (const bool wide : {false, true}) {
+            if (wide && !c.wide) continue;
+            SCOPED_TRACE(c.what + (wide ? ", wide" : ", in teams"));
+            gpu::Device& d = wide ? *h100_like : *dev;
+            PruneOptions o;
+            o.resolution = c.resolution;
+            ::setenv("SDFPRUNE_VULKAN_WIDE", wide ? "1" : "0", 1);
+            const gpu::Grid claims = gpu::prune(d, c.sc, o);
+            const gpu::Grid longest = prune_with_env(d, c.sc, o, "SDFPRUNE_VULKAN_CLAIMS", "0");
+            ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+            const std::vector<gpu::GpuStepShape>&a = claims.stats().steps,
+                  &b = longest.stats().steps;
+            ASSERT_EQ(a.size(), b.size());
+            uint32_t smaller = 0;
+            for (size_t i = 0; i < a.size(); ++i) {
+                EXPECT_EQ(a[i].jobs, b[i].jobs) << "step " << i;
+                EXPECT_EQ(a[i].wide, b[i].wide) << "step " << i;
+                EXPECT_LE(a[i].scratch_bytes, b[i].scratch_bytes) << "step " << i;
+                smaller += a[i].scratch_bytes < b[i].scratch_bytes && a[i].wide == wide ? 1 : 0;
+            }
+            EXPECT_GT(smaller, 0u);
+            expect_same_stats(longest.stats(), claims.stats(), "claims against the longest");
+            expect_same_device_cells(claims, longest, "claims against room for the longest");
+            expect_matches_cpu(c.sc, prune(c.sc, o), claims, d, c.what);
         }
-        EXPECT_GT(smaller, 0u);
-        expect_same_stats(longest.stats(), claims.stats(), "claims against room for the longest");
-        expect_same_device_cells(claims, longest, "claims against room for the longest");
-        expect_matches_cpu(c.sc, prune(c.sc, o), claims, *dev, c.what);
-    }
 }
 
 // By default the top levels' steps, few jobs over long parent tapes, run wide: a workgroup
@@ -795,19 +819,6 @@ void expect_same_device_cells(const gpu::Grid& a, const gpu::Grid& b, const std:
     });
     EXPECT_EQ(i, cells.size());
     EXPECT_EQ(mismatches, 0u);
-}
-
-// A device made with an environment variable set (for the figures it reads once).
-std::unique_ptr<gpu::Device> device_with_env(const char* name, const char* value) {
-    setenv(name, value, 1);
-    std::unique_ptr<gpu::Device> d;
-    try {
-        d = std::make_unique<gpu::Device>();
-    } catch (const gpu::GpuError& e) {
-        ADD_FAILURE() << "no Vulkan device (install mesa-vulkan-drivers): " << e.what();
-    }
-    unsetenv(name);
-    return d;
 }
 
 // Buffers are recycled across levels and calls (Context's idle cache): a pruning that repeats

@@ -46,6 +46,9 @@ layout(std430, binding = 8) coherent buffer Scratch { uint scratch[]; };
 // replaces (flag 4). Tapes for the main pool never share one of these: they copy it.
 layout(std430, binding = 9) buffer OctantPool { uint octant_pool[]; };
 const uint kInOctantPool = 0x80000000u;
+// What a job's claim of scratch gives where the claims would pass the host's bound
+// (prune_team.glsl: claim_entries; prune_wide.glsl: claim_items).
+const uint kNoClaim = 0xffffffffu;
 // The finest near-field cells, the only ones refinement (mode 3) has work for: the step that
 // makes the finest cells (flag 4) lists each near one's index (list_near_cell); mode 3 takes
 // its jobs from here (refine_job; the far ones stay as they are: refinement rewrites the near

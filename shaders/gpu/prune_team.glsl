@@ -84,7 +84,6 @@ uint root_sweep_flags(uint parent, uint len) {
 
 // Each team's claim (claim_entries): its job's entries' words, then their first word.
 shared uint s_claim[kTeams];
-const uint kNoClaim = 0xffffffffu;
 // The first word of the entries of this team's job (round 0), whose tape has `len` words (0
 // where it walks none; `lead`: the team's first lane): claimed for the workgroup's 8 teams at once, with one atomic, past the
 // teams' scratch (pc.threads / kTeam of them); kNoClaim where the claims would pass

@@ -57,9 +57,12 @@ const uint kRunEntry = 4u, kRunLeft = 5u, kRunWord = 6u, kRunSigns = 7u;
 // Words per scene height: 3 per height, kRoundWords per round, 1 in the list of breaks
 // (device_layout.hpp: kPruneWideHeightWords).
 const uint kWideHeightWords = 3u + kRoundWords + 1u;
+// Where the step's jobs claim their items (pc.claim_words > 0, gpu_prune_plan.cpp: their
+// tapes sum to less than the longest tape per workgroup), a workgroup holds none, and each job
+// claims its own tape's, past the workgroups' scratch (claim_items).
 uint wide_words() {
-    return pc.max_len * (2u + kWideEntryWords * (kTeam / pc.wide_split)) +
-           kWideHeightWords * (pc.max_stack + 1u);
+    uint items = pc.claim_words != 0u ? 0u : kWideEntryWords * (kTeam / pc.wide_split);
+    return pc.max_len * (2u + items) + kWideHeightWords * (pc.max_stack + 1u);
 }
 
 // The workgroup's prefix sums.
@@ -69,6 +72,7 @@ shared uvec4 s_scan[kWide];
 shared uint s_state[kTeam], s_at[kTeam], s_len[kTeam], s_prims[kTeam], s_depth[kTeam];
 shared float s_value[kTeam];
 shared uint s_rounds;  // the job's rounds: the heights its tape has
+shared uint s_items;   // the first word of the job's items, where it claims them
 shared uint s_breaks;  // its rounds that are in no run
 
 #ifdef PRUNE_WIDE_SUBGROUPS
@@ -133,6 +137,22 @@ void sync_all() {
 // The boxes of its job a workgroup takes: [g_b0, g_b0 + g_boxes) (pc.wide_split workgroups per
 // job, kTeam / pc.wide_split boxes each).
 uint g_b0, g_boxes;
+
+// The first word of the items of the workgroup's share of a job whose tape has `len` entries
+// (g_boxes of its boxes), claimed with one atomic past the step's `groups` workgroups'
+// scratch; kNoClaim where the claims would pass pc.claim_words (the host's bound on them: a
+// bug, which it reports). Every lane calls it.
+uint claim_items(uint len, uint groups) {
+    if (gl_LocalInvocationID.x == 0u) {
+        uint need = len * g_boxes * kWideEntryWords;
+        uint first = atomicAdd(scratch_claimed, need);
+        bool over = first + need > pc.claim_words || first + need < first;
+        if (over) atomicOr(overflow, 4u);
+        s_items = over ? kNoClaim : groups * wide_words() + first;
+    }
+    sync_all();
+    return s_items;
+}
 
 // Entry e's value, range (lo, hi) and decision at box b (of the workgroup's, g_b0 and up):
 // item (e · g_boxes + b − g_b0) of scratch. A workgroup holds items for its own boxes only, so a
@@ -362,7 +382,7 @@ void main() {
     uint hbase = obase + pc.max_len;        // per height: count, placed, first place
     uint rbase = hbase + 3u * (pc.max_stack + 1u);  // per round: kRoundWords
     uint bbase = rbase + kRoundWords * (pc.max_stack + 1u);  // the rounds in no run, in order
-    uint vbase = bbase + (pc.max_stack + 1u);  // items (item_at): v, lo, hi, flags
+    uint own_items = bbase + (pc.max_stack + 1u);  // items (item_at): v, lo, hi, flags
     bool interval = (pc.flags & 2u) != 0u;
     bool transient = pc.mode == 1u || (pc.flags & 4u) != 0u;
 
@@ -385,6 +405,9 @@ void main() {
         uint len = tape_read(parent, 0u);
         uint root_word = tape_read(parent, 1u + len);
         uint H = node_span[tape_node(root_word)].y;
+        // The job's items: the workgroup's own, or claimed.
+        uint vbase = pc.claim_words != 0u ? claim_items(len, groups) : own_items;
+        if (vbase == kNoClaim) continue;  // (the host reports it)
 
         // Stage 1: the counting sort by height, and the left operands.
         for (uint h = id; h <= H; h += kWide) {

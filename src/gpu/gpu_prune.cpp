@@ -145,7 +145,7 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
     refine_second_pass = env_flag("SDFPRUNE_VULKAN_REFINE_SECOND_PASS", refine_second_pass);
     refine_order = env_flag("SDFPRUNE_VULKAN_REFINE_ORDER", refine_order);
     team_order = env_flag("SDFPRUNE_VULKAN_TEAM_ORDER", team_order);
-    team_claims = env_flag("SDFPRUNE_VULKAN_TEAM_CLAIMS", team_claims);
+    claims = env_flag("SDFPRUNE_VULKAN_CLAIMS", claims);
     origin = sc.aabb.min;
     extent = sc.aabb.max - sc.aabb.min;
     L = sc.lipschitz[sc.root()];
@@ -565,7 +565,7 @@ void Pruner::presize(Buffer& pool, uint64_t& cap, uint64_t used, uint64_t bound)
     if (want > cap) resize(pool, cap, want, used);
 }
 
-void Pruner::hold(Buffer& b, uint64_t bytes, uint64_t grow_to) {
+void Pruner::hold(Buffer& b, uint64_t bytes) {
     if (b.size >= bytes) return;
     const uint64_t size = (bytes + 15) & ~uint64_t(15);
     if (b.buffer && b.capacity >= size) {  // (a buffer is made as large as its capacity)
@@ -573,18 +573,7 @@ void Pruner::hold(Buffer& b, uint64_t bytes, uint64_t grow_to) {
         return;
     }
     ctx.destroy(b);
-    if (grow_to > bytes) {
-        try {
-            b = ctx.create_buffer(grow_to);
-            return;
-        } catch (const GpuError&) {  // (no memory for more: as much as asked)
-        }
-    }
     b = ctx.create_buffer(bytes);
-}
-
-void Pruner::hold_scratch(uint64_t bytes) {
-    hold(scratch, bytes, std::min(2 * scratch.capacity, ctx.prune_scratch_budget_bytes()));
 }
 
 // All levels' cells in one buffer, for the lookups of the tracing and discretizing kernels,

@@ -99,19 +99,14 @@ class Pruner {
     void plan_squads(const Level& lv, Step& s);
     PrunePush push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
                        uint32_t budget) const;
-    void plan_wide(Step& s, uint64_t& scratch_bytes);
+    void plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_words);
     void record_step(Step& s);
     void resize(Buffer& pool, uint64_t& cap, uint64_t words, uint64_t keep);
     void grow(Buffer& pool, uint64_t& cap, uint64_t need, uint64_t keep);
     void presize(Buffer& pool, uint64_t& cap, uint64_t used, uint64_t bound);
-    // Makes b hold at least `bytes`: within its capacity, or a new buffer of at least
-    // `grow_to` bytes (its contents are not kept).
-    void hold(Buffer& b, uint64_t bytes, uint64_t grow_to = 0);
-    // hold() for the steps' scratch, which grows at least twofold (within a step's budget): a
-    // level's steps take more and more of it (molecule's finest level on an H100: 49, 118 and
-    // 141 MB for its cells before, its octants and its cells), and a new buffer costs a first
-    // call its allocation (about 0.02 ms per MB on an H100).
-    void hold_scratch(uint64_t bytes);
+    // Makes b hold at least `bytes`: within its capacity (its class's, Context::create_buffer),
+    // or in a new buffer (its contents are not kept).
+    void hold(Buffer& b, uint64_t bytes);
     void gather_cells();
 
     Context& ctx;
@@ -173,10 +168,11 @@ class Pruner {
     // The lane pass takes its cells longest tapes first, in an order pass before it;
     // SDFPRUNE_VULKAN_REFINE_ORDER=0: in the order they were listed.
     bool refine_order = true;
-    // Where the jobs' tapes sum to less than the teams' longest, each job of a step in teams
-    // claims scratch for its own tape (prune_team.glsl: claim_entries);
-    // SDFPRUNE_VULKAN_TEAM_CLAIMS=0: every team holds room for the longest.
-    bool team_claims = true;
+    // Where the jobs' tapes sum to less than the longest per team or workgroup, each job claims
+    // scratch for its own tape (prune_team.glsl: claim_entries; prune_wide.glsl:
+    // claim_items); SDFPRUNE_VULKAN_CLAIMS=0: every team or workgroup holds room for the
+    // longest.
+    bool claims = true;
     // The octants' and cells' team jobs take their parents (blocks, octants) longest tapes
     // first, after an order pass; SDFPRUNE_VULKAN_TEAM_ORDER=0: block by block (not measured
     // on a GPU yet: BENCHMARKS.md, stop 39).

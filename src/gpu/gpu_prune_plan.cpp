@@ -45,7 +45,7 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
         // it fits.
         const uint64_t parents = mode == 1 ? blocks : blocks * 8, at = teams.scratch_words;
         if (parents > 0 && 4 * (at + parents) <= ctx.max_buffer_bytes()) {
-            hold_scratch(4 * (at + parents));
+            hold(scratch, 4 * (at + parents));
             teams.push.flags |= 512u;
             teams.push.order_start = uint32_t(at);
             teams.push.order_first = uint32_t(mode == 1 ? first_block : first_block * 8);
@@ -66,7 +66,7 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
     const bool order = refine_order && lv.listed_cells > 0 &&
                        4 * (order_at + lv.listed_cells) <= ctx.max_buffer_bytes();
     Step lanes = plan_refine_lanes(teams, more);
-    hold_scratch(4 * (order ? order_at + lv.listed_cells : order_at));
+    hold(scratch, 4 * (order ? order_at + lv.listed_cells : order_at));
     std::vector<Step> steps;
     if (order) {
         lanes.push.order_start = uint32_t(order_at);
@@ -161,8 +161,9 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
     const uint64_t parent_jobs = mode == 1   ? 1
                                  : mode == 2 ? teams_for(hf * hf * hf)
                                              : teams_for(lv.per_block);
-    const uint64_t claim_bytes = parent_jobs * lv.parent_tape_words * entry_bytes;
-    if (team_claims && lv.parent_tape_words > 0 && claim_bytes / 4 <= 0xffffffffull &&
+    const uint64_t claimable_words = parent_jobs * lv.parent_tape_words;
+    const uint64_t claim_bytes = claimable_words * entry_bytes;
+    if (claims && lv.parent_tape_words > 0 && claim_bytes / 4 <= 0xffffffffull &&
         s.teams * fixed_bytes + claim_bytes < s.teams * team_bytes)
         s.push.claim_words = uint32_t(claim_bytes / 4);
     const auto teams_scratch = [&](const Step& t) {
@@ -170,8 +171,9 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
     };
     uint64_t scratch_bytes = teams_scratch(s);
     const Step teams = s;
-    if (wide_override != 0 && ctx.can_run(KernelId::kPruneWide)) plan_wide(s, scratch_bytes);
-    hold_scratch(scratch_bytes);
+    if (wide_override != 0 && ctx.can_run(KernelId::kPruneWide))
+        plan_wide(s, scratch_bytes, claimable_words);
+    hold(scratch, scratch_bytes);
     // A wide step's further scratch buffers (those it does not take are given back: only the
     // top levels' steps spread, and the finer levels need the memory). Where the device has
     // no memory left for them (a small GPU, a large scene), the pruning goes on with one
@@ -186,8 +188,8 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
         scratch_buffers_cap = 1;
         s = teams;
         scratch_bytes = teams_scratch(s);
-        plan_wide(s, scratch_bytes);
-        hold_scratch(scratch_bytes);
+        plan_wide(s, scratch_bytes, claimable_words);
+        hold(scratch, scratch_bytes);
     }
     s.scratch_words = ceil_div(scratch_bytes, 4);
     s.shape.scratch_bytes = scratch_bytes * s.scratch_buffers;
@@ -364,7 +366,7 @@ void Pruner::plan_squads(const Level& lv, Step& s) {
 // found among them) themselves and the prefix sums' steps: a job ends in the dispatch
 // that starts it, within lavapipe's loop limit; only where twice that count fits (a deep chain
 // near the limit came out wrong on lavapipe: the count is taken as approximate).
-void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
+void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_words) {
     const uint64_t len = max_len, heights = uint64_t(scene_height) + 1;
     const uint64_t rounds = std::min<uint64_t>(heights, len / 2 + 1);
     // Workgroups per job (wide_split): where a step has very few jobs (level 0: one, the root's
@@ -437,7 +439,6 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
     s.push.max_stack = scene_height;
     s.push.budget = 0;
     s.push.wide_split = uint32_t(split);
-    s.push.claim_words = 0;
     const bool runs =
         wide_runs_override == 1 ||
         (wide_runs_override != 0 && s.team_jobs <= kWideRunsJobs && rounds >= kWideRunsRounds);
@@ -449,6 +450,19 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes) {
     s.shape.lanes = std::min<uint64_t>(parts, groups) * kPruneWide;
     s.shape.longest_walk_words = walk;
     scratch_bytes = dispatch_groups * group_bytes;  // in each buffer
+    // Each job's items claimed for its own tape (prune_wide.glsl: claim_items) where the jobs'
+    // tapes (`claimable_words` at most, all jobs' shares together) sum to less than the
+    // longest tape per workgroup, in one buffer: the same workgroups, their scratch without
+    // items. The generated fluid's level-1 cells (4,096 jobs on 512 workgroups, parent tapes
+    // of up to 5,000 words summing to 4.5 million) then take 0.6 GB instead of 1.4.
+    const uint64_t items_bytes = len * kPruneWideEntryWords * (kPruneTeam / split) * 4;
+    const uint64_t claim_bytes = claimable_words * kPruneWideEntryWords * kPruneTeam * 4;
+    s.push.claim_words = 0;
+    if (claims && spread == 1 && claimable_words > 0 && claim_bytes / 4 <= 0xffffffffull &&
+        groups * (group_bytes - items_bytes) + claim_bytes < scratch_bytes) {
+        s.push.claim_words = uint32_t(claim_bytes / 4);
+        scratch_bytes = groups * (group_bytes - items_bytes) + claim_bytes;
+    }
 }
 
 }  // namespace sdfprune::gpu::pruning
