@@ -41,8 +41,8 @@ const uint kWindow = 64u;  // tape entries a lane advances per step (gpu_prune.c
 // step's longest parent tape, or, where the jobs' tapes are known to sum to less
 // (pc.claim_words > 0, gpu_prune_plan.cpp), each job claims room for its own tape's entries
 // from the area past the teams' (claim_entries): molecule's level-3 octants, 31,556 jobs on as
-// many teams, whose tapes reach 199 words but sum to 2.9 million, take 105 MB of scratch
-// instead of 250 on an H100.
+// many teams, whose tapes reach 199 words but sum to 2.9 million, take 129 MB of scratch
+// instead of 250 (planned as on an H100).
 
 // The team's scratch, through a second view of the scratch buffer (binding 12, the same buffer
 // as binding 8) without `coherent`: a lane reads only words it wrote itself (its state, its
