@@ -57,6 +57,10 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
             idle_.erase(idle_.begin() + ptrdiff_t(i));
             cached_ -= b.capacity;
             ++host_.buffers_reused;
+            if (host_log_)
+                log_host(host_visible ? "host-visible buffer from the idle cache"
+                                      : "device buffer from the idle cache",
+                         b.capacity, start, 0);
             return hand_out(b);
         }
 
@@ -114,6 +118,9 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
 
 void Context::destroy(Buffer& b) {
     if (!b.buffer) return;
+    if (host_log_)
+        log_host(b.mapped ? "host-visible buffer given back" : "device buffer given back",
+                 b.capacity, std::chrono::steady_clock::now(), 0);
     if (!b.mapped) live_ -= b.capacity;
     if (b.capacity > cache_budget_) {
         free_buffer(b);
