@@ -884,6 +884,44 @@ TEST(Gpu, SmallBuffersShareSlabs) {
     expect_same_device_cells(first, second, "a slab taken again");
 }
 
+// Buffers over 1 MiB are bound into blocks of device memory, and a buffer given back leaves
+// its room to later ones that fit (Context::Block): a first pruning peaks the same and makes
+// the same grid as through the idle cache alone (SDFPRUNE_VULKAN_BLOCKS=0), and on lavapipe
+// allocates device memory fewer times and reuses more; a repeated call once the first grid is gone
+// allocates nothing; empty blocks are idle memory, freed with the cache.
+TEST(Gpu, LargeBuffersShareBlocks) {
+    if (!gpu::built_with_vulkan()) GTEST_SKIP() << "built without the Vulkan backend";
+    const Scene sc = builtin_scene("demo");
+    PruneOptions o;
+    o.resolution = 128;
+    const std::unique_ptr<gpu::Device> blocks = device_with_env("SDFPRUNE_VULKAN_BLOCKS", "1");
+    const std::unique_ptr<gpu::Device> cache = device_with_env("SDFPRUNE_VULKAN_BLOCKS", "0");
+    ASSERT_TRUE(blocks && cache);
+    std::optional<gpu::Grid> a(gpu::prune(*blocks, sc, o));
+    const gpu::Grid b = gpu::prune(*cache, sc, o);
+    const gpu::DevicePruneStats &sa = a->stats(), &sb = b.stats();
+    if (exact_device(*blocks)) {  // (lavapipe: this plan's buffers; a GPU plans others)
+        EXPECT_LT(sa.host_allocations, sb.host_allocations);
+        EXPECT_GT(sa.host_buffers_reused, sb.host_buffers_reused);
+    }
+    EXPECT_EQ(sa.host_buffers + sa.host_buffers_reused, sb.host_buffers + sb.host_buffers_reused);
+    EXPECT_EQ(sa.prune_peak_bytes, sb.prune_peak_bytes);
+    expect_same_stats(sb, sa, "blocks");
+    expect_same_device_cells(*a, b, "blocks");
+
+    const uint64_t requests = sa.host_buffers + sa.host_buffers_reused;
+    a.reset();
+    const gpu::Grid again = gpu::prune(*blocks, sc, o);
+    EXPECT_EQ(again.stats().host_buffers, 0u);
+    EXPECT_EQ(again.stats().host_allocations, 0u);
+    EXPECT_EQ(again.stats().host_buffers_reused, requests);
+    EXPECT_EQ(again.stats().prune_peak_bytes, sb.prune_peak_bytes);
+    expect_same_device_cells(again, b, "blocks, again");
+    EXPECT_GT(blocks->memory_cached(), 0u);
+    blocks->release_cached_memory();
+    EXPECT_EQ(blocks->memory_cached(), 0u);
+}
+
 // The idle cache keeps to its budget (SDFPRUNE_VULKAN_CACHE_BYTES), buffers cached longest
 // going first; with no budget nothing is kept or reused; release_cached_memory empties it.
 // Grids are the same whatever the cache holds.

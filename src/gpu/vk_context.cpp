@@ -227,6 +227,8 @@ Context::Context() {
     host_log_ = std::getenv("SDFPRUNE_VULKAN_HOST_LOG") != nullptr;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_SLABS"); env && *env)
         use_slabs_ = std::atoi(env) != 0;
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_BLOCKS"); env && *env)
+        use_blocks_ = std::atoi(env) != 0;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_MAX_BUFFER"))  // a smaller device, for tests
         max_range_ = std::min<uint64_t>(max_range_, std::strtoull(env, nullptr, 10));
     // A device with less memory, for tests: new device-local buffers past this many bytes in
@@ -421,8 +423,11 @@ Context::~Context() {
     if (device_) {
         vkDeviceWaitIdle(device_);
         trim(0);
-        for (Slab& slab : slabs_)  // (with buffers still bound, if a grid outlived its device)
+        // (with buffers still bound, if a grid outlived its device)
+        for (Slab& slab : slabs_)
             if (slab.memory) vkFreeMemory(device_, slab.memory, nullptr);
+        for (Block& block : blocks_)
+            if (block.memory) vkFreeMemory(device_, block.memory, nullptr);
         for (Kernel& k : kernels_) {
             vkDestroyPipeline(device_, k.pipeline, nullptr);
             vkDestroyPipelineLayout(device_, k.layout, nullptr);

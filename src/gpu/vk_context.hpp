@@ -56,6 +56,9 @@ struct Buffer {
     void* mapped = nullptr;  // host-visible buffers only
     // The slab (Context's) whose memory the buffer is bound into, or -1: memory of its own.
     int32_t slab = -1;
+    // The block (Context's) it is bound into, or -1, and where: its offset and bytes there.
+    int32_t block = -1;
+    VkDeviceSize offset = 0, span = 0;
 };
 
 class Context {
@@ -216,6 +219,11 @@ class Context {
     bool bind_to_slab(Buffer& b, const VkMemoryRequirements& req, uint32_t type, bool host_visible);
     // Frees the slabs no buffer is bound into.
     void free_empty_slabs();
+    // Binds a new device-local buffer of memory requirements `req` into free room of a block of
+    // memory type `type`; false if no block has room.
+    bool bind_to_block(Buffer& b, const VkMemoryRequirements& req, uint32_t type);
+    // Gives a block-bound buffer's room back to its block (its buffer destroyed).
+    void unbind_from_block(Buffer& b);
 
     VkInstance instance_ = VK_NULL_HANDLE;
     VkPhysicalDevice physical_ = VK_NULL_HANDLE;
@@ -258,7 +266,24 @@ class Context {
     static constexpr uint64_t kSlabBufferMax[2] = {1 << 20, 128 << 10};  // device, host
     std::vector<Slab> slabs_;
     bool use_slabs_ = true;  // SDFPRUNE_VULKAN_SLABS=0: every buffer allocates its own
-    // Idle buffers, cached longest first; cached_ counts their capacities.
+    // Large device-local buffers' memory (over kSlabBufferMax). A pruning call's pools and
+    // scratch grow level by level: a buffer given back is smaller than the next one asked for,
+    // so an idle cache by capacity class gave a first call few of them and it allocated far
+    // more than its peak (the generated fluid at 256³: 7.0 GB for a 2.7 GB peak). Such a
+    // buffer is bound into a block of device memory allocated for it, and when it is destroyed
+    // its room goes back to the block, where later buffers take what fits (first fit); a block
+    // left empty is idle memory (counted in bytes_cached(), freed past the cache's budget).
+    // SDFPRUNE_VULKAN_BLOCKS=0 (or no cache budget): through the idle cache, as before.
+    struct Block {
+        VkDeviceMemory memory = VK_NULL_HANDLE;
+        uint64_t size = 0;
+        uint32_t type = 0;
+        uint32_t buffers = 0;                             // bound into it now
+        std::vector<std::pair<uint64_t, uint64_t>> free;  // (offset, bytes), in order
+    };
+    std::vector<Block> blocks_;
+    bool use_blocks_ = true;
+    // Idle buffers, cached longest first, and empty blocks; cached_ counts their bytes.
     std::vector<Buffer> idle_;
     uint64_t cached_ = 0, cache_budget_ = 0;
     uint32_t sets_used_ = 0;

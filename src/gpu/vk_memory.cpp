@@ -1,10 +1,12 @@
 // vk_memory.cpp — the device memory behind Context's buffers: memory types, the idle cache
-// that recycles buffers by capacity class, and the slabs small buffers share (vk_context.hpp
-// says why each exists).
+// that recycles buffers by capacity class, the slabs small buffers share, and the blocks whose
+// free room large buffers take (vk_context.hpp says why each exists).
 #include <algorithm>
 #include <bit>
 #include <chrono>
+#include <iterator>
 #include <string>
+#include <utility>
 
 #include "../core/clock.hpp"
 #include "vk_context.hpp"
@@ -80,6 +82,13 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
         ++host_.buffers;
         return hand_out(b);
     }
+    const bool in_block =
+        !host_visible && use_blocks_ && cache_budget_ > 0 && req.size > kSlabBufferMax[0];
+    if (in_block && bind_to_block(b, req, type)) {
+        ++host_.buffers_reused;
+        if (host_log_) log_host("device buffer in a block's free room", capacity, start, 0);
+        return hand_out(b);
+    }
     auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
     mai.allocationSize = req.size;
     mai.memoryTypeIndex = type;
@@ -90,7 +99,7 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
                    : vkAllocateMemory(device_, &mai, nullptr, &b.memory);
     };
     VkResult r = allocate();
-    if (r != VK_SUCCESS && !idle_.empty()) {  // the idle buffers may be what is in the way
+    if (r != VK_SUCCESS && cached_ > 0) {  // the idle buffers may be what is in the way
         trim(0);
         r = allocate();
     }
@@ -101,6 +110,15 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
                        " bytes did not fit (" + std::to_string(live_) + " bytes in use)");
     }
     vkBindBufferMemory(device_, b.buffer, b.memory, 0);
+    if (in_block) {  // the buffer's own block, whose room later buffers may take
+        size_t slot = 0;
+        while (slot < blocks_.size() && blocks_[slot].memory) ++slot;
+        if (slot == blocks_.size()) blocks_.emplace_back();
+        blocks_[slot] = Block{b.memory, req.size, type, 1, {}};
+        b.block = int32_t(slot);
+        b.offset = 0;
+        b.span = req.size;
+    }
     if (host_visible) {
         r = vkMapMemory(device_, b.memory, 0, capacity, 0, &b.mapped);
         if (r != VK_SUCCESS) {
@@ -122,6 +140,12 @@ void Context::destroy(Buffer& b) {
         log_host(b.mapped ? "host-visible buffer given back" : "device buffer given back",
                  b.capacity, std::chrono::steady_clock::now(), 0);
     if (!b.mapped) live_ -= b.capacity;
+    if (b.block >= 0) {
+        vkDestroyBuffer(device_, b.buffer, nullptr);
+        unbind_from_block(b);
+        b = Buffer{};
+        return;
+    }
     if (b.capacity > cache_budget_) {
         free_buffer(b);
     } else {
@@ -130,6 +154,59 @@ void Context::destroy(Buffer& b) {
         cached_ += b.capacity;
     }
     b = Buffer{};
+}
+
+bool Context::bind_to_block(Buffer& b, const VkMemoryRequirements& req, uint32_t type) {
+    for (size_t i = 0; i < blocks_.size(); ++i) {
+        Block& block = blocks_[i];
+        if (!block.memory || block.type != type) continue;
+        for (size_t k = 0; k < block.free.size(); ++k) {
+            const auto [at, bytes] = block.free[k];
+            const uint64_t offset = (at + req.alignment - 1) / req.alignment * req.alignment;
+            if (offset + req.size > at + bytes) continue;
+            // The room taken out of the range: what is left before and after it stays free.
+            block.free.erase(block.free.begin() + ptrdiff_t(k));
+            if (offset + req.size < at + bytes)
+                block.free.insert(block.free.begin() + ptrdiff_t(k),
+                                  {offset + req.size, at + bytes - offset - req.size});
+            if (offset > at)
+                block.free.insert(block.free.begin() + ptrdiff_t(k), {at, offset - at});
+            if (block.buffers++ == 0) cached_ -= block.size;
+            vkBindBufferMemory(device_, b.buffer, block.memory, offset);
+            b.memory = block.memory;
+            b.block = int32_t(i);
+            b.offset = offset;
+            b.span = req.size;
+            return true;
+        }
+    }
+    return false;
+}
+
+void Context::unbind_from_block(Buffer& b) {
+    Block& block = blocks_[size_t(b.block)];
+    auto& free = block.free;
+    // Back in order, merged with the ranges it touches.
+    auto next = std::lower_bound(free.begin(), free.end(), std::make_pair(b.offset, uint64_t(0)));
+    uint64_t at = b.offset, bytes = b.span;
+    if (next != free.end() && at + bytes == next->first) {
+        bytes += next->second;
+        next = free.erase(next);
+    }
+    if (next != free.begin() && std::prev(next)->first + std::prev(next)->second == at) {
+        std::prev(next)->second += bytes;
+    } else {
+        free.insert(next, {at, bytes});
+    }
+    if (--block.buffers > 0) return;
+    // Empty: idle memory, freed at once if it alone is over the cache's budget.
+    if (block.size > cache_budget_) {
+        vkFreeMemory(device_, block.memory, nullptr);
+        block = Block{};
+        return;
+    }
+    cached_ += block.size;
+    trim(cache_budget_);
 }
 
 void Context::free_buffer(Buffer& b) {
@@ -210,6 +287,12 @@ void Context::trim(uint64_t keep_bytes) {
         free_buffer(idle_[n++]);
     }
     idle_.erase(idle_.begin(), idle_.begin() + ptrdiff_t(n));
+    for (Block& block : blocks_)
+        if (cached_ > keep_bytes && block.memory && block.buffers == 0) {
+            cached_ -= block.size;
+            vkFreeMemory(device_, block.memory, nullptr);
+            block = Block{};
+        }
     if (keep_bytes == 0) free_empty_slabs();
 }
 
