@@ -46,11 +46,12 @@ class Device {
     Device& operator=(Device&&) noexcept;
     std::string name() const;
     // Device memory held now by sdfprune's buffers on this device (grids included), not
-    // counting the idle buffers kept for reuse (memory_cached: at most a quarter of the
-    // device's memory, 4 GiB; SDFPRUNE_VULKAN_CACHE_BYTES=N sets the budget).
+    // counting the idle memory kept for reuse (memory_cached: idle buffers and empty blocks of
+    // large ones, at most a quarter of the device's memory, 4 GiB; SDFPRUNE_VULKAN_CACHE_BYTES=N
+    // sets the budget).
     uint64_t memory_in_use() const;
     uint64_t memory_cached() const;
-    // Frees the idle buffers (the next pruning allocates its buffers again).
+    // Frees the idle memory (the next pruning allocates its buffers again).
     void release_cached_memory();
     Context& context() { return *context_; }
 

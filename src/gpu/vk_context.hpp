@@ -135,8 +135,9 @@ class Context {
     uint64_t bytes_live() const { return live_; }
     uint64_t bytes_peak() const { return peak_; }
     void reset_peak() { peak_ = live_; }
-    // The idle cache: bytes it holds (device-local and host-visible), and its budget, past
-    // which the buffers cached longest are freed first. By default a quarter of the largest
+    // The idle cache: bytes it holds (idle buffers, device-local and host-visible, and empty
+    // blocks), and its budget, past which the buffers cached longest are freed first, then
+    // empty blocks. By default a quarter of the largest
     // device-local heap, at most 4 GiB; SDFPRUNE_VULKAN_CACHE_BYTES=N sets it (0: no cache).
     uint64_t bytes_cached() const { return cached_; }
     uint64_t cache_budget() const { return cache_budget_; }
