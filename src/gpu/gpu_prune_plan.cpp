@@ -453,8 +453,9 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_word
     // Each job's items claimed for its own tape (prune_wide.glsl: claim_items) where the jobs'
     // tapes (`claimable_words` at most, all jobs' shares together) sum to less than the
     // longest tape per workgroup, in one buffer: the same workgroups, their scratch without
-    // items. The generated fluid's level-1 cells (4,096 jobs on 512 workgroups, parent tapes
-    // of up to 5,000 words summing to 4.5 million) then take 0.6 GB instead of 1.4.
+    // items. The generated fluid's level-1 cells (512 jobs of 8 cells, a workgroup each, over
+    // parent tapes of up to 5,000 words summing to 4.5 million) then take 0.66 GB instead of
+    // 1.4 (planned as on an H100).
     const uint64_t items_bytes = len * kPruneWideEntryWords * (kPruneTeam / split) * 4;
     const uint64_t claim_bytes = claimable_words * kPruneWideEntryWords * kPruneTeam * 4;
     s.push.claim_words = 0;
