@@ -46,9 +46,6 @@ layout(std430, binding = 8) coherent buffer Scratch { uint scratch[]; };
 // replaces (flag 4). Tapes for the main pool never share one of these: they copy it.
 layout(std430, binding = 9) buffer OctantPool { uint octant_pool[]; };
 const uint kInOctantPool = 0x80000000u;
-// What a job's claim of scratch gives where the claims would pass the host's bound
-// (prune_team.glsl: claim_entries; prune_wide.glsl: claim_items).
-const uint kNoClaim = 0xffffffffu;
 // The finest near-field cells, the only ones refinement (mode 3) has work for: the step that
 // makes the finest cells (flag 4) lists each near one's index (list_near_cell); mode 3 takes
 // its jobs from here (refine_job; the far ones stay as they are: refinement rewrites the near
@@ -94,6 +91,21 @@ layout(push_constant) uniform Push {
     uint order_first;   // modes 1, 2 (flag 512) and 4: the step's first parent (block, octant)
     uint claim_words;   // modes 0-2 in teams: the words its jobs may claim (0: no claims)
 } pc;
+
+// A job's claim of `words` of its step's claim area (pc.claim_words of them, past the teams'
+// or workgroups' own scratch; prune_team.glsl: claim_entries, prune_wide.glsl: claim_items):
+// their first word in the area, or kNoClaim where the claims would pass the host's bound on
+// them (a bug: overflow bit 4 tells the host, which reports it).
+const uint kNoClaim = 0xffffffffu;
+uint claim_scratch(uint words) {
+    if (words == 0u) return 0u;
+    uint first = atomicAdd(scratch_claimed, words);
+    if (first + words > pc.claim_words || first + words < first) {
+        atomicOr(overflow, 4u);
+        return kNoClaim;
+    }
+    return first;
+}
 
 // The step's counters (near_jobs, near_words, max_len, max_depth, then walk_cells), summed and
 // maxed first in shared memory by the workgroup's lanes, then added to the device's once per

@@ -85,9 +85,9 @@ uint root_sweep_flags(uint parent, uint len) {
 // Each team's claim (claim_entries): its job's entries' words, then their first word.
 shared uint s_claim[kTeams];
 // The first word of the entries of this team's job (round 0), whose tape has `len` words (0
-// where it walks none; `lead`: the team's first lane): claimed for the workgroup's 8 teams at once, with one atomic, past the
-// teams' scratch (pc.threads / kTeam of them); kNoClaim where the claims would pass
-// pc.claim_words (the host's bound on them: a bug, which it reports). Every lane calls it.
+// where it walks none; `lead`: the team's first lane): claimed for the workgroup's 8 teams at
+// once (claim_scratch), past the teams' scratch (pc.threads / kTeam of them), or kNoClaim.
+// Every lane calls it.
 uint claim_entries(uint tl, bool lead, uint len) {
     if (lead) s_claim[tl] = len * (1u + kTeam);
     memoryBarrierShared();
@@ -99,11 +99,10 @@ uint claim_entries(uint tl, bool lead, uint len) {
             s_claim[t] = sum;
             sum += need;
         }
-        uint first = sum == 0u ? 0u : atomicAdd(scratch_claimed, sum);
-        bool over = first + sum > pc.claim_words || first + sum < first;
-        if (over) atomicOr(overflow, 4u);
+        uint first = claim_scratch(sum);
         uint base = (pc.threads / kTeam) * team_fixed_words() + first;
-        for (uint t = 0u; t < kTeams; ++t) s_claim[t] = over ? kNoClaim : base + s_claim[t];
+        for (uint t = 0u; t < kTeams; ++t)
+            s_claim[t] = first == kNoClaim ? kNoClaim : base + s_claim[t];
     }
     memoryBarrierShared();
     barrier();

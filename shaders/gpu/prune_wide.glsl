@@ -139,16 +139,12 @@ void sync_all() {
 uint g_b0, g_boxes;
 
 // The first word of the items of the workgroup's share of a job whose tape has `len` entries
-// (g_boxes of its boxes), claimed with one atomic past the step's `groups` workgroups'
-// scratch; kNoClaim where the claims would pass pc.claim_words (the host's bound on them: a
-// bug, which it reports). Every lane calls it.
+// (g_boxes of its boxes), claimed (claim_scratch) past the step's `groups` workgroups'
+// scratch, or kNoClaim. Every lane calls it.
 uint claim_items(uint len, uint groups) {
     if (gl_LocalInvocationID.x == 0u) {
-        uint need = len * g_boxes * kWideEntryWords;
-        uint first = atomicAdd(scratch_claimed, need);
-        bool over = first + need > pc.claim_words || first + need < first;
-        if (over) atomicOr(overflow, 4u);
-        s_items = over ? kNoClaim : groups * wide_words() + first;
+        uint first = claim_scratch(len * g_boxes * kWideEntryWords);
+        s_items = first == kNoClaim ? kNoClaim : groups * wide_words() + first;
     }
     sync_all();
     return s_items;

@@ -45,13 +45,6 @@ GpuGridParams DeviceGrid::grid_params() const {
 }
 
 namespace pruning {
-namespace {
-// An on/off setting from the environment: `fallback` where `name` is unset or empty.
-bool env_flag(const char* name, bool fallback) {
-    const char* env = std::getenv(name);
-    return env && *env ? std::atoi(env) != 0 : fallback;
-}
-}  // namespace
 
 Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, DeviceGrid& grid)
     : ctx(device.context()),

@@ -225,10 +225,8 @@ Context::Context() {
     device_name_ = props.deviceName;
     max_range_ = props.limits.maxStorageBufferRange;
     host_log_ = std::getenv("SDFPRUNE_VULKAN_HOST_LOG") != nullptr;
-    if (const char* env = std::getenv("SDFPRUNE_VULKAN_SLABS"); env && *env)
-        use_slabs_ = std::atoi(env) != 0;
-    if (const char* env = std::getenv("SDFPRUNE_VULKAN_BLOCKS"); env && *env)
-        use_blocks_ = std::atoi(env) != 0;
+    use_slabs_ = env_flag("SDFPRUNE_VULKAN_SLABS", use_slabs_);
+    use_blocks_ = env_flag("SDFPRUNE_VULKAN_BLOCKS", use_blocks_);
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_MAX_BUFFER"))  // a smaller device, for tests
         max_range_ = std::min<uint64_t>(max_range_, std::strtoull(env, nullptr, 10));
     // A device with less memory, for tests: new device-local buffers past this many bytes in
@@ -253,8 +251,7 @@ Context::Context() {
         subgroups_ = props.apiVersion >= VK_API_VERSION_1_1 &&
                      (sg.supportedStages & VK_SHADER_STAGE_COMPUTE_BIT) != 0 &&
                      (sg.supportedOperations & need) == need && sg.subgroupSize >= 1;
-        if (const char* env = std::getenv("SDFPRUNE_VULKAN_SUBGROUPS"); env && *env)
-            subgroups_ = subgroups_ && std::atoi(env) != 0;
+        subgroups_ = subgroups_ && env_flag("SDFPRUNE_VULKAN_SUBGROUPS", true);
     }
     {
         // Invocations resident at once (resident_threads): the vendors' core counts where the
@@ -701,6 +698,11 @@ void Context::download(const Buffer& src, void* data, uint64_t bytes, uint64_t s
     submit();
     std::memcpy(data, staging.mapped, bytes);
     destroy(staging);
+}
+
+bool env_flag(const char* name, bool fallback) {
+    const char* env = std::getenv(name);
+    return env && *env ? std::atoi(env) != 0 : fallback;
 }
 
 }  // namespace sdfprune::gpu

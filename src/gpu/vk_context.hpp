@@ -37,6 +37,10 @@ enum class KernelId : uint32_t {
     kCount
 };
 
+// An on/off setting from the environment (SDFPRUNE_VULKAN_...=0 or 1): `fallback` where
+// `name` is unset or empty.
+bool env_flag(const char* name, bool fallback);
+
 // A zeroed Vulkan info struct with its type set.
 template <class T>
 T vk_struct(VkStructureType type) {

@@ -26,6 +26,15 @@ uint32_t Context::memory_type(uint32_t bits, bool host_visible) const {
 }
 
 namespace {
+// The place in `v` of an entry without memory (a freed slab's or block's), made if none.
+template <class T>
+size_t free_place(std::vector<T>& v) {
+    size_t i = 0;
+    while (i < v.size() && v[i].memory) ++i;
+    if (i == v.size()) v.emplace_back();
+    return i;
+}
+
 // The capacity class of a buffer of `bytes` (a multiple of 16): up to 64 bytes the size
 // itself; above, the next multiple of a quarter of the power of two below it (2^k times 1.25,
 // 1.5, 1.75 or 2), so at most 25 % more than asked.
@@ -111,9 +120,7 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
     }
     vkBindBufferMemory(device_, b.buffer, b.memory, 0);
     if (in_block) {  // the buffer's own block, whose room later buffers may take
-        size_t slot = 0;
-        while (slot < blocks_.size() && blocks_[slot].memory) ++slot;
-        if (slot == blocks_.size()) blocks_.emplace_back();
+        const size_t slot = free_place(blocks_);
         blocks_[slot] = Block{b.memory, req.size, type, 1, {}};
         b.block = int32_t(slot);
         b.offset = 0;
@@ -254,10 +261,7 @@ bool Context::bind_to_slab(Buffer& b, const VkMemoryRequirements& req, uint32_t 
         slab.mapped = static_cast<uint8_t*>(mapped);
         if (host_log_)
             log_host(host_visible ? "host-visible slab" : "device slab", slab.size, start, 0);
-        // (a freed slab's place is taken first)
-        for (pick = 0; pick < slabs_.size() && slabs_[pick].memory; ++pick) {
-        }
-        if (pick == slabs_.size()) slabs_.emplace_back();
+        pick = free_place(slabs_);  // (a freed slab's place is taken first)
         slabs_[pick] = slab;
     }
     Slab& slab = slabs_[pick];
