@@ -222,13 +222,20 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
     PruneOptions o;
     o.resolution = 64;
     const PrunedGrid cpu = prune(sc, o);
+    uint64_t submissions = 1;
+    const std::vector<uint32_t> res = grid_levels(o.resolution, o.factor);
+    for (size_t l = 0; l < res.size(); ++l)
+        submissions +=
+            splits_into_octants(sc, o, res[l], l == 0 ? res[0] : res[l] / res[l - 1]) ? 2 : 1;
+    ASSERT_EQ(submissions, 1u + 1u + 1u + 2u);  // levels 0 and 1 direct, level 2 split
     {
         // Pools sized before each level from the parents' tapes, the cells' from their
-        // octants' tapes and refinement's from the cells': two submissions per level (the
-        // octants, then the cells), one for refinement, none redone.
+        // octants' tapes and refinement's from the cells': two submissions per level split
+        // into octants (the octants, then the cells), one per other level, one for
+        // refinement, none redone.
         const gpu::Grid gpu = gpu::prune(*dev, sc, o);
         EXPECT_EQ(gpu.stats().pool_grows, 0u);
-        EXPECT_EQ(gpu.stats().submissions, 2u * 3u + 1u);
+        EXPECT_EQ(gpu.stats().submissions, submissions);
         expect_matches_cpu(sc, cpu, gpu, *dev, "demo 64³, presized");
     }
     // Without that, the demo's tapes at 64³ outgrow the initial pools (1 Mi words, 64 Ki for
@@ -237,8 +244,8 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
     const gpu::Grid gpu = gpu::prune(*dev, sc, o);
     ::unsetenv("SDFPRUNE_VULKAN_PRESIZE_WORDS");
     EXPECT_GT(gpu.stats().pool_grows, 0u);
-    EXPECT_GT(gpu.stats().submissions, 2u * 3u + 1u);
-    EXPECT_LE(gpu.stats().submissions, 2u * 3u + 1u + gpu.stats().pool_grows);
+    EXPECT_GT(gpu.stats().submissions, submissions);
+    EXPECT_LE(gpu.stats().submissions, submissions + gpu.stats().pool_grows);
     expect_matches_cpu(sc, cpu, gpu, *dev, "demo 64³");
     // The same through the wide kernel wherever it fits (at 32³, where its tapes outgrow the
     // pools too: on lavapipe it is slow over many jobs).
@@ -253,8 +260,9 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
     expect_matches_cpu(sc, prune(sc, o), wide, *dev, "demo 32³, wide");
 }
 
-// The steps' work shapes (GpuStepShape) follow the hierarchy: per level the octants then the
-// cells from them, then the refinement; jobs are the CPU's cells and octants, lanes come in
+// The steps' work shapes (GpuStepShape) follow the hierarchy: per level the cells from their
+// blocks (the top levels, splits_into_octants), or the octants then the cells from them, then
+// the refinement; jobs are the CPU's cells and octants, lanes come in
 // teams that share a parent tape (one lane per cell or octant; in refinement a squad per cell,
 // a lane per sub-box), and
 // the busiest lane walks at least one parent tape; their GPU times add up to at most the
@@ -315,8 +323,8 @@ TEST(Gpu, StepShapesFollowTheLevels) {
     ::unsetenv("SDFPRUNE_VULKAN_WIDE");
     ::unsetenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE");
     const std::vector<gpu::GpuStepShape>& steps = gpu.stats().steps;
-    ASSERT_EQ(steps.size(), 7u);
-    const uint32_t levels[] = {0, 0, 1, 1, 2, 2, 2}, modes[] = {1, 2, 1, 2, 1, 2, 3};
+    ASSERT_EQ(steps.size(), 5u);
+    const uint32_t levels[] = {0, 1, 2, 2, 2}, modes[] = {0, 0, 1, 2, 3};
     uint64_t jobs = 0;
     for (size_t i = 0; i < steps.size(); ++i) {
         const gpu::GpuStepShape& st = steps[i];
@@ -334,21 +342,25 @@ TEST(Gpu, StepShapesFollowTheLevels) {
         EXPECT_GT(st.longest_walk_words, 0u);
         EXPECT_EQ(st.lanes_ms, 0.0);
         EXPECT_EQ(st.long_jobs, 0u);
-        if (st.mode == 2) jobs += st.jobs;
+        if (st.mode == 0 || st.mode == 2) jobs += st.jobs;
     }
     const PrunedGrid cpu = prune(sc, o);
-    EXPECT_EQ(steps[0].jobs, 8u);     // the root's octants
-    for (uint32_t l = 0; l < 3; ++l)  // a level's cells, as many as the CPU's
-        EXPECT_EQ(steps[2 * l + 1].jobs, cpu.level_cells(l).size()) << "level " << l;
+    const size_t cells_step[] = {0, 1, 3};  // a level's cells, as many as the CPU's
+    for (uint32_t l = 0; l < 3; ++l)
+        EXPECT_EQ(steps[cells_step[l]].jobs, cpu.level_cells(l).size()) << "level " << l;
     EXPECT_EQ(jobs,
               cpu.level_cells(0).size() + cpu.level_cells(1).size() + cpu.level_cells(2).size());
+    // Level 2's octants: 8 a near-field cell of level 1.
+    uint64_t near_1 = 0;
+    for (const PrunedCell& c : cpu.level_cells(1)) near_1 += c.tape != PrunedCell::kFarField;
+    EXPECT_EQ(steps[2].jobs, 8 * near_1);
     // Refinement's jobs are the finest near-field cells before it (the CPU's without it).
     PruneOptions unrefined = o;
     unrefined.refine = 1;
     const PrunedGrid before = prune(sc, unrefined);
-    EXPECT_EQ(steps[6].jobs, before.stats().near_field_cells);
-    EXPECT_LT(steps[6].jobs, steps[5].jobs);
-    // The root's octants walk the full tape: evaluation and compaction, and one more pass.
+    EXPECT_EQ(steps[4].jobs, before.stats().near_field_cells);
+    EXPECT_LT(steps[4].jobs, steps[3].jobs);
+    // The root's cells walk the full tape: evaluation and compaction, and one more pass.
     EXPECT_GE(steps[0].longest_walk_words, 3ull * sc.size());
     // The steps' GPU times are parts of the pruning's GPU time; with timestamps (every device
     // prune_ms comes from), each step takes some.
@@ -383,7 +395,7 @@ TEST(Gpu, StepShapesFollowTheLevels) {
     for (const PrunedCell& c : before.level_cells(2))
         if (c.tape != PrunedCell::kFarField && before.tape_at(c.tape).size() > 4) ++long_cells;
     EXPECT_GT(long_cells, 0u);
-    EXPECT_EQ(with[6].long_jobs, long_cells);
+    EXPECT_EQ(with[4].long_jobs, long_cells);
     expect_same_stats(gpu.stats(), passes.stats(), "refinement's lane pass");
     expect_same_device_cells(gpu, passes, "refinement's lane pass");
 }
@@ -610,17 +622,19 @@ TEST(Gpu, CountersInDeviceOrHostMemoryGiveOneGrid) {
 // workgroup) has each job claim scratch for its own tape (prune_team.glsl: claim_entries;
 // prune_wide.glsl: claim_items) instead of every team or workgroup holding room for the
 // longest: less scratch, the same cells as with room for the longest (SDFPRUNE_VULKAN_CLAIMS=0)
-// and the CPU's. In teams throughout and wide wherever the kernel fits (planned for as many
-// workgroups in flight as an H100's, so that they are not far fewer than the jobs), on the
-// demo scene, and in teams on a right-deep chain of 12,000 whose long tapes lavapipe prunes
-// over resumed rounds (a job's claim kept in its team's state between them).
+// and the CPU's. On the demo scene in teams throughout and wide wherever the kernel fits,
+// both planned for as many teams and workgroups in flight as an H100's (so that they are not
+// far fewer than the jobs, whose tapes would then sum to more than a longest one each), and
+// in teams on a right-deep chain of 12,000 whose long tapes lavapipe prunes over resumed
+// rounds (a job's claim kept in its team's state between them).
 TEST(Gpu, ClaimsChangeNoCell) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     struct Case {
         std::string what;
         Scene sc;
         uint32_t resolution;
-        bool wide;  // wide too (the chain's tapes are too long for its jobs on lavapipe)
+        bool wide;  // wide too, and planned as on an H100 (the chain's tapes are too long
+                    // for its jobs on lavapipe)
     };
     std::vector<Case> cases;
     cases.push_back({"demo 64³", builtin_scene("demo"), 64, true});
@@ -632,7 +646,7 @@ TEST(Gpu, ClaimsChangeNoCell) {
         for (const bool wide : {false, true}) {
             if (wide && !c.wide) continue;
             SCOPED_TRACE(c.what + (wide ? ", wide" : ", in teams"));
-            gpu::Device& d = wide ? *h100_like : *dev;
+            gpu::Device& d = c.wide ? *h100_like : *dev;
             PruneOptions o;
             o.resolution = c.resolution;
             ::setenv("SDFPRUNE_VULKAN_WIDE", wide ? "1" : "0", 1);
@@ -684,8 +698,7 @@ TEST(Gpu, TopLevelsRunWide) {
         EXPECT_LE(st.lanes, (st.jobs + 7) / 8 * st.lanes_per_tape);
         EXPECT_LT(st.longest_walk_words, team.longest_walk_words);
     }
-    EXPECT_TRUE(steps[0].wide);  // the root's octants, from the full tape
-    EXPECT_TRUE(steps[1].wide);
+    EXPECT_TRUE(steps[0].wide);  // the root's cells, from the full tape
     expect_matches_cpu(sc, prune(sc, o), gpu, *dev, "demo 64³");
     // Every step wide (at 32³), its jobs' boxes on 1, 2 or 8 workgroups.
     PruneOptions small = o;
@@ -744,7 +757,8 @@ TEST(Gpu, ScratchLimitedStepsRunWide) {
     bool spread_wider = false;
     for (size_t i = 0; i < gpu.stats().steps.size(); ++i) {
         const gpu::GpuStepShape &st = spread.stats().steps[i], &one = gpu.stats().steps[i];
-        if (st.wide && one.wide && st.lanes > one.lanes && st.dispatches > one.dispatches)
+        // (scratch_bytes: all the step's buffers together.)
+        if (st.wide && one.wide && st.lanes > one.lanes && st.scratch_bytes > one.scratch_bytes)
             spread_wider = true;
     }
     EXPECT_TRUE(spread_wider) << "no wide step spread its scratch over more buffers";

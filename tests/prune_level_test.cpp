@@ -12,6 +12,7 @@
 #include "prune_check.hpp"
 #include "sdfprune/builtin.hpp"
 #include "sdfprune/eval.hpp"
+#include "sdfprune/generate.hpp"
 #include "sdfprune/io.hpp"
 #include "sdfprune/render.hpp"
 #include "src/prune/prune_level.hpp"
@@ -117,7 +118,7 @@ TEST(PruneLevelStep, MoleculeSubset) {
 TEST(PruneLevelStep, SplitNeedsWholeBlocks) {
     const Scene sc = test::random_scene(3, test::RandomSceneSpec{});
     PruneOptions o;
-    const LevelGeometry geo = level_geometry(sc, o, 16, 4, false, kPruneChunkCells);
+    const LevelGeometry geo = level_geometry(sc, o, 64, 4, false, kPruneChunkCells);
     ASSERT_TRUE(geo.split);
     const std::vector<ParentBlock> blocks{
         {{0, 0, 0}, uint32_t(sc.full_tape.size()), sc.full_tape.data()}};
@@ -130,6 +131,42 @@ TEST(PruneLevelStep, SplitNeedsWholeBlocks) {
     prune_level_step(sc, o, geo, blocks, 0, 64, cells, s, out);
     for (const PrunedCell& c : cells)
         EXPECT_TRUE(c.tape == PrunedCell::kFarField || c.tape < out.words.size());
+}
+
+// Levels split into octants where they have more than kDirectMaxParents parents or the full
+// tape is long for their cells; the top levels of a scene of a short tape prune their cells
+// from their blocks.
+// Either way the cells are exact (the property tests prune at 64³–256³, through both).
+TEST(PruneLevelStep, TopLevelsOfShortTapesPruneTheirCellsDirectly) {
+    const Scene sc = builtin_scene("demo");
+    ASSERT_LE(sc.full_tape.size(), kSiblingMaxTape);
+    PruneOptions o;
+    const std::vector<uint32_t> res = grid_levels(256, 4);
+    ASSERT_EQ(res, (std::vector<uint32_t>{4, 16, 64, 256}));
+    const bool expected[] = {false, false, true, true};
+    for (size_t l = 0; l < res.size(); ++l) {
+        const uint32_t f = l == 0 ? res[0] : res[l] / res[l - 1];
+        EXPECT_EQ(splits_into_octants(sc, o, res[l], f), expected[l]) << "level " << l;
+        EXPECT_EQ(level_geometry(sc, o, res[l], f, false, kPruneChunkCells).split, expected[l]);
+    }
+    // A level of more parents (an 8³ grid of them) splits; factors 2 and 3 never do, nor
+    // a pruning without hierarchy.
+    EXPECT_TRUE(splits_into_octants(sc, o, 32, 4));
+    EXPECT_FALSE(splits_into_octants(sc, o, 128, 2));
+    EXPECT_FALSE(splits_into_octants(sc, o, 162, 3));
+    PruneOptions flat = o;
+    flat.hierarchy = false;
+    EXPECT_FALSE(splits_into_octants(sc, flat, 256, 4));
+    // A full tape past kDirectMaxCellWords / 16³ words: level 1 (16³ cells) splits, level 0
+    // does not; past kSiblingMaxTape words, every level splits.
+    const Scene longer = generate_scene("fluid", 1, 3000);
+    ASSERT_GT(longer.full_tape.size() * 4096, kDirectMaxCellWords);
+    EXPECT_FALSE(splits_into_octants(longer, o, 4, 4));
+    EXPECT_TRUE(splits_into_octants(longer, o, 16, 4));
+    const Scene big = generate_scene("fluid", 1, kSiblingMaxTape / 2 + 1);
+    ASSERT_GT(big.full_tape.size(), kSiblingMaxTape);
+    EXPECT_TRUE(splits_into_octants(big, o, 4, 4));
+    EXPECT_TRUE(splits_into_octants(big, o, 16, 4));
 }
 
 // The grids the walk tests run on: a random scene of 40 primitives pruned with factor 4 at 64

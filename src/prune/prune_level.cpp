@@ -406,8 +406,18 @@ LevelGeometry level_geometry(const Scene& sc, const PruneOptions& opt, uint32_t 
     geo.factor = factor;
     geo.finest = finest;
     const uint64_t per_block = uint64_t(factor) * factor * factor;
-    geo.split = opt.hierarchy && factor >= 4 && factor % 2 == 0 && chunk_cells % per_block == 0;
+    geo.split = splits_into_octants(sc, opt, res, factor) && chunk_cells % per_block == 0;
     return geo;
+}
+
+bool splits_into_octants(const Scene& sc, const PruneOptions& opt, uint32_t res, uint32_t factor) {
+    if (!opt.hierarchy || factor < 4 || factor % 2 != 0) return false;
+    const uint64_t parents_per_axis = res / factor, tape = sc.full_tape.size();
+    const uint64_t cells = uint64_t(res) * res * res;
+    const bool direct =
+        parents_per_axis * parents_per_axis * parents_per_axis <= kDirectMaxParents &&
+        tape <= kSiblingMaxTape && cells * tape <= kDirectMaxCellWords;
+    return !direct;
 }
 
 void add_chunk_stats(const LevelChunk& o, PruneStats& st) {
@@ -430,11 +440,24 @@ void prune_level_step(const Scene& sc, const PruneOptions& opt, const LevelGeome
         throw std::invalid_argument("prune_level_step: range outside the blocks or the cells");
     StepPruner step(sc, opt, geo, s, out);
     if (!geo.split) {
+        // The cells of a block kSiblingLanes at a time, in one pass over its tape each.
+        PrunedCell* group[kSiblingLanes];
+        CellBox boxes[kSiblingLanes];
+        uint32_t count = 0;
+        uint64_t group_block = 0;
         for (uint64_t i = begin; i < end; ++i) {
-            const ParentBlock& b = blocks[i / per_block];
-            const CellCoord at = block_cell(b.origin, f, uint32_t(i % per_block));
-            step.prune_cell(cells[i - begin], b.tape(), step.cell_box(at.x, at.y, at.z));
+            const uint64_t bi = i / per_block;
+            if (count == kSiblingLanes || (count > 0 && bi != group_block)) {
+                step.prune_siblings(group, boxes, count, blocks[group_block].tape());
+                count = 0;
+            }
+            const CellCoord at = block_cell(blocks[bi].origin, f, uint32_t(i % per_block));
+            group[count] = &cells[i - begin];
+            boxes[count] = step.cell_box(at.x, at.y, at.z);
+            group_block = bi;
+            ++count;
         }
+        if (count > 0) step.prune_siblings(group, boxes, count, blocks[group_block].tape());
         return;
     }
     if (begin % per_block != 0 || end % per_block != 0)
