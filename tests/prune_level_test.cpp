@@ -139,7 +139,6 @@ TEST(PruneLevelStep, SplitNeedsWholeBlocks) {
 // Either way the cells are exact (the property tests prune at 64³–256³, through both).
 TEST(PruneLevelStep, TopLevelsOfShortTapesPruneTheirCellsDirectly) {
     const Scene sc = builtin_scene("demo");
-    ASSERT_LE(sc.full_tape.size(), kSiblingMaxTape);
     PruneOptions o;
     const std::vector<uint32_t> res = grid_levels(256, 4);
     ASSERT_EQ(res, (std::vector<uint32_t>{4, 16, 64, 256}));
@@ -158,13 +157,13 @@ TEST(PruneLevelStep, TopLevelsOfShortTapesPruneTheirCellsDirectly) {
     flat.hierarchy = false;
     EXPECT_FALSE(splits_into_octants(sc, flat, 256, 4));
     // A full tape past kDirectMaxCellWords / 16³ words: level 1 (16³ cells) splits, level 0
-    // does not; past kSiblingMaxTape words, every level splits.
+    // does not; past kDirectMaxCellWords / 4³ words, every level splits.
     const Scene longer = generate_scene("fluid", 1, 3000);
     ASSERT_GT(longer.full_tape.size() * 4096, kDirectMaxCellWords);
     EXPECT_FALSE(splits_into_octants(longer, o, 4, 4));
     EXPECT_TRUE(splits_into_octants(longer, o, 16, 4));
-    const Scene big = generate_scene("fluid", 1, kSiblingMaxTape / 2 + 1);
-    ASSERT_GT(big.full_tape.size(), kSiblingMaxTape);
+    const Scene big = generate_scene("fluid", 1, uint32_t(kDirectMaxCellWords / 64 / 2) + 1);
+    ASSERT_GT(big.full_tape.size() * 64, kDirectMaxCellWords);
     EXPECT_TRUE(splits_into_octants(big, o, 4, 4));
     EXPECT_TRUE(splits_into_octants(big, o, 16, 4));
 }

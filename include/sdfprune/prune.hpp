@@ -83,14 +83,15 @@ std::vector<uint32_t> grid_levels(uint32_t resolution, uint32_t factor, bool hie
 // octants first and then every cell from its octant's tape, or every cell from its block's
 // tape directly (both backends decide so, and give the same cells). The octants shorten the
 // tapes the cells walk, so most levels take them (a hierarchy, an even factor >= 4). The top
-// levels do not, where they have at most kDirectMaxParents parents, the scene's full tape
-// (the longest a cell can walk) has at most kSiblingMaxTape words, and the level's cells times
-// that tape are at most kDirectMaxCellWords: there a few long tapes are walked one node after
-// another, and on a GPU the octants' walk is a step of its own about as long as the cells'
-// (the reference molecule's level-0 octants took 0.54 ms of 8.1 on an H200, for tapes no
-// shorter than the root's). The last bound keeps such a step's scratch (on the GPU 16 bytes
-// per tape entry and cell, shaders/gpu/prune_wide.glsl) within 256 MB: the reference molecule's
-// levels 0 and 1 are direct, the generated fluid's (27,977 words) level 0 only.
+// levels do not, where they have at most kDirectMaxParents parents and the level's cells times
+// the scene's full tape (the longest a cell can walk) are at most kDirectMaxCellWords
+// (SDFPRUNE_DIRECT_CELL_WORDS sets another bound, for comparisons): there a few long tapes are
+// walked one node after another, and on a GPU the octants' walk is a step of its own about as
+// long as the cells' (the reference molecule's level-0 octants took 0.54 ms of 8.1 on an
+// H200, for tapes no shorter than the root's). The bound keeps such a step's scratch (on the
+// GPU 16 bytes per tape entry and cell, shaders/gpu/prune_wide.glsl) within 256 MB: the
+// reference molecule's levels 0 and 1 are direct, the generated fluid's (27,977 words) level 0
+// only, a scene of up to 262,144 words its level 0.
 constexpr uint32_t kDirectMaxParents = 64;
 constexpr uint64_t kDirectMaxCellWords = uint64_t(1) << 24;
 bool splits_into_octants(const Scene& scene, const PruneOptions& options, uint32_t res,

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <cstdlib>
 #include <stdexcept>
 #include <vector>
 
@@ -412,12 +413,13 @@ LevelGeometry level_geometry(const Scene& sc, const PruneOptions& opt, uint32_t 
 
 bool splits_into_octants(const Scene& sc, const PruneOptions& opt, uint32_t res, uint32_t factor) {
     if (!opt.hierarchy || factor < 4 || factor % 2 != 0) return false;
-    const uint64_t parents_per_axis = res / factor, tape = sc.full_tape.size();
-    const uint64_t cells = uint64_t(res) * res * res;
-    const bool direct =
-        parents_per_axis * parents_per_axis * parents_per_axis <= kDirectMaxParents &&
-        tape <= kSiblingMaxTape && cells * tape <= kDirectMaxCellWords;
-    return !direct;
+    static const uint64_t max_cell_words = [] {
+        const char* env = std::getenv("SDFPRUNE_DIRECT_CELL_WORDS");
+        return env && *env ? std::strtoull(env, nullptr, 10) : kDirectMaxCellWords;
+    }();
+    const uint64_t parents_per_axis = res / factor, cells = uint64_t(res) * res * res;
+    return parents_per_axis * parents_per_axis * parents_per_axis > kDirectMaxParents ||
+           cells * sc.full_tape.size() > max_cell_words;
 }
 
 void add_chunk_stats(const LevelChunk& o, PruneStats& st) {
