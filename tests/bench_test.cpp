@@ -182,6 +182,29 @@ TEST(Bench, EstimateIsCloseToMeasurement) {
     EXPECT_LT(estimated.discretize_ms, measured.discretize_ms * 5);
 }
 
+TEST(Bench, NoHierarchyEstimateIsCloseToMeasurement) {
+    // The no_hierarchy pruning measured (large budget) and estimated from a sample of groups of
+    // 8 neighbouring cells pruned as prune() prunes them (tiny budget): the sample's near-field
+    // share and active primitives land near the grid's, and its time near the real one.
+    const Scene sc = builtin_scene("demo");
+    BenchOptions o;
+    o.width = 32;
+    o.height = 18;
+    o.res = 16;
+    o.grid = 48;
+    const BenchRow measured = run_variant(sc, Variant::kNoHierarchy, o);
+    o.budget_s = 1e-6;
+    const BenchRow estimated = run_variant(sc, Variant::kNoHierarchy, o);
+    ASSERT_FALSE(measured.estimate());
+    ASSERT_TRUE(estimated.prune_estimated && estimated.stats_estimated);
+    EXPECT_GT(estimated.prune_ms, measured.prune_ms / 5);
+    EXPECT_LT(estimated.prune_ms, measured.prune_ms * 5);
+    EXPECT_NEAR(estimated.near_field_fraction, measured.near_field_fraction,
+                0.25 * measured.near_field_fraction);
+    EXPECT_NEAR(estimated.active_avg, measured.active_avg, 0.05 * measured.active_avg);
+    EXPECT_LE(estimated.active_max, measured.active_max);  // the sample's: a lower bound
+}
+
 TEST(Bench, VariantsOnSphere) {
     const Scene sc = builtin_scene("sphere");
     BenchOptions o;

@@ -14,11 +14,12 @@
 //     small sample gives the cost per unit (pixel, cell), the sample grows until it takes about
 //     budget_s / 8, and the figure is that sample's time scaled to the full count. Samples keep
 //     the work's distribution: the same camera at a lower resolution (pixels spread uniformly
-//     over the image), a coarser grid over the same AABB, random cells of the finest grid.
-//     Estimated fields are flagged in the row (and "≈" in markdown).
+//     over the image), a coarser grid over the same AABB, random groups of 8 neighbouring
+//     cells of the finest grid. Estimated fields are flagged in the row (and "≈" in markdown).
 //   - no_hierarchy: when its pruning is estimated (K random finest cells pruned from the full
-//     tape, scaled to res³), the grid is never built: trace and discretize are not measured
-//     (NaN), and the statistics and memory are estimated from the same sample.
+//     tape as prune() prunes them, 8 neighbours a pass, refinement included, scaled to res³),
+//     the grid is never built: trace and discretize are not measured (NaN), and the statistics
+//     and memory are estimated from the same sample.
 //
 // Thread-safety: run_variant() uses the machine (all threads unless BenchOptions::threads); call
 // it from one thread at a time. The report functions are pure.
@@ -57,7 +58,7 @@ struct BenchOptions {
     double budget_s = 20;                  // per measurement, before it is estimated (> 0)
     int threads = 0;                       // 0 = all hardware threads
     float yaw = 30, pitch = 25, fov = 40;  // camera: orbit_camera over the AABB, degrees
-    uint64_t seed = 1;                     // random cells of the no_hierarchy sample
+    uint64_t seed = 1;                     // random cell groups of the no_hierarchy sample
     // Progress messages ("no_hierarchy: pilot on 4096 cells ..."); may be empty.
     std::function<void(const std::string&)> log;
     uint32_t grid_resolution() const { return grid ? grid : res; }

@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "../core/clock.hpp"
+#include "../prune/prune_level.hpp"
 #include "sdfprune/bench.hpp"
 #include "sdfprune/builtin.hpp"
 #include "sdfprune/discretize.hpp"
@@ -275,65 +276,57 @@ struct CellSample {
     uint32_t prims_max = 0;
 };
 
-// Prunes `count` random finest cells (of an N³ grid) from the full tape, in parallel, the way
-// prune() does without hierarchy: evaluate at the centre, far-field test, compact.
+// Prunes about `count` random finest cells (of an N³ grid) from the full tape, in parallel, the
+// way prune() does without hierarchy (prune_level_step over the level's one block of N³ cells,
+// refinement included): groups of kSiblingLanes cells that follow each other in the block, a
+// group in one pass over the tape as prune() takes them, at random places.
 SampleRun prune_random_cells(const Scene& sc, const PruneOptions& po, uint64_t count, uint64_t seed,
                              CellSample& sample) {
     const uint32_t N = po.resolution;
-    const vec3 extent = sc.aabb.max - sc.aabb.min, csize = extent / float(N);
+    const uint64_t total = uint64_t(N) * N * N;
+    const uint64_t group = std::min<uint64_t>(kSiblingLanes, total);
+    const uint64_t groups = std::max<uint64_t>(1, (count + group - 1) / group);
+    const LevelGeometry geo = level_geometry(sc, po, N, N, true, kPruneChunkCells);
+    const std::vector<ParentBlock> root{
+        {{0, 0, 0}, uint32_t(sc.full_tape.size()), sc.full_tape.data()}};
     tbb::enumerable_thread_specific<CellScratch> scratch;
-    tbb::enumerable_thread_specific<CellSample> part;
-    tbb::enumerable_thread_specific<std::vector<uint32_t>> words;
+    tbb::enumerable_thread_specific<LevelChunk> part;
+    tbb::enumerable_thread_specific<std::vector<PrunedCell>> cells;
     const auto t0 = Clock::now();
     with_threads(po.threads, [&] {
         tbb::parallel_for(
-            tbb::blocked_range<uint64_t>(0, count, 16), [&](const tbb::blocked_range<uint64_t>& r) {
+            tbb::blocked_range<uint64_t>(0, groups, 4), [&](const tbb::blocked_range<uint64_t>& r) {
                 CellScratch& s = scratch.local();
-                CellSample& p = part.local();
-                std::vector<uint32_t>& out = words.local();
-                for (uint64_t i = r.begin(); i != r.end(); ++i) {
-                    // Cell i of the sample: its own stream, so the sample
-                    // does not depend on the thread count.
-                    Rng rng(seed * 0x100000000ull + i);
-                    uint32_t c[3];
-                    for (uint32_t& a : c) a = std::min(N - 1, uint32_t(rng.uniform() * float(N)));
-                    CellBox box;
-                    box.half = csize * 0.5f;
-                    box.radius = math::length(box.half);
-                    box.centre =
-                        sc.aabb.min +
-                        vec3(float(c[0]) + 0.5f, float(c[1]) + 0.5f, float(c[2]) + 0.5f) * csize;
-                    evaluate_cell(sc, sc.full_tape, box, po.bounds, s);
-                    ++p.cells;
-                    float constant = 0;
-                    if (po.far_field &&
-                        !is_near_field(sc, sc.full_tape, box, po.far_field_c, s, constant)) {
-                        p.prims += 1;
-                        p.prims_sq += 1;
-                        p.prims_max = std::max(p.prims_max, 1u);
-                        continue;
-                    }
-                    out.clear();
-                    const uint32_t prims = compact_tape(sc, sc.full_tape, s, out);
-                    ++p.near;
-                    p.prims += prims;
-                    p.prims_sq += double(prims) * prims;
-                    p.prims_max = std::max(p.prims_max, prims);
-                    p.words += double(out.size());
+                LevelChunk& out = part.local();
+                std::vector<PrunedCell>& mine = cells.local();
+                mine.resize(group);
+                for (uint64_t g = r.begin(); g != r.end(); ++g) {
+                    // Group g of the sample: its own stream, so the sample does not depend
+                    // on the thread count.
+                    Rng rng(seed * 0x100000000ull + g);
+                    const uint64_t first =
+                        std::min(rng.next_u64() % (total / group) * group, total - group);
+                    out.words.clear();  // (offsets within the group only)
+                    prune_level_step(sc, po, geo, root, first, first + group, mine, s, out);
                 }
             });
     });
     const double ms = ms_since(t0);
     sample = {};
-    for (const CellSample& p : part) {
-        sample.cells += p.cells;
+    for (const LevelChunk& p : part) {
+        // A far-field cell counts one primitive (Table 2's metric).
         sample.near += p.near;
-        sample.prims += p.prims;
-        sample.prims_sq += p.prims_sq;
-        sample.words += p.words;
-        sample.prims_max = std::max(sample.prims_max, p.prims_max);
+        sample.prims += double(p.prim_sum);
+        sample.prims_sq += double(p.prim_sq_sum);
+        sample.words += double(p.tape_sum);
+        sample.prims_max = std::max(sample.prims_max, p.prim_max);
     }
-    return {ms, double(count)};
+    sample.cells = groups * group;
+    const uint64_t far = sample.cells - sample.near;
+    sample.prims += double(far);
+    sample.prims_sq += double(far);
+    if (far > 0) sample.prims_max = std::max(sample.prims_max, 1u);
+    return {ms, double(sample.cells)};
 }
 
 void measure_no_hierarchy(const Scene& sc, const BenchOptions& o, BenchRow& row) {
