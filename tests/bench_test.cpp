@@ -163,42 +163,52 @@ TEST(BenchCli, BadArgumentsExitTwo) {
     EXPECT_EQ(test::run_cli("bench builtin:nosuch --quiet").status, 2);
 }
 
-TEST(Bench, EstimateIsCloseToMeasurement) {
-    // The same naive trace measured (large budget) and estimated from a sample (tiny budget):
-    // the estimate scales a uniform sample of the image, so it lands near the real time.
+// A variant on the demo scene measured (a large budget), then estimated from a sample (a tiny
+// one), with options `o`.
+struct MeasuredAndEstimated {
+    BenchRow measured, estimated;
+};
+MeasuredAndEstimated measure_and_estimate(Variant v, BenchOptions o) {
     const Scene sc = builtin_scene("demo");
+    MeasuredAndEstimated r;
+    r.measured = run_variant(sc, v, o);
+    o.budget_s = 1e-6;
+    r.estimated = run_variant(sc, v, o);
+    EXPECT_FALSE(r.measured.estimate());
+    return r;
+}
+// An estimated time lands within 5x of the measured one.
+void expect_near_time(double estimated, double measured, const char* what) {
+    EXPECT_GT(estimated, measured / 5) << what;
+    EXPECT_LT(estimated, measured * 5) << what;
+}
+
+TEST(Bench, EstimateIsCloseToMeasurement) {
+    // The naive trace and discretization: the estimate scales a uniform sample of the image
+    // (of the cells), so it lands near the real time.
     BenchOptions o;
     o.width = 160;
     o.height = 90;
     o.res = 48;
-    const BenchRow measured = run_variant(sc, Variant::kNaive, o);
-    o.budget_s = 1e-6;
-    const BenchRow estimated = run_variant(sc, Variant::kNaive, o);
-    ASSERT_FALSE(measured.estimate());
-    ASSERT_TRUE(estimated.trace_estimated && estimated.discretize_estimated);
-    EXPECT_GT(estimated.trace_ms, measured.trace_ms / 5);
-    EXPECT_LT(estimated.trace_ms, measured.trace_ms * 5);
-    EXPECT_GT(estimated.discretize_ms, measured.discretize_ms / 5);
-    EXPECT_LT(estimated.discretize_ms, measured.discretize_ms * 5);
+    const MeasuredAndEstimated r = measure_and_estimate(Variant::kNaive, o);
+    ASSERT_TRUE(r.estimated.trace_estimated && r.estimated.discretize_estimated);
+    expect_near_time(r.estimated.trace_ms, r.measured.trace_ms, "trace");
+    expect_near_time(r.estimated.discretize_ms, r.measured.discretize_ms, "discretize");
 }
 
 TEST(Bench, NoHierarchyEstimateIsCloseToMeasurement) {
-    // The no_hierarchy pruning measured (large budget) and estimated from a sample of groups of
-    // 8 neighbouring cells pruned as prune() prunes them (tiny budget): the sample's near-field
-    // share and active primitives land near the grid's, and its time near the real one.
-    const Scene sc = builtin_scene("demo");
+    // The no_hierarchy pruning, estimated from a sample of groups of 8 neighbouring cells
+    // pruned as prune() prunes them: the sample's near-field share and active primitives land
+    // near the grid's, and its time near the real one.
     BenchOptions o;
     o.width = 32;
     o.height = 18;
     o.res = 16;
     o.grid = 48;
-    const BenchRow measured = run_variant(sc, Variant::kNoHierarchy, o);
-    o.budget_s = 1e-6;
-    const BenchRow estimated = run_variant(sc, Variant::kNoHierarchy, o);
-    ASSERT_FALSE(measured.estimate());
+    const MeasuredAndEstimated r = measure_and_estimate(Variant::kNoHierarchy, o);
+    const BenchRow &measured = r.measured, &estimated = r.estimated;
     ASSERT_TRUE(estimated.prune_estimated && estimated.stats_estimated);
-    EXPECT_GT(estimated.prune_ms, measured.prune_ms / 5);
-    EXPECT_LT(estimated.prune_ms, measured.prune_ms * 5);
+    expect_near_time(estimated.prune_ms, measured.prune_ms, "prune");
     EXPECT_NEAR(estimated.near_field_fraction, measured.near_field_fraction,
                 0.25 * measured.near_field_fraction);
     EXPECT_NEAR(estimated.active_avg, measured.active_avg, 0.05 * measured.active_avg);
