@@ -161,6 +161,33 @@ class StepPruner {
                        refined[c] ? &refined_[c] : nullptr);
     }
 
+    // Prunes `count` <= kSiblingGroupLanes cells of one block from its tape `parent`: stage 1
+    // for all of them in one pass over the tape where it is short (kSiblingGroupMaxTape words),
+    // then the rest kSiblingLanes cells at a time (prune_siblings). The same results as
+    // prune_cell on each, in the same order: each lane is computed alone.
+    void prune_block_cells(PrunedCell* const* cells, const CellBox* boxes, uint32_t count,
+                           std::span<const uint32_t> parent) {
+        CellScratch& s = s_;
+        const bool together = count > kSiblingLanes && parent.size() <= kSiblingGroupMaxTape;
+        CellScratch::SiblingLanes evaluated;
+        if (together) {
+            vec3 centres[kSiblingGroupLanes];
+            for (uint32_t c = 0; c < count; ++c) centres[c] = boxes[c].centre;
+            s.sib_used = 0;
+            evaluate_siblings(sc_, parent, centres, count, proto_.half, proto_.radius, opt_.bounds,
+                              s);
+            s.sib_used = s.sib_at.offset + uint32_t(parent.size()) * s.sib_at.stride;
+            evaluated = s.sib_at;
+        }
+        for (uint32_t c0 = 0; c0 < count; c0 += kSiblingLanes) {
+            CellScratch::SiblingLanes at = evaluated;
+            at.first = c0;
+            prune_siblings(cells + c0, boxes + c0, std::min(kSiblingLanes, count - c0), parent,
+                           together ? &at : nullptr);
+        }
+        s.sib_used = 0;
+    }
+
     // Refinement of the near cells (bits of `near`) that store_cell refines, by groups of cells
     // whose compacted tapes are equal (refine_cells: one pass over the tape per batch for the
     // group); each cell's result goes to refined_[c] (refined[c] set), for store_cell.
@@ -442,15 +469,15 @@ void prune_level_step(const Scene& sc, const PruneOptions& opt, const LevelGeome
         throw std::invalid_argument("prune_level_step: range outside the blocks or the cells");
     StepPruner step(sc, opt, geo, s, out);
     if (!geo.split) {
-        // The cells of a block kSiblingLanes at a time, in one pass over its tape each.
-        PrunedCell* group[kSiblingLanes];
-        CellBox boxes[kSiblingLanes];
+        // The cells of a block kSiblingGroupLanes at a time (prune_block_cells).
+        PrunedCell* group[kSiblingGroupLanes];
+        CellBox boxes[kSiblingGroupLanes];
         uint32_t count = 0;
         uint64_t group_block = 0;
         for (uint64_t i = begin; i < end; ++i) {
             const uint64_t bi = i / per_block;
-            if (count == kSiblingLanes || (count > 0 && bi != group_block)) {
-                step.prune_siblings(group, boxes, count, blocks[group_block].tape());
+            if (count == kSiblingGroupLanes || (count > 0 && bi != group_block)) {
+                step.prune_block_cells(group, boxes, count, blocks[group_block].tape());
                 count = 0;
             }
             const CellCoord at = block_cell(blocks[bi].origin, f, uint32_t(i % per_block));
@@ -459,7 +486,7 @@ void prune_level_step(const Scene& sc, const PruneOptions& opt, const LevelGeome
             group_block = bi;
             ++count;
         }
-        if (count > 0) step.prune_siblings(group, boxes, count, blocks[group_block].tape());
+        if (count > 0) step.prune_block_cells(group, boxes, count, blocks[group_block].tape());
         return;
     }
     if (begin % per_block != 0 || end % per_block != 0)
