@@ -197,7 +197,7 @@ TEST(Bench, EstimateIsCloseToMeasurement) {
 }
 
 TEST(Bench, NoHierarchyEstimateIsCloseToMeasurement) {
-    // The no_hierarchy pruning, estimated from a sample of groups of 8 neighbouring cells
+    // The no_hierarchy pruning, estimated from a sample of groups of 64 neighbouring cells
     // pruned as prune() prunes them: the sample's near-field share and active primitives land
     // near the grid's, and its time near the real one.
     BenchOptions o;

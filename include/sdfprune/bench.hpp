@@ -14,10 +14,10 @@
 //     small sample gives the cost per unit (pixel, cell), the sample grows until it takes about
 //     budget_s / 8, and the figure is that sample's time scaled to the full count. Samples keep
 //     the work's distribution: the same camera at a lower resolution (pixels spread uniformly
-//     over the image), a coarser grid over the same AABB, random groups of 8 neighbouring
+//     over the image), a coarser grid over the same AABB, random groups of 64 neighbouring
 //     cells of the finest grid. Estimated fields are flagged in the row (and "≈" in markdown).
 //   - no_hierarchy: when its pruning is estimated (K random finest cells pruned from the full
-//     tape as prune() prunes them, 8 neighbours a pass, refinement included, scaled to res³),
+//     tape as prune() prunes them, 64 neighbours a pass, refinement included, scaled to res³),
 //     the grid is never built: trace and discretize are not measured (NaN), and the statistics
 //     and memory are estimated from the same sample.
 //

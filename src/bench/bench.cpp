@@ -278,13 +278,14 @@ struct CellSample {
 
 // Prunes about `count` random finest cells (of an N³ grid) from the full tape, in parallel, the
 // way prune() does without hierarchy (prune_level_step over the level's one block of N³ cells,
-// refinement included): groups of kSiblingLanes cells that follow each other in the block, a
-// group in one pass over the tape as prune() takes them, at random places.
+// refinement included): groups of kSiblingGroupLanes cells that follow each other in the block,
+// a group taken as prune() takes such cells (stage 1 in one pass over a short tape), at random
+// places.
 SampleRun prune_random_cells(const Scene& sc, const PruneOptions& po, uint64_t count, uint64_t seed,
                              CellSample& sample) {
     const uint32_t N = po.resolution;
     const uint64_t total = uint64_t(N) * N * N;
-    const uint64_t group = std::min<uint64_t>(kSiblingLanes, total);
+    const uint64_t group = std::min<uint64_t>(kSiblingGroupLanes, total);
     const uint64_t groups = std::max<uint64_t>(1, (count + group - 1) / group);
     const LevelGeometry geo = level_geometry(sc, po, N, N, true, kPruneChunkCells);
     const std::vector<ParentBlock> root{
