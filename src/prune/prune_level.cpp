@@ -161,6 +161,17 @@ class StepPruner {
                        refined[c] ? &refined_[c] : nullptr);
     }
 
+    // Stage 1 for `count` <= kSiblingGroupLanes cells of this level centred at `centres` from
+    // `tape`, in one pass over it, kept in the sibling arrays past those in use (s.sib_used
+    // moves past them) for prune_siblings: their lanes, lane c the cell at centres[c].
+    CellScratch::SiblingLanes evaluate_kept(std::span<const uint32_t> tape, const vec3* centres,
+                                            uint32_t count) {
+        CellScratch& s = s_;
+        evaluate_siblings(sc_, tape, centres, count, proto_.half, proto_.radius, opt_.bounds, s);
+        s.sib_used = s.sib_at.offset + uint32_t(tape.size()) * s.sib_at.stride;
+        return s.sib_at;
+    }
+
     // Prunes `count` <= kSiblingGroupLanes cells of one block from its tape `parent`: stage 1
     // for all of them in one pass over the tape where it is short (kSiblingGroupMaxTape words),
     // then the rest kSiblingLanes cells at a time (prune_siblings). The same results as
@@ -174,10 +185,7 @@ class StepPruner {
             vec3 centres[kSiblingGroupLanes];
             for (uint32_t c = 0; c < count; ++c) centres[c] = boxes[c].centre;
             s.sib_used = 0;
-            evaluate_siblings(sc_, parent, centres, count, proto_.half, proto_.radius, opt_.bounds,
-                              s);
-            s.sib_used = s.sib_at.offset + uint32_t(parent.size()) * s.sib_at.stride;
-            evaluated = s.sib_at;
+            evaluated = evaluate_kept(parent, centres, count);
         }
         for (uint32_t c0 = 0; c0 < count; c0 += kSiblingLanes) {
             CellScratch::SiblingLanes at = evaluated;
@@ -367,11 +375,9 @@ class StepPruner {
             for (uint32_t j = 0; j < m; ++j)
                 for (uint32_t c = 0; c < kSiblingLanes; ++c)
                     centres[j * kSiblingLanes + c] = octant_cell(members[j], c).centre;
-            evaluate_siblings(sc_, tape, centres, m * kSiblingLanes, proto_.half, proto_.radius,
-                              opt_.bounds, s);
-            s.sib_used = s.sib_at.offset + uint32_t(tape.size()) * s.sib_at.stride;
+            const CellScratch::SiblingLanes lanes = evaluate_kept(tape, centres, m * kSiblingLanes);
             for (uint32_t j = 0; j < m; ++j) {
-                evaluated[members[j]] = s.sib_at;
+                evaluated[members[j]] = lanes;
                 evaluated[members[j]].first = j * kSiblingLanes;
                 grouped[members[j]] = true;
             }
