@@ -207,12 +207,12 @@ Mirror mirror(std::string name, std::vector<std::string> kernels, std::vector<Me
 const std::vector<Mirror>& mirrors() {
     using namespace gpu;
     using math::PrimitiveParams;
-    const std::vector<std::string> all = {"prune",           "prune_lanes", "prune_refine_lanes",
+    const std::vector<std::string> all = {"prune",           "prune_bytes", "prune_refine_lanes",
                                           "prune_refine",    "prune_wide",  "prune_wide_subgroups",
                                           "prune_wide_runs", "expand",      "cell_info",
                                           "trace",           "discretize"};
     const std::vector<std::string> scene = {
-        "prune",           "prune_lanes", "prune_refine_lanes",
+        "prune",           "prune_bytes", "prune_refine_lanes",
         "prune_refine",    "prune_wide",  "prune_wide_subgroups",
         "prune_wide_runs", "trace",       "discretize"};
     const std::vector<std::string> grid = {"trace", "discretize"};
@@ -234,8 +234,8 @@ const std::vector<Mirror>& mirrors() {
             {SDFPRUNE_MEMBER(PrunedCell, tape), SDFPRUNE_MEMBER(PrunedCell, children),
              SDFPRUNE_MEMBER(PrunedCell, value), SDFPRUNE_MEMBER(PrunedCell, bound)}),
         mirror<GpuBlock>("Block",
-                         {"prune", "prune_refine_lanes", "prune_refine", "prune_wide",
-                          "prune_wide_subgroups", "prune_wide_runs", "expand"},
+                         {"prune", "prune_bytes", "prune_refine_lanes", "prune_refine",
+                          "prune_wide", "prune_wide_subgroups", "prune_wide_runs", "expand"},
                          {SDFPRUNE_MEMBER(GpuBlock, x), SDFPRUNE_MEMBER(GpuBlock, y),
                           SDFPRUNE_MEMBER(GpuBlock, z), SDFPRUNE_MEMBER(GpuBlock, tape)}),
         mirror<GpuLevel>("Level", grid,
@@ -247,8 +247,8 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(GpuGridParams, cell_size), SDFPRUNE_MEMBER(GpuGridParams, inv_cell)}),
         mirror<GpuCounters>(
             "Counters",
-            {"prune", "prune_refine_lanes", "prune_refine", "prune_wide", "prune_wide_subgroups",
-             "prune_wide_runs"},
+            {"prune", "prune_bytes", "prune_refine_lanes", "prune_refine", "prune_wide",
+             "prune_wide_subgroups", "prune_wide_runs"},
             {SDFPRUNE_MEMBER(GpuCounters, pool_used), SDFPRUNE_MEMBER(GpuCounters, pool_capacity),
              SDFPRUNE_MEMBER(GpuCounters, overflow), SDFPRUNE_MEMBER(GpuCounters, max_len),
              SDFPRUNE_MEMBER(GpuCounters, near_jobs), SDFPRUNE_MEMBER(GpuCounters, next_blocks),
@@ -281,8 +281,8 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(DiscretizeParams, pad2)}),
         mirror<PrunePush>(
             "Push",
-            {"prune", "prune_refine_lanes", "prune_refine", "prune_wide", "prune_wide_subgroups",
-             "prune_wide_runs"},
+            {"prune", "prune_bytes", "prune_refine_lanes", "prune_refine", "prune_wide",
+             "prune_wide_subgroups", "prune_wide_runs"},
             {SDFPRUNE_MEMBER(PrunePush, origin),       SDFPRUNE_MEMBER(PrunePush, csize),
              SDFPRUNE_MEMBER(PrunePush, mode),         SDFPRUNE_MEMBER(PrunePush, factor),
              SDFPRUNE_MEMBER(PrunePush, jobs),         SDFPRUNE_MEMBER(PrunePush, threads),
@@ -395,6 +395,9 @@ struct EmbeddedKernel {
 constexpr uint32_t kPruneSpv[] = {
 #include "prune.reflect.spv.inc"
 };
+constexpr uint32_t kPruneBytesSpv[] = {
+#include "prune_bytes.reflect.spv.inc"
+};
 constexpr uint32_t kPruneRefineLanesSpv[] = {
 #include "prune_refine_lanes.reflect.spv.inc"
 };
@@ -423,6 +426,7 @@ constexpr uint32_t kDiscretizeSpv[] = {
 #include "discretize.reflect.spv.inc"
 };
 const EmbeddedKernel kKernels[] = {{"prune", kPruneSpv},
+                                   {"prune_bytes", kPruneBytesSpv},
                                    {"prune_refine_lanes", kPruneRefineLanesSpv},
                                    {"prune_refine", kPruneRefineSpv},
                                    {"prune_wide", kPruneWideSpv},
@@ -495,6 +499,9 @@ void check_kernel(const std::string& kernel) {
 
 TEST(GpuLayout, Prune) {
     check_kernel("prune");
+}
+TEST(GpuLayout, PruneBytes) {
+    check_kernel("prune_bytes");
 }
 TEST(GpuLayout, PruneRefineLanes) {
     check_kernel("prune_refine_lanes");

@@ -670,6 +670,60 @@ TEST(Gpu, ClaimsChangeNoCell) {
         }
 }
 
+// The team steps' decision and sweep flags a byte a lane (prune_bytes.comp, where the device
+// has 8-bit storage) make the same cells as a word a lane (prune.comp), and the CPU's, in a
+// third of the entries' scratch: every team step holds less a lane. On the demo scene planned as on
+// an H100 (as many teams as jobs, each job's entries claimed) and on a right-deep chain of
+// 12,000 whose long tapes lavapipe prunes over resumed rounds (room for the longest tape).
+TEST(Gpu, ByteFlagsChangeNoCell) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const std::unique_ptr<gpu::Device> words = device_with_env("SDFPRUNE_VULKAN_BYTE_FLAGS", "0");
+    const std::unique_ptr<gpu::Device> h100_like =
+        device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "270336");
+    ::setenv("SDFPRUNE_VULKAN_RESIDENT_THREADS", "270336", 1);
+    const std::unique_ptr<gpu::Device> h100_words =
+        device_with_env("SDFPRUNE_VULKAN_BYTE_FLAGS", "0");
+    ::unsetenv("SDFPRUNE_VULKAN_RESIDENT_THREADS");
+    ASSERT_TRUE(words && h100_like && h100_words);
+    struct Case {
+        std::string what;
+        Scene sc;
+        uint32_t resolution;
+        gpu::Device *bytes, *words;
+    };
+    const Case cases[] = {
+        {"demo 64³, planned as on an H100", builtin_scene("demo"), 64, h100_like.get(),
+         h100_words.get()},
+        {"chain of 12,000 at 16³", right_deep_chain(12000), 16, dev, words.get()}};
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.what);
+        PruneOptions o;
+        o.resolution = c.resolution;
+        ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
+        const gpu::Grid bytes = gpu::prune(*c.bytes, c.sc, o);
+        const gpu::Grid word = gpu::prune(*c.words, c.sc, o);
+        ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+        if (!bytes.stats().byte_flags) GTEST_SKIP() << "the device has no 8-bit storage buffers";
+        EXPECT_FALSE(word.stats().byte_flags);
+        const std::vector<gpu::GpuStepShape>&a = bytes.stats().steps, &b = word.stats().steps;
+        ASSERT_EQ(a.size(), b.size());
+        for (size_t i = 0; i < a.size(); ++i) {
+            SCOPED_TRACE("step " + std::to_string(i));
+            EXPECT_EQ(a[i].jobs, b[i].jobs);
+            // Less scratch a lane in flight (where the scratch budget holds a step to fewer
+            // teams than its jobs, as the chain's, more teams in the same scratch).
+            if (a[i].mode < 3 && a[i].jobs > 0) {
+                ASSERT_GT(a[i].lanes * b[i].lanes, 0u);
+                EXPECT_LT(double(a[i].scratch_bytes) / double(a[i].lanes),
+                          double(b[i].scratch_bytes) / double(b[i].lanes));
+            }
+        }
+        expect_same_stats(word.stats(), bytes.stats(), "bytes against words");
+        expect_same_device_cells(bytes, word, "bytes against words");
+        expect_matches_cpu(c.sc, prune(c.sc, o), bytes, *c.bytes, c.what);
+    }
+}
+
 // By default the top levels' steps, few jobs over long parent tapes, run wide: a workgroup
 // per parent tape (or, with fewer jobs than the device holds workgroups, up to 8 workgroups a
 // tape, a share of its boxes each), and its busiest lane walks less than a team's would. Every

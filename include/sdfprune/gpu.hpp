@@ -129,10 +129,16 @@ struct DevicePruneStats : PruneStats {
     // submission's (uploads and readbacks included) from the end of its recording to its
     // results being back, which holds the GPU's time.
     uint64_t host_buffers = 0, host_buffers_reused = 0, host_allocations = 0, host_submissions = 0;
+    // The bytes of those device allocations: on an NVIDIA H100 a first call's allocations
+    // cost the host about 0.016 ms per MB (BENCHMARKS.md, stop 29).
+    uint64_t host_allocated_bytes = 0;
     double host_buffer_ms = 0, host_submit_ms = 0;
     // Whether the wide steps used subgroup operations (the device has them and
     // SDFPRUNE_VULKAN_SUBGROUPS is not 0), else shared memory.
     bool subgroups = false;
+    // Whether the team steps kept their decision and sweep flags a byte a lane (the device has
+    // 8-bit storage and SDFPRUNE_VULKAN_BYTE_FLAGS is not 0: prune_bytes.comp), else a word.
+    bool byte_flags = false;
     std::vector<GpuStepShape> steps;  // in the order they ran
 };
 

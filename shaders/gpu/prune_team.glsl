@@ -36,8 +36,9 @@ const uint kWindow = 64u;  // tape entries a lane advances per step (gpu_prune.c
 
 // Per team (team_words): the lanes' job state (kStateWords each) and 4 words per stack slot and
 // lane (value, lo, hi, entry), then per entry of its job's parent tape (len words) the entry's
-// left operand (one word, the same in every lane) and its decision and sweep flags (one word
-// per lane). Lane l's word of item k is at k · kTeam + l. A team's entries are sized for the
+// left operand (one word, the same in every lane) and its decision and sweep flags
+// (kEntryFlagWords: a word per lane, or with PRUNE_BYTE_FLAGS a byte, a third of the entry's
+// scratch). Lane l's word (or byte) of item k is at k · kTeam + l. A team's entries are sized for the
 // step's longest parent tape, or, where the jobs' tapes are known to sum to less
 // (pc.claim_words > 0, gpu_prune_plan.cpp), each job claims room for its own tape's entries
 // from the area past the teams' (claim_entries): molecule's level-3 octants, 31,556 jobs on as
@@ -68,13 +69,35 @@ const uint kPhaseEvaluate = 0u, kPhaseSweep = 1u, kPhaseWrite = 2u, kPhaseDone =
 // pass blend_may_decide (operators), then the sweep's flags: bits 2-3 alive (0 dead, 1 kept,
 // 2 skipped), bit 4 negate.
 
+// An entry's flags for lane `lane` (entry_flags), past the entries' left operands (dbase).
+#ifdef PRUNE_BYTE_FLAGS
+// prune_bytes.comp: a byte, through a third view of the scratch buffer (8-bit storage).
+layout(std430, binding = 12) buffer LaneFlags { uint8_t lane_flags[]; };
+const uint kEntryFlagWords = kTeam / 4u;
+uint entry_flags(uint dbase, uint e, uint lane) {
+    return uint(lane_flags[4u * dbase + e * kTeam + lane]);
+}
+void set_entry_flags(uint dbase, uint e, uint lane, uint flags) {
+    lane_flags[4u * dbase + e * kTeam + lane] = uint8_t(flags);
+}
+#else
+const uint kEntryFlagWords = kTeam;
+uint entry_flags(uint dbase, uint e, uint lane) { return lane_scratch[dbase + e * kTeam + lane]; }
+void set_entry_flags(uint dbase, uint e, uint lane, uint flags) {
+    lane_scratch[dbase + e * kTeam + lane] = flags;
+}
+#endif
+const uint kEntryWords = 1u + kEntryFlagWords;  // gpu_prune_plan.cpp: entry_bytes
+
 uint team_fixed_words() { return kStateWords * kTeam + 4u * pc.max_stack * kTeam; }
 uint team_words() {
-    return team_fixed_words() + (pc.claim_words != 0u ? 0u : pc.max_len * (1u + kTeam));
+    return team_fixed_words() + (pc.claim_words != 0u ? 0u : pc.max_len * kEntryWords);
 }
 
 // An entry's sweep flags set, its decision bits (0-1 and 5) kept.
-void set_sweep_flags(uint at, uint flags) { lane_scratch[at] = (lane_scratch[at] & 35u) | flags; }
+void set_sweep_flags(uint dbase, uint e, uint lane, uint flags) {
+    set_entry_flags(dbase, e, lane, (entry_flags(dbase, e, lane) & 35u) | flags);
+}
 // The sweep's flags of a tape's root (its last entry, `len` words at `parent`): alive, with its
 // own sign.
 uint root_sweep_flags(uint parent, uint len) {
@@ -89,7 +112,7 @@ shared uint s_claim[kTeams];
 // once (claim_scratch), past the teams' scratch (pc.threads / kTeam of them), or kNoClaim.
 // Every lane calls it.
 uint claim_entries(uint tl, bool lead, uint len) {
-    if (lead) s_claim[tl] = len * (1u + kTeam);
+    if (lead) s_claim[tl] = len * kEntryWords;
     memoryBarrierShared();
     barrier();
     if (gl_LocalInvocationID.x == 0u) {
@@ -317,7 +340,7 @@ void main() {
                     }
                     if (tape_negated(w)) x = negate_range(x);
                     // The decision, its sweep flags cleared for stage 3.
-                    lane_scratch[dbase + i * kTeam + lane] = decision;
+                    set_entry_flags(dbase, i, lane, decision);
                     tx = x;
                     t_entry = i;
                     pdepth = max(pdepth, top);
@@ -343,8 +366,7 @@ void main() {
                     } else if (!valid) {
                         phase = kPhaseDone;  // a lane past the boxes
                     } else {
-                        set_sweep_flags(dbase + (len - 1u) * kTeam + lane,
-                                        root_sweep_flags(parent, len));
+                        set_sweep_flags(dbase, len - 1u, lane, root_sweep_flags(parent, len));
                         phase = kPhaseSweep;
                     }
                 }
@@ -356,8 +378,7 @@ void main() {
                 uint stop = i > kWindow ? i - kWindow : 0u;
                 for (; i > stop; --i) {
                     uint e = i - 1u;
-                    uint fe = dbase + e * kTeam + lane;
-                    uint fl = lane_scratch[fe];
+                    uint fl = entry_flags(dbase, e, lane);
                     if (((fl >> 2) & 3u) != 1u) continue;
                     uint w = tape_read(parent, 2u + e);
                     if (is_primitive(tape_node(w))) {
@@ -372,15 +393,15 @@ void main() {
                         may_decide = may_decide || (fl & 32u) != 0u;
                         uint nl = tape_negated(tape_read(parent, 2u + l)) ? 1u : 0u;
                         uint nr = tape_negated(tape_read(parent, 2u + r)) ? 1u : 0u;
-                        set_sweep_flags(dbase + l * kTeam + lane, (1u << 2) | (nl << 4));
-                        set_sweep_flags(dbase + r * kTeam + lane, (1u << 2) | (nr << 4));
+                        set_sweep_flags(dbase, l, lane, (1u << 2) | (nl << 4));
+                        set_sweep_flags(dbase, r, lane, (1u << 2) | (nr << 4));
                         continue;
                     }
                     uint wn = d == kLeftWins ? l : r;
                     uint neg = ((fl >> 4) & 1u) ^
                                (tape_negated(tape_read(parent, 2u + wn)) ? 1u : 0u);
-                    set_sweep_flags(fe, (2u << 2) | (fl & 16u));
-                    set_sweep_flags(dbase + wn * kTeam + lane, (1u << 2) | (neg << 4));
+                    set_sweep_flags(dbase, e, lane, (2u << 2) | (fl & 16u));
+                    set_sweep_flags(dbase, wn, lane, (1u << 2) | (neg << 4));
                 }
                 if (i == 0u) {
                     note_len(out_len);
@@ -407,7 +428,7 @@ void main() {
             if (phase == kPhaseWrite) {
                 uint we = min(i + kWindow, len);
                 for (; i < we; ++i) {
-                    uint fl = lane_scratch[dbase + i * kTeam + lane];
+                    uint fl = entry_flags(dbase, i, lane);
                     if (((fl >> 2) & 3u) != 1u) continue;
                     uint node = tape_node(tape_read(parent, 2u + i));
                     tape_write(top++, tape_word(node, ((fl >> 4) & 1u) != 0u));

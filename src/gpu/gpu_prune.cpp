@@ -151,8 +151,7 @@ void Pruner::run() {
     g.near_box = res.size() < 2 ? sc.aabb : Aabb{sc.aabb.max, sc.aabb.min};
     for (uint32_t li = 0; li < res.size(); ++li) prune_level(li);
     ctx.destroy(blocks);
-    ctx.destroy(scratch);
-    for (Buffer* b : more_scratch) ctx.destroy(*b);
+    release_scratch();
     ctx.destroy(octant_pool);
     ctx.destroy(refine_list);
     g.finest_stack_depth = max_depth;  // the last level's: the finest cells' (refined)
@@ -220,7 +219,12 @@ void Pruner::prune_level(uint32_t li) {
     }
     // The level's cells, made after the pools grew (a pool's old and new buffers, held at once
     // while its words are copied, are not held beside them).
-    lv.cells = &local.create(lv.total * sizeof(PrunedCell));
+    // The finest level's cells buffer has room for the coarser levels' after its own
+    // (gather_cells): all levels' cells end in it without a buffer of their own. (Its
+    // capacity exactly that: its class could be a quarter more.)
+    uint64_t coarser = 0;
+    for (const uint64_t n : level_totals) coarser += lv.finest ? n : 0;
+    lv.cells = &local.create((lv.total + coarser) * sizeof(PrunedCell), false, lv.finest);
     lv.octants = &local.create(lv.split ? block_count * 8 * sizeof(PrunedCell) : 16);
     lv.next = &local.create(lv.finest ? 16 : lv.total * sizeof(GpuBlock));
     // Room to list every finest cell for refinement.
@@ -246,6 +250,7 @@ void Pruner::prune_level(uint32_t li) {
     }
     g.level_info.push_back({res[li], lv.f, 0, 0});
     level_cells.push_back(lv.cells);
+    level_totals.push_back(lv.total);
 }
 
 // The level's blocks in slices, each in its own submissions with the octant pool emptied
@@ -287,6 +292,9 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             max_depth = std::max(std::min(sc->max_depth, max_depth), 1u);
             const uint64_t hf = lv.f / 2;
             const uint64_t cells_bound = std::min(hf * hf * hf * sc->near_words, room_cap);
+            // (The octants' scratch first: the next step holds its own, and a pool's old and
+            // new buffers, held at once while its words are copied, are not held beside it.)
+            release_scratch();
             if (lv.refine) {
                 if (octant_keep + cells_bound > octant_capacity)
                     resize(octant_pool, octant_capacity, octant_keep + cells_bound, octant_keep);
@@ -324,6 +332,7 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             lv.copied_cells = sc->copy_cells;
             std::copy_n(sc->walk_cells, kRefineWalkClasses, lv.walk_cells.begin());
             const uint64_t room = uint64_t(g.pool_words) + sc->near_words;
+            release_scratch();
             if (room > capacity) resize(g.pool, capacity, room, g.pool_words);
             max_len = std::max(sc->max_len, 1u);
             max_depth = std::max(sc->max_depth, 1u);
@@ -558,6 +567,11 @@ void Pruner::presize(Buffer& pool, uint64_t& cap, uint64_t used, uint64_t bound)
     if (want > cap) resize(pool, cap, want, used);
 }
 
+void Pruner::release_scratch() {
+    ctx.destroy(scratch);
+    for (Buffer* b : more_scratch) ctx.destroy(*b);
+}
+
 void Pruner::hold(Buffer& b, uint64_t bytes) {
     if (b.size >= bytes) return;
     const uint64_t size = (bytes + 15) & ~uint64_t(15);
@@ -570,19 +584,26 @@ void Pruner::hold(Buffer& b, uint64_t bytes) {
 }
 
 // All levels' cells in one buffer, for the lookups of the tracing and discretizing kernels,
-// and their far-field clearances.
+// and their far-field clearances: the finest level's, with the coarser levels' copied after
+// its own (level_info's offsets say where each level is).
 void Pruner::gather_cells() {
-    for (size_t li = 0; li < level_cells.size(); ++li) {
+    const size_t finest = level_cells.size() - 1;
+    cell_total = level_totals[finest];
+    g.level_info[finest].offset = 0;
+    for (size_t li = 0; li < finest; ++li) {
         g.level_info[li].offset = uint32_t(cell_total);
-        cell_total += level_cells[li]->size / sizeof(PrunedCell);
+        cell_total += level_totals[li];
     }
-    g.cells = ctx.create_buffer(cell_total * sizeof(PrunedCell));
+    g.cells = *level_cells[finest];
+    *level_cells[finest] = Buffer{};
     g.levels = ctx.create_buffer(g.level_info.size() * sizeof(GpuLevel));
-    ctx.begin();
-    for (size_t li = 0; li < level_cells.size(); ++li)
-        ctx.copy(*level_cells[li], g.cells, level_cells[li]->size, 0,
-                 uint64_t(g.level_info[li].offset) * sizeof(PrunedCell));
-    gpu_ms += ctx.submit();
+    if (finest > 0) {
+        ctx.begin();
+        for (size_t li = 0; li < finest; ++li)
+            ctx.copy(*level_cells[li], g.cells, level_totals[li] * sizeof(PrunedCell), 0,
+                     uint64_t(g.level_info[li].offset) * sizeof(PrunedCell));
+        gpu_ms += ctx.submit();
+    }
     ctx.upload(g.levels, g.level_info.data(), g.level_info.size() * sizeof(GpuLevel));
     for (Buffer* b : level_cells) ctx.destroy(*b);
     // The far-field clearances (set_clearance), on the host: the cells read back, set, and
@@ -592,19 +613,16 @@ void Pruner::gather_cells() {
         std::vector<PrunedCell> host(cell_total);
         ctx.download(g.cells, host.data(), cell_total * sizeof(PrunedCell));
         std::vector<LevelCells> levels;
-        for (size_t li = 0; li < g.level_info.size(); ++li) {
-            const uint64_t end =
-                li + 1 < g.level_info.size() ? g.level_info[li + 1].offset : cell_total;
-            levels.push_back(
-                {g.level_info[li].res, g.level_info[li].factor,
-                 std::span(host).subspan(g.level_info[li].offset, end - g.level_info[li].offset)});
-        }
+        for (size_t li = 0; li < g.level_info.size(); ++li)
+            levels.push_back({g.level_info[li].res, g.level_info[li].factor,
+                              std::span(host).subspan(g.level_info[li].offset, level_totals[li])});
         st.clearance_bytes = set_clearance(levels, opt.threads) + cell_total * sizeof(PrunedCell);
         ctx.upload(g.cells, host.data(), cell_total * sizeof(PrunedCell));
         st.clearance_ms = ms_since(t_clear);
     }
     st.prune_ms = gpu_ms;
     st.subgroups = ctx.can_run(KernelId::kPruneWideSubgroups);
+    st.byte_flags = ctx.can_run(KernelId::kPruneBytes);
 }
 
 // Statistics (not timed): per cell (length, primitives) or far-field, level by level.
@@ -616,9 +634,7 @@ void Pruner::read_statistics() {
     uint64_t far_finest = 0;
     double prim_sum = 0, prim_sq = 0, tape_sum = 0;
     for (size_t li = 0; li < g.level_info.size(); ++li) {
-        const uint64_t n = li + 1 < g.level_info.size()
-                               ? g.level_info[li + 1].offset - g.level_info[li].offset
-                               : cell_total - g.level_info[li].offset;
+        const uint64_t n = level_totals[li];
         const uint64_t below = N / g.level_info[li].res;
         const bool finest = li + 1 == g.level_info.size();
         Buffer& level = local.create(n * sizeof(PrunedCell));
@@ -684,6 +700,7 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     st.host_buffers = host.buffers - host_before.buffers;
     st.host_buffers_reused = host.buffers_reused - host_before.buffers_reused;
     st.host_allocations = host.allocations - host_before.allocations;
+    st.host_allocated_bytes = host.allocated_bytes - host_before.allocated_bytes;
     st.host_submissions = host.submissions - host_before.submissions;
     st.host_buffer_ms = host.buffer_ms - host_before.buffer_ms;
     st.host_submit_ms = host.submit_ms - host_before.submit_ms;

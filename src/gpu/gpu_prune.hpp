@@ -107,6 +107,8 @@ class Pruner {
     // Makes b hold at least `bytes`: within its capacity (its class's, Context::create_buffer),
     // or in a new buffer (its contents are not kept).
     void hold(Buffer& b, uint64_t bytes);
+    // Gives back the steps' scratch (between steps: each step holds what it needs).
+    void release_scratch();
     void gather_cells();
 
     Context& ctx;
@@ -181,7 +183,8 @@ class Pruner {
     float L = 1;
     uint32_t flags = 0;  // the push constants' (prune_common.glsl)
     std::vector<Buffer*> level_cells;
-    uint64_t cell_total = 0;  // of all levels
+    std::vector<uint64_t> level_totals;  // each level's cells
+    uint64_t cell_total = 0;             // of all levels
 };
 
 }  // namespace sdfprune::gpu::pruning

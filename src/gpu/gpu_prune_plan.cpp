@@ -107,9 +107,12 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
         return s;
     }
     // A team's scratch: its lanes' state, per stack slot and lane 4 words, per parent-tape
-    // entry a left operand and a word per lane (decision and sweep flags).
+    // entry a left operand and the lanes' decision and sweep flags: a word per lane, or a byte
+    // (prune_bytes.comp, where the device has 8-bit storage).
+    s.kernel = ctx.can_run(KernelId::kPruneBytes) ? KernelId::kPruneBytes : KernelId::kPrune;
+    const uint64_t flag_bytes = s.kernel == KernelId::kPruneBytes ? 1 : 4;
     const uint64_t fixed_bytes = (kPruneStateWords + 4ull * max_depth) * kPruneTeam * 4;
-    const uint64_t entry_bytes = (1 + kPruneTeam) * 4;
+    const uint64_t entry_bytes = 4 + kPruneTeam * flag_bytes;
     const uint64_t team_bytes = fixed_bytes + uint64_t(max_len) * entry_bytes;
     // Teams in flight: as many as have jobs, their scratch fits the budget and the device runs
     // at once (more would only queue, their scratch held for nothing; the teams take the jobs

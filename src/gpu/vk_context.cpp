@@ -20,6 +20,9 @@ namespace {
 const uint32_t kPruneSpv[] = {
 #include "prune.spv.inc"
 };
+const uint32_t kPruneBytesSpv[] = {
+#include "prune_bytes.spv.inc"
+};
 const uint32_t kPruneRefineLanesSpv[] = {
 #include "prune_refine_lanes.spv.inc"
 };
@@ -54,12 +57,14 @@ struct KernelCode {
     size_t bytes;
     uint32_t bindings;                     // storage buffers 0 .. bindings-1
     uint32_t local_size = kWorkgroupSize;  // local_size_x: built only where the device allows it
-    bool subgroups = false;  // built only where the device has them (Context::subgroups)
+    bool subgroups = false;     // built only where the device has them (Context::subgroups)
+    bool byte_storage = false;  // built only where the device has it (Context::byte_storage)
 };
 
 // Binding counts must match the shaders' layouts (shaders/gpu/*.comp).
 const KernelCode kKernels[] = {
     {"prune", kPruneSpv, sizeof(kPruneSpv), 13},
+    {"prune_bytes", kPruneBytesSpv, sizeof(kPruneBytesSpv), 13, kWorkgroupSize, false, true},
     {"prune_refine_lanes", kPruneRefineLanesSpv, sizeof(kPruneRefineLanesSpv), 13},
     {"prune_refine", kPruneRefineSpv, sizeof(kPruneRefineSpv), 13},
     {"prune_wide", kPruneWideSpv, sizeof(kPruneWideSpv), 13, uint32_t(kPruneWide)},
@@ -253,6 +258,17 @@ Context::Context() {
                      (sg.supportedOperations & need) == need && sg.subgroupSize >= 1;
         subgroups_ = subgroups_ && env_flag("SDFPRUNE_VULKAN_SUBGROUPS", true);
     }
+    // 8-bit storage (enabled at device creation below, where offered).
+    auto storage8 = vk_struct<VkPhysicalDevice8BitStorageFeaturesKHR>(
+        VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_8BIT_STORAGE_FEATURES_KHR);
+    if (has_extension(physical_, VK_KHR_8BIT_STORAGE_EXTENSION_NAME)) {
+        auto f2 =
+            vk_struct<VkPhysicalDeviceFeatures2>(VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2);
+        f2.pNext = &storage8;
+        vkGetPhysicalDeviceFeatures2(physical_, &f2);
+        byte_storage_ = storage8.storageBuffer8BitAccess == VK_TRUE &&
+                        env_flag("SDFPRUNE_VULKAN_BYTE_FLAGS", true);
+    }
     {
         // Invocations resident at once (resident_threads): the vendors' core counts where the
         // device reports them (querying an extension's properties needs no enabling).
@@ -309,7 +325,7 @@ Context::Context() {
     dci.queueCreateInfoCount = 1;
     dci.pQueueCreateInfos = &qci;
     // Such a driver must be told that the application knows (the Vulkan spec).
-    const char* extensions[2];
+    const char* extensions[3];
     const char* portability_subset = "VK_KHR_portability_subset";
     if (has_extension(physical_, portability_subset))
         extensions[dci.enabledExtensionCount++] = portability_subset;
@@ -331,6 +347,14 @@ Context::Context() {
     } else if (want_kernel_stats) {
         std::fprintf(stderr, "vulkan: %s has no VK_KHR_pipeline_executable_properties\n",
                      device_name_.c_str());
+    }
+    if (byte_storage_) {
+        extensions[dci.enabledExtensionCount++] = VK_KHR_8BIT_STORAGE_EXTENSION_NAME;
+        storage8 = vk_struct<VkPhysicalDevice8BitStorageFeaturesKHR>(
+            VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_8BIT_STORAGE_FEATURES_KHR);
+        storage8.storageBuffer8BitAccess = VK_TRUE;
+        storage8.pNext = const_cast<void*>(dci.pNext);
+        dci.pNext = &storage8;
     }
     dci.ppEnabledExtensionNames = extensions;
     check(vkCreateDevice(physical_, &dci, nullptr, &device_), "vkCreateDevice");
@@ -370,7 +394,7 @@ Context::Context() {
         Kernel k;
         k.bindings = code.bindings;
         // (Vulkan guarantees workgroups of 128 invocations only.)
-        if ((code.subgroups && !subgroups_) ||
+        if ((code.subgroups && !subgroups_) || (code.byte_storage && !byte_storage_) ||
             code.local_size > props.limits.maxComputeWorkGroupInvocations ||
             code.local_size > props.limits.maxComputeWorkGroupSize[0]) {
             kernels_.push_back(k);  // no pipeline: never dispatched (can_run)
@@ -462,8 +486,10 @@ void Context::log_host(const char* what, uint64_t bytes,
     const auto ms = [&](auto since) {
         return std::chrono::duration<double, std::milli>(now - since).count();
     };
-    std::fprintf(stderr, "vulkan host %10.3f ms: %s %llu bytes, host %.3f ms, gpu %.3f ms\n",
-                 ms(made_), what, static_cast<unsigned long long>(bytes), ms(start), gpu_ms);
+    std::fprintf(stderr,
+                 "vulkan host %10.3f ms: %s %llu bytes, host %.3f ms, gpu %.3f ms live %.1f MB\n",
+                 ms(made_), what, static_cast<unsigned long long>(bytes), ms(start), gpu_ms,
+                 bytes_live() / 1e6);
 }
 
 uint32_t Context::groups_for(uint64_t n) const {

@@ -25,6 +25,7 @@ inline constexpr uint32_t kWorkgroupSize = 64;
 // The kernels, one per compute shader in shaders/gpu/.
 enum class KernelId : uint32_t {
     kPrune,
+    kPruneBytes,  // the same, its decision and sweep flags a byte a lane (needs byte_storage())
     kPruneRefineLanes,  // refinement's (mode 3) lane pass: a lane per cell with a short tape
     kPruneRefine,       // refinement: a squad of lanes per cell
     kPruneWide,
@@ -84,6 +85,9 @@ class Context {
     // Subgroup arithmetic and ballot in compute shaders (Vulkan 1.1), for the kernels that use
     // them; SDFPRUNE_VULKAN_SUBGROUPS=0 turns them off (the fallbacks, for tests).
     bool subgroups() const { return subgroups_; }
+    // 8-bit storage buffer access (VK_KHR_8bit_storage), for prune_bytes.comp;
+    // SDFPRUNE_VULKAN_BYTE_FLAGS=0 turns it off (prune.comp's word flags, to compare).
+    bool byte_storage() const { return byte_storage_; }
     // Whether this device runs kernel k (prune_wide's 256-lane workgroups need a device that
     // allows them; the subgroup kernels need subgroups()).
     bool can_run(KernelId k) const { return kernels_[size_t(k)].pipeline != VK_NULL_HANDLE; }
@@ -129,8 +133,9 @@ class Context {
     // than the device's largest storage buffer unless asked for), so a buffer holds at most
     // 25 % more than asked and a call that repeats another's requests finds every buffer it
     // needs in the cache. Throws GpuError when the device has no memory left for it (after
-    // freeing the idle cache and trying once more).
-    Buffer create_buffer(uint64_t bytes, bool host_visible = false);
+    // freeing the idle cache and trying once more). `exact`: its capacity `bytes` (rounded up
+    // to 16), for a large buffer that is never held for more (its class may be a quarter more).
+    Buffer create_buffer(uint64_t bytes, bool host_visible = false, bool exact = false);
     // Hands b back to the idle cache (freed at once if it alone is over the budget) and
     // empties it; an empty buffer is ignored.
     void destroy(Buffer& b);
@@ -155,7 +160,8 @@ class Context {
     // wall time from ending the recording to the results being back.
     struct HostTime {
         uint64_t buffers = 0, buffers_reused = 0, submissions = 0;
-        uint64_t allocations = 0;  // device memory allocations (buffers' own and slabs)
+        uint64_t allocations = 0;      // device memory allocations (buffers' own and slabs)
+        uint64_t allocated_bytes = 0;  // their bytes
         double buffer_ms = 0, submit_ms = 0;
     };
     const HostTime& host_time() const { return host_; }
@@ -251,6 +257,7 @@ class Context {
     uint64_t device_heap_ = 0;  // the largest device-local heap (or any heap), in bytes
     bool loop_limited_ = false;
     bool subgroups_ = false;
+    bool byte_storage_ = false;
     uint64_t live_ = 0, peak_ = 0;
     uint64_t memory_limit_ = ~uint64_t(0);  // SDFPRUNE_VULKAN_MEMORY_LIMIT
     // Small buffers' memory. A device allocation costs the host about 0.13 ms however small
@@ -312,9 +319,9 @@ class LocalBuffers {
     }
     LocalBuffers(const LocalBuffers&) = delete;
     LocalBuffers& operator=(const LocalBuffers&) = delete;
-    Buffer& create(uint64_t bytes, bool host_visible = false) {
+    Buffer& create(uint64_t bytes, bool host_visible = false, bool exact = false) {
         Buffer& b = slot();
-        b = ctx_.create_buffer(bytes, host_visible);
+        b = ctx_.create_buffer(bytes, host_visible, exact);
         return b;
     }
     // An empty entry, for a buffer made later.

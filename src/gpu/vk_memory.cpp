@@ -45,12 +45,13 @@ uint64_t capacity_class(uint64_t bytes) {
 }
 }  // namespace
 
-Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
+Buffer Context::create_buffer(uint64_t bytes, bool host_visible, bool exact) {
     const auto start = std::chrono::steady_clock::now();
     const auto add_time = [&] { host_.buffer_ms += ms_since(start); };
     const uint64_t size = (std::max<uint64_t>(bytes, 16) + 15) & ~uint64_t(15);
     // (A buffer as large as the device's largest range is not rounded past it.)
-    const uint64_t capacity = std::max(size, std::min(capacity_class(size), max_range_));
+    const uint64_t capacity =
+        exact ? size : std::max(size, std::min(capacity_class(size), max_range_));
     const auto hand_out = [&](Buffer b) {
         b.size = size;
         if (!host_visible) {
@@ -102,6 +103,7 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible) {
     mai.allocationSize = req.size;
     mai.memoryTypeIndex = type;
     ++host_.allocations;
+    host_.allocated_bytes += mai.allocationSize;
     const auto allocate = [&] {
         return !host_visible && live_ + capacity > memory_limit_
                    ? VK_ERROR_OUT_OF_DEVICE_MEMORY
@@ -251,6 +253,7 @@ bool Context::bind_to_slab(Buffer& b, const VkMemoryRequirements& req, uint32_t 
         mai.memoryTypeIndex = type;
         const auto start = std::chrono::steady_clock::now();
         ++host_.allocations;
+        host_.allocated_bytes += slab.size;
         if (vkAllocateMemory(device_, &mai, nullptr, &slab.memory) != VK_SUCCESS) return false;
         void* mapped = nullptr;
         if (host_visible &&

@@ -242,6 +242,7 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          .add("host_buffers", device_grid->stats().host_buffers)
                          .add("host_buffers_reused", device_grid->stats().host_buffers_reused)
                          .add("host_allocations", device_grid->stats().host_allocations)
+                         .add("host_allocated_bytes", device_grid->stats().host_allocated_bytes)
                          .add("host_buffer_ms", device_grid->stats().host_buffer_ms)
                          .add("host_submissions", device_grid->stats().host_submissions)
                          .add("host_submit_ms", device_grid->stats().host_submit_ms);
@@ -255,6 +256,7 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                              .add("first_host_buffers", first.host_buffers)
                              .add("first_host_buffers_reused", first.host_buffers_reused)
                              .add("first_host_allocations", first.host_allocations)
+                             .add("first_host_allocated_bytes", first.host_allocated_bytes)
                              .add("first_host_buffer_ms", first.host_buffer_ms);
                      j.add("gpu_steps", steps);
                  }
@@ -288,11 +290,12 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                  std::printf(
                      "  pruning on %s: %.1f ms GPU (%.1f ms wall, %u submissions, %u pool "
                      "grows), peak %.1f MB device memory\n"
-                     "    host: %llu buffers made (%llu device allocations) and %llu reused in "
+                     "    host: %llu buffers made (%llu device allocations, %.1f MB) and %llu "
+                     "reused in "
                      "%.1f ms, %llu submissions waited for in %.1f ms\n",
                      device->name().c_str(), s.prune_ms, ds.wall_ms, ds.submissions, ds.pool_grows,
                      double(s.prune_peak_bytes) / 1e6, (unsigned long long)ds.host_buffers,
-                     (unsigned long long)ds.host_allocations,
+                     (unsigned long long)ds.host_allocations, double(ds.host_allocated_bytes) / 1e6,
                      (unsigned long long)ds.host_buffers_reused, ds.host_buffer_ms,
                      (unsigned long long)ds.host_submissions, ds.host_submit_ms);
                  static const char* const kModes[] = {"cells", "octants", "cells from octants",
