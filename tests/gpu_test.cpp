@@ -955,8 +955,8 @@ TEST(Gpu, SmallBuffersShareSlabs) {
 // Buffers over 1 MiB are bound into blocks of device memory, and a buffer given back leaves
 // its room to later ones that fit (Context::Block): a first pruning peaks the same and makes
 // the same grid as through the idle cache alone (SDFPRUNE_VULKAN_BLOCKS=0), and on lavapipe
-// allocates device memory fewer times and reuses more; a repeated call once the first grid is gone
-// allocates nothing; empty blocks are idle memory, freed with the cache.
+// allocates device memory fewer times and fewer bytes and reuses more; a repeated call once the
+// first grid is gone allocates nothing; empty blocks are idle memory, freed with the cache.
 TEST(Gpu, LargeBuffersShareBlocks) {
     if (!gpu::built_with_vulkan()) GTEST_SKIP() << "built without the Vulkan backend";
     const Scene sc = builtin_scene("demo");
@@ -970,8 +970,12 @@ TEST(Gpu, LargeBuffersShareBlocks) {
     const gpu::DevicePruneStats &sa = a->stats(), &sb = b.stats();
     if (exact_device(*blocks)) {  // (lavapipe: this plan's buffers; a GPU plans others)
         EXPECT_LT(sa.host_allocations, sb.host_allocations);
+        EXPECT_LT(sa.host_allocated_bytes, sb.host_allocated_bytes);
         EXPECT_GT(sa.host_buffers_reused, sb.host_buffers_reused);
     }
+    // A fresh device's first call allocated all it held at once, at least.
+    EXPECT_GE(sa.host_allocated_bytes, sa.prune_peak_bytes);
+    EXPECT_GE(sb.host_allocated_bytes, sb.prune_peak_bytes);
     EXPECT_EQ(sa.host_buffers + sa.host_buffers_reused, sb.host_buffers + sb.host_buffers_reused);
     EXPECT_EQ(sa.prune_peak_bytes, sb.prune_peak_bytes);
     expect_same_stats(sb, sa, "blocks");
@@ -982,6 +986,7 @@ TEST(Gpu, LargeBuffersShareBlocks) {
     const gpu::Grid again = gpu::prune(*blocks, sc, o);
     EXPECT_EQ(again.stats().host_buffers, 0u);
     EXPECT_EQ(again.stats().host_allocations, 0u);
+    EXPECT_EQ(again.stats().host_allocated_bytes, 0u);
     EXPECT_EQ(again.stats().host_buffers_reused, requests);
     EXPECT_EQ(again.stats().prune_peak_bytes, sb.prune_peak_bytes);
     expect_same_device_cells(again, b, "blocks, again");
