@@ -8,7 +8,8 @@
 # REPEAT`, the last run kept), after one untimed warm-up pruning: a fresh machine's GPU ran its
 # first scene 3–4 times slower. One line per scene and variant: prune_ms, near-field cells,
 # average active primitives (equal across variants, or the variants disagree), the first call's
-# wall time, buffer time and peak memory (a first call allocates its buffers) and each step's
+# wall time, buffer time, peak memory and the device memory it allocated (a first call
+# allocates its buffers) and each step's
 # GPU time (L level, o octants, c cells, x refinement, W wide; [lane pass's part]).
 # SDFPRUNE_GPU_SCENES names the scenes (default: molecule, trees and five generated kinds);
 # molecule and trees are read from SDFPRUNE_SCENES (default ../shared/scenes), the others
@@ -69,6 +70,8 @@ else:
     if "first_wall_ms" in d:  # the first call of the process: wall time, buffer time, peak
         first = "first %.1f/%.1f ms wall/buffers, peak %.0f MB" % (
             d["first_wall_ms"], d["first_host_buffer_ms"], d["first_prune_peak_bytes"] / 1e6)
+        if "first_host_allocated_bytes" in d:  # (builds from stop 42 on)
+            first += ", allocated %.0f MB" % (d["first_host_allocated_bytes"] / 1e6)
     print(scene, label, "%.2f ms" % d["prune_ms"], "near", d["near_field_cells"],
           "active %.5f" % d["active_avg"], first, steps)
 ' "$1" "$2"

@@ -671,37 +671,37 @@ TEST(Gpu, ClaimsChangeNoCell) {
 }
 
 // The team steps' decision and sweep flags a byte a lane (prune_bytes.comp, where the device
-// has 8-bit storage) make the same cells as a word a lane (prune.comp), and the CPU's, in a
-// third of the entries' scratch: every team step holds less a lane. On the demo scene planned as on
-// an H100 (as many teams as jobs, each job's entries claimed) and on a right-deep chain of
-// 12,000 whose long tapes lavapipe prunes over resumed rounds (room for the longest tape).
+// has 8-bit storage) make the same cells as a word a lane (prune.comp,
+// SDFPRUNE_VULKAN_BYTE_FLAGS=0), and the CPU's, in a third of the entries' scratch: every team
+// step holds less a lane. On the demo scene planned as on an H100 (as many teams as jobs, each
+// job's entries claimed) and on a right-deep chain of 12,000 whose long tapes lavapipe prunes
+// over resumed rounds (room for the longest tape). A device without 8-bit storage
+// (SDFPRUNE_VULKAN_8BIT_STORAGE=0) runs every step in teams, with word flags: the wide kernels,
+// whose items' flags are bytes too, are not built there.
 TEST(Gpu, ByteFlagsChangeNoCell) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
-    const std::unique_ptr<gpu::Device> words = device_with_env("SDFPRUNE_VULKAN_BYTE_FLAGS", "0");
     const std::unique_ptr<gpu::Device> h100_like =
         device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "270336");
-    ::setenv("SDFPRUNE_VULKAN_RESIDENT_THREADS", "270336", 1);
-    const std::unique_ptr<gpu::Device> h100_words =
-        device_with_env("SDFPRUNE_VULKAN_BYTE_FLAGS", "0");
-    ::unsetenv("SDFPRUNE_VULKAN_RESIDENT_THREADS");
-    ASSERT_TRUE(words && h100_like && h100_words);
+    const std::unique_ptr<gpu::Device> no_bytes =
+        device_with_env("SDFPRUNE_VULKAN_8BIT_STORAGE", "0");
+    ASSERT_TRUE(h100_like && no_bytes);
     struct Case {
         std::string what;
         Scene sc;
         uint32_t resolution;
-        gpu::Device *bytes, *words;
+        gpu::Device* device;
     };
     const Case cases[] = {
-        {"demo 64³, planned as on an H100", builtin_scene("demo"), 64, h100_like.get(),
-         h100_words.get()},
-        {"chain of 12,000 at 16³", right_deep_chain(12000), 16, dev, words.get()}};
+        {"demo 64³, planned as on an H100", builtin_scene("demo"), 64, h100_like.get()},
+        {"chain of 12,000 at 16³", right_deep_chain(12000), 16, dev}};
     for (const Case& c : cases) {
         SCOPED_TRACE(c.what);
         PruneOptions o;
         o.resolution = c.resolution;
         ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
-        const gpu::Grid bytes = gpu::prune(*c.bytes, c.sc, o);
-        const gpu::Grid word = gpu::prune(*c.words, c.sc, o);
+        const gpu::Grid bytes = gpu::prune(*c.device, c.sc, o);
+        const gpu::Grid word =
+            prune_with_env(*c.device, c.sc, o, "SDFPRUNE_VULKAN_BYTE_FLAGS", "0");
         ::unsetenv("SDFPRUNE_VULKAN_WIDE");
         if (!bytes.stats().byte_flags) GTEST_SKIP() << "the device has no 8-bit storage buffers";
         EXPECT_FALSE(word.stats().byte_flags);
@@ -720,8 +720,19 @@ TEST(Gpu, ByteFlagsChangeNoCell) {
         }
         expect_same_stats(word.stats(), bytes.stats(), "bytes against words");
         expect_same_device_cells(bytes, word, "bytes against words");
-        expect_matches_cpu(c.sc, prune(c.sc, o), bytes, *c.bytes, c.what);
+        expect_matches_cpu(c.sc, prune(c.sc, o), bytes, *c.device, c.what);
     }
+    SCOPED_TRACE("without 8-bit storage");
+    PruneOptions o;
+    o.resolution = 64;
+    const Scene sc = builtin_scene("demo");
+    const gpu::Grid teams = gpu::prune(*no_bytes, sc, o);
+    EXPECT_FALSE(teams.stats().byte_flags);
+    for (const gpu::GpuStepShape& st : teams.stats().steps) EXPECT_FALSE(st.wide);
+    const gpu::Grid wide = gpu::prune(*dev, sc, o);
+    EXPECT_TRUE(std::any_of(wide.stats().steps.begin(), wide.stats().steps.end(),
+                            [](const gpu::GpuStepShape& st) { return st.wide; }));
+    expect_same_device_cells(teams, wide, "without 8-bit storage");
 }
 
 // By default the top levels' steps, few jobs over long parent tapes, run wide: a workgroup
@@ -793,7 +804,7 @@ TEST(Gpu, ScratchLimitedStepsRunWide) {
     const Scene sc = generate_scene("fluid", 1, 1000);
     PruneOptions o;
     o.resolution = 64;
-    ::setenv("SDFPRUNE_VULKAN_SCRATCH_BYTES", "1048576", 1);
+    ::setenv("SDFPRUNE_VULKAN_SCRATCH_BYTES", "786432", 1);
     ::setenv("SDFPRUNE_VULKAN_SCRATCH_BUFFERS", "4", 1);
     const gpu::Grid spread = gpu::prune(*dev, sc, o);
     ::setenv("SDFPRUNE_VULKAN_SCRATCH_BUFFERS", "1", 1);

@@ -138,6 +138,7 @@ struct DevicePruneStats : PruneStats {
     bool subgroups = false;
     // Whether the team steps kept their decision and sweep flags a byte a lane (the device has
     // 8-bit storage and SDFPRUNE_VULKAN_BYTE_FLAGS is not 0: prune_bytes.comp), else a word.
+    // (The wide steps always do: without 8-bit storage every step runs in teams.)
     bool byte_flags = false;
     std::vector<GpuStepShape> steps;  // in the order they ran
 };

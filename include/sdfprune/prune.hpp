@@ -89,7 +89,7 @@ std::vector<uint32_t> grid_levels(uint32_t resolution, uint32_t factor, bool hie
 // walked one node after another, and on a GPU the octants' walk is a step of its own about as
 // long as the cells' (the reference molecule's level-0 octants took 0.54 ms of 8.1 on an
 // H200, for tapes no shorter than the root's). The bound keeps such a step's scratch (on the
-// GPU 16 bytes per tape entry and cell, shaders/gpu/prune_wide.glsl) within 256 MB: the
+// GPU 13 bytes per tape entry and cell, shaders/gpu/prune_wide.glsl) within 256 MB: the
 // reference molecule's levels 0 and 1 are direct, the generated fluid's (27,977 words) level 0
 // only, a scene of up to 262,144 words its level 0.
 constexpr uint32_t kDirectMaxParents = 64;

@@ -24,6 +24,7 @@
 // ballot in compute shaders): the prefix sums and the pool appends on subgroup operations,
 // else on shared memory and an atomic per box. PRUNE_WIDE_RUNS (prune_wide_runs.comp): long
 // runs walked from shared memory (below).
+#extension GL_EXT_shader_8bit_storage : require
 #include "scene.glsl"
 #ifdef PRUNE_WIDE_SUBGROUPS
 #extension GL_KHR_shader_subgroup_basic : require
@@ -44,9 +45,14 @@ layout(std430, binding = 12) readonly buffer NodeSpans { uvec2 node_span[]; };
 // A workgroup's scratch (wide_words): per parent-tape entry its left operand and its place in
 // the height order, per height its count, its entries placed so far and its first place, per
 // round (a height the tape has) kRoundWords (below), the rounds in no run (breaks) in order,
-// then per entry and box of the workgroup's the value, range and flags (kWideEntryWords, item
-// (e · g_boxes + b − g_b0)).
-const uint kWideEntryWords = 4u;
+// then per entry and box of the workgroup's the value and range (kWideValueWords, item
+// (e · g_boxes + b − g_b0)), then each item's flags, a byte (8-bit storage: the wide kernels
+// are built only where the device has it): 13 bytes an item instead of 16.
+const uint kWideValueWords = 3u;
+// The words of `items` items (device_layout.hpp: kPruneWideItemBytes).
+uint item_words(uint items) { return items * kWideValueWords + (items + 3u) / 4u; }
+// Scratch as bytes, for the items' flags.
+layout(std430, binding = 8) coherent buffer ScratchBytes { uint8_t scratch_bytes[]; };
 // Per round: its first place in the height order, its count of entries, and where it is in a
 // run (rounds 1 and up of one entry each: a chain's operators), the run's first round and the
 // round after its last (for any other round: itself and the next); in a run, its one entry's
@@ -61,8 +67,8 @@ const uint kWideHeightWords = 3u + kRoundWords + 1u;
 // tapes sum to less than the longest tape per workgroup), a workgroup holds none, and each job
 // claims its own tape's, past the workgroups' scratch (claim_items).
 uint wide_words() {
-    uint items = pc.claim_words != 0u ? 0u : kWideEntryWords * (kTeam / pc.wide_split);
-    return pc.max_len * (2u + items) + kWideHeightWords * (pc.max_stack + 1u);
+    uint items = pc.claim_words != 0u ? 0u : item_words(pc.max_len * (kTeam / pc.wide_split));
+    return pc.max_len * 2u + items + kWideHeightWords * (pc.max_stack + 1u);
 }
 
 // The workgroup's prefix sums.
@@ -135,36 +141,44 @@ void sync_all() {
 }
 
 // The boxes of its job a workgroup takes: [g_b0, g_b0 + g_boxes) (pc.wide_split workgroups per
-// job, kTeam / pc.wide_split boxes each).
-uint g_b0, g_boxes;
+// job, kTeam / pc.wide_split boxes each); the first byte of its items' flags.
+uint g_b0, g_boxes, g_flags;
 
 // The first word of the items of the workgroup's share of a job whose tape has `len` entries
 // (g_boxes of its boxes), claimed (claim_scratch) past the step's `groups` workgroups'
 // scratch, or kNoClaim. Every lane calls it.
 uint claim_items(uint len, uint groups) {
     if (gl_LocalInvocationID.x == 0u) {
-        uint first = claim_scratch(len * g_boxes * kWideEntryWords);
+        uint first = claim_scratch(item_words(len * g_boxes));
         s_items = first == kNoClaim ? kNoClaim : groups * wide_words() + first;
     }
     sync_all();
     return s_items;
 }
 
-// Entry e's value, range (lo, hi) and decision at box b (of the workgroup's, g_b0 and up):
-// item (e · g_boxes + b − g_b0) of scratch. A workgroup holds items for its own boxes only, so a
-// job split over more workgroups takes less scratch in each.
+// Entry e's value and range (lo, hi) at box b (of the workgroup's, g_b0 and up): item
+// (e · g_boxes + b − g_b0) of scratch; its decision and sweep flags at byte g_flags + the item
+// (item_flags). A workgroup holds items for its own boxes only, so a job split over more
+// workgroups takes less scratch in each.
 uint item_at(uint vbase, uint e, uint b) {
-    return vbase + (e * g_boxes + (b - g_b0)) * kWideEntryWords;
+    return vbase + (e * g_boxes + (b - g_b0)) * kWideValueWords;
 }
+uint item_flags(uint e, uint b) { return uint(scratch_bytes[g_flags + e * g_boxes + (b - g_b0)]); }
+void set_item_flags(uint e, uint b, uint flags) {
+    scratch_bytes[g_flags + e * g_boxes + (b - g_b0)] = uint8_t(flags);
+}
+// The flags an entry's operand gets from a kept operator above it, its decision kept.
+void set_kept(uint e, uint b, uint flags) { set_item_flags(e, b, (item_flags(e, b) & 3u) | flags); }
 vec3 item_range(uint at) {
     return vec3(uintBitsToFloat(scratch[at]), uintBitsToFloat(scratch[at + 1u]),
                 uintBitsToFloat(scratch[at + 2u]));
 }
-void store_item(uint at, vec3 x, uint decision) {
+void store_item(uint vbase, uint e, uint b, vec3 x, uint decision) {
+    uint at = item_at(vbase, e, b);
     scratch[at] = floatBitsToUint(x.x);
     scratch[at + 1u] = floatBitsToUint(x.y);
     scratch[at + 2u] = floatBitsToUint(x.z);
-    scratch[at + 3u] = decision;  // the sweep's flags cleared
+    set_item_flags(e, b, decision);  // the sweep's flags cleared
 }
 // Round q's record in a run: its entry, left operand, and `third` (kRunWord or kRunSigns).
 uvec3 run_record(uint rbase, uint q, uint third) {
@@ -243,7 +257,7 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
                                           item_range(item_at(vbase, rec.y, b)),
                                           item_range(item_at(vbase, rec.x - 1u, b)), decision);
                 if (tape_negated(rec.z)) x = negate_range(x);
-                store_item(item_at(vbase, rec.x, b), x, decision);
+                store_item(vbase, rec.x, b, x, decision);
             }
         sync_all();
         return;
@@ -273,7 +287,7 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
                 vec3 x = combine_operator(s_run_node[q], spread_r, interval, false, left, right,
                                           decision);
                 if (tape_negated(rec.z)) x = negate_range(x);
-                store_item(item_at(vbase, rec.x, b), x, decision);
+                store_item(vbase, rec.x, b, x, decision);
                 s_run_own[q * kTeam + b] = uvec4(floatBitsToUint(x), 0u);
             }
         sync_all();
@@ -293,20 +307,18 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
             for (uint q = end; q > r0; --q) {
                 uvec3 rec = run_record(rbase, q - 1u, kRunSigns);
                 uint e = rec.x, l = rec.y, r = e - 1u;
-                uint fl = scratch[item_at(vbase, e, b) + 3u];
+                uint fl = item_flags(e, b);
                 if (((fl >> 2) & 3u) != 1u) continue;
                 uint d = fl & 3u;
                 uint nl = rec.z & 1u, nr = (rec.z >> 1) & 1u;
-                uint fl_l = item_at(vbase, l, b) + 3u, fl_r = item_at(vbase, r, b) + 3u;
                 if (d == kKeepBoth) {
-                    scratch[fl_l] = (scratch[fl_l] & 3u) | (1u << 2) | (nl << 4);
-                    scratch[fl_r] = (scratch[fl_r] & 3u) | (1u << 2) | (nr << 4);
+                    set_kept(l, b, (1u << 2) | (nl << 4));
+                    set_kept(r, b, (1u << 2) | (nr << 4));
                 } else {
                     bool left = d == kLeftWins;
-                    uint fl_w = left ? fl_l : fl_r;
                     uint neg = ((fl >> 4) & 1u) ^ (left ? nl : nr);
-                    scratch[item_at(vbase, e, b) + 3u] = (fl & 3u) | (2u << 2) | (fl & 16u);
-                    scratch[fl_w] = (scratch[fl_w] & 3u) | (1u << 2) | (neg << 4);
+                    set_item_flags(e, b, (fl & 3u) | (2u << 2) | (fl & 16u));
+                    set_kept(left ? l : r, b, (1u << 2) | (neg << 4));
                 }
             }
         sync_all();
@@ -319,9 +331,9 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
         for (uint k = id; k < (c1 - c0) * g_boxes; k += kWide) {
             uvec4 rec = s_run_rec[k / g_boxes];
             uint box = g_b0 + k % g_boxes;
-            s_run_own[(k / g_boxes) * kTeam + box] = uvec4(scratch[item_at(vbase, rec.x, box) + 3u],
-                                 scratch[item_at(vbase, rec.y, box) + 3u] & 3u,
-                                 scratch[item_at(vbase, rec.x - 1u, box) + 3u] & 3u, 0u);
+            s_run_own[(k / g_boxes) * kTeam + box] =
+                uvec4(item_flags(rec.x, box), item_flags(rec.y, box) & 3u,
+                      item_flags(rec.x - 1u, box) & 3u, 0u);
         }
         sync_all();
         if (id < g_boxes && s_state[b] == 1u)
@@ -336,17 +348,17 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
                 if (d == kKeepBoth) {
                     uint set_l = own.y | (1u << 2) | (nl << 4);
                     uint set_r = own.z | (1u << 2) | (nr << 4);
-                    scratch[item_at(vbase, l, b) + 3u] = set_l;
-                    scratch[item_at(vbase, r, b) + 3u] = set_r;
+                    set_item_flags(l, b, set_l);
+                    set_item_flags(r, b, set_r);
                     if (jl != kNotInChunk) s_run_own[jl * kTeam + b].x = set_l;
                     if (jr != kNotInChunk) s_run_own[jr * kTeam + b].x = set_r;
                 } else {
                     bool left = d == kLeftWins;
                     uint wn = left ? l : r, jw = left ? jl : jr;
                     uint neg = ((fl >> 4) & 1u) ^ (left ? nl : nr);
-                    scratch[item_at(vbase, e, b) + 3u] = (fl & 3u) | (2u << 2) | (fl & 16u);
+                    set_item_flags(e, b, (fl & 3u) | (2u << 2) | (fl & 16u));
                     uint set_w = (left ? own.y : own.z) | (1u << 2) | (neg << 4);
-                    scratch[item_at(vbase, wn, b) + 3u] = set_w;
+                    set_item_flags(wn, b, set_w);
                     if (jw != kNotInChunk) s_run_own[jw * kTeam + b].x = set_w;
                 }
             }
@@ -378,7 +390,7 @@ void main() {
     uint hbase = obase + pc.max_len;        // per height: count, placed, first place
     uint rbase = hbase + 3u * (pc.max_stack + 1u);  // per round: kRoundWords
     uint bbase = rbase + kRoundWords * (pc.max_stack + 1u);  // the rounds in no run, in order
-    uint own_items = bbase + (pc.max_stack + 1u);  // items (item_at): v, lo, hi, flags
+    uint own_items = bbase + (pc.max_stack + 1u);  // items (item_at): v, lo, hi; then flags
     bool interval = (pc.flags & 2u) != 0u;
     bool transient = pc.mode == 1u || (pc.flags & 4u) != 0u;
 
@@ -404,6 +416,7 @@ void main() {
         // The job's items: the workgroup's own, or claimed.
         uint vbase = pc.claim_words != 0u ? claim_items(len, groups) : own_items;
         if (vbase == kNoClaim) continue;  // (the host reports it)
+        g_flags = 4u * (vbase + len * g_boxes * kWideValueWords);
 
         // Stage 1: the counting sort by height, and the left operands.
         for (uint h = id; h <= H; h += kWide) {
@@ -519,7 +532,7 @@ void main() {
                     x = combine_operator(nd, spread_r, interval, false, left, right, decision);
                 }
                 if (tape_negated(w)) x = negate_range(x);
-                store_item(item_at(vbase, e, box), x, decision);
+                store_item(vbase, e, box, x, decision);
             }
             sync_all();
             ++r;
@@ -544,7 +557,7 @@ void main() {
                 if (valid) store(dest, false, v, constant, kFarField, 0u, Cell(0u, 0u, 0.0, 0.0));
             } else if (valid) {
                 uint root_neg = tape_negated(root_word) ? 1u : 0u;
-                scratch[s0 + 3u] = (scratch[s0 + 3u] & 3u) | (1u << 2) | (root_neg << 4);
+                set_kept(len - 1u, box, (1u << 2) | (root_neg << 4));
                 s_state[box] = 1u;
             }
         }
@@ -564,25 +577,21 @@ void main() {
             for (uint k = id; k < count * g_boxes; k += kWide) {
                 if (s_state[box] != 1u) continue;
                 uint e = scratch[obase + first_place + k / g_boxes];
-                uint fe = item_at(vbase, e, box) + 3u;
-                uint fl = scratch[fe];
+                uint fl = item_flags(e, box);
                 if (((fl >> 2) & 3u) != 1u) continue;
                 uint l = scratch[lbase + e], r = e - 1u;
                 uint d = fl & 3u;
                 if (d == kKeepBoth) {
                     uint nl = tape_negated(tape_read(parent, 2u + l)) ? 1u : 0u;
                     uint nr = tape_negated(tape_read(parent, 2u + r)) ? 1u : 0u;
-                    uint fl_l = item_at(vbase, l, box) + 3u;
-                    uint fl_r = item_at(vbase, r, box) + 3u;
-                    scratch[fl_l] = (scratch[fl_l] & 3u) | (1u << 2) | (nl << 4);
-                    scratch[fl_r] = (scratch[fl_r] & 3u) | (1u << 2) | (nr << 4);
+                    set_kept(l, box, (1u << 2) | (nl << 4));
+                    set_kept(r, box, (1u << 2) | (nr << 4));
                     continue;
                 }
                 uint wn = d == kLeftWins ? l : r;
                 uint neg = ((fl >> 4) & 1u) ^ (tape_negated(tape_read(parent, 2u + wn)) ? 1u : 0u);
-                scratch[fe] = (fl & 3u) | (2u << 2) | (fl & 16u);
-                uint fl_w = item_at(vbase, wn, box) + 3u;
-                scratch[fl_w] = (scratch[fl_w] & 3u) | (1u << 2) | (neg << 4);
+                set_item_flags(e, box, (fl & 3u) | (2u << 2) | (fl & 16u));
+                set_kept(wn, box, (1u << 2) | (neg << 4));
             }
             sync_all();
             --r;
@@ -598,7 +607,7 @@ void main() {
         uint kept = 0u, kept_prims = 0u;
         int depth = 0, depth_peak = 0;  // the stack's change from the slice's start, its peak
         for (uint e = e0; mine && e < e1; ++e) {
-            uint fl = scratch[item_at(vbase, e, cbox) + 3u];
+            uint fl = item_flags(e, cbox);
             if (((fl >> 2) & 3u) != 1u) continue;
             bool prim = is_primitive(tape_node(tape_read(parent, 2u + e)));
             if (prim) ++kept_prims;
@@ -665,7 +674,7 @@ void main() {
         if (s_state[cbox] == 2u) {
             uint to = s_at[cbox] + 2u + before.x;
             for (uint e = e0; e < e1; ++e) {
-                uint fl = scratch[item_at(vbase, e, cbox) + 3u];
+                uint fl = item_flags(e, cbox);
                 if (((fl >> 2) & 3u) != 1u) continue;
                 uint node = tape_node(tape_read(parent, 2u + e));
                 tape_write(to++, tape_word(node, ((fl >> 4) & 1u) != 0u));

@@ -69,10 +69,13 @@ inline constexpr uint32_t kRefineLaneTape = 32;
 inline constexpr uint64_t kRefineFirstBoxes = 9;
 inline constexpr uint64_t kRefineMoreWords = 7;
 // prune_wide.comp: kWide, the lanes of a workgroup that takes one team job (kPruneTeam boxes of
-// one parent tape); kWideEntryWords, its scratch words per tape entry and box;
-// kWideHeightWords, per scene height (the counting sort's, the rounds' and their runs').
+// one parent tape); its scratch words for `items` items (an item per tape entry and box:
+// value and range, then its flags a byte: prune_wide.glsl's item_words); kWideHeightWords, per
+// scene height (the counting sort's, the rounds' and their runs').
 inline constexpr uint64_t kPruneWide = 256;
-inline constexpr uint64_t kPruneWideEntryWords = 4;
+inline constexpr uint64_t prune_wide_item_words(uint64_t items) {
+    return items * 3 + (items + 3) / 4;
+}
 inline constexpr uint64_t kPruneWideHeightWords = 12;
 inline constexpr uint64_t kPruneWideRunChunk = 32;  // prune_wide.glsl: kRunChunk
 struct PrunePush {                                  // prune.comp and prune_wide.comp: Push

@@ -139,6 +139,8 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
     refine_order = env_flag("SDFPRUNE_VULKAN_REFINE_ORDER", refine_order);
     team_order = env_flag("SDFPRUNE_VULKAN_TEAM_ORDER", team_order);
     claims = env_flag("SDFPRUNE_VULKAN_CLAIMS", claims);
+    byte_flags =
+        env_flag("SDFPRUNE_VULKAN_BYTE_FLAGS", byte_flags) && ctx.can_run(KernelId::kPruneBytes);
     origin = sc.aabb.min;
     extent = sc.aabb.max - sc.aabb.min;
     L = sc.lipschitz[sc.root()];
@@ -622,7 +624,7 @@ void Pruner::gather_cells() {
     }
     st.prune_ms = gpu_ms;
     st.subgroups = ctx.can_run(KernelId::kPruneWideSubgroups);
-    st.byte_flags = ctx.can_run(KernelId::kPruneBytes);
+    st.byte_flags = byte_flags;
 }
 
 // Statistics (not timed): per cell (length, primitives) or far-field, level by level.

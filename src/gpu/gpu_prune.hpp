@@ -175,6 +175,9 @@ class Pruner {
     // claim_items); SDFPRUNE_VULKAN_CLAIMS=0: every team or workgroup holds room for the
     // longest.
     bool claims = true;
+    // The team steps keep their flags a byte a lane (prune_bytes.comp) where the device has
+    // 8-bit storage; SDFPRUNE_VULKAN_BYTE_FLAGS=0: a word a lane (prune.comp), to compare.
+    bool byte_flags = true;
     // The octants' and cells' team jobs take their parents (blocks, octants) longest tapes
     // first, after an order pass; SDFPRUNE_VULKAN_TEAM_ORDER=0: block by block (not measured
     // on a GPU yet: BENCHMARKS.md, stop 39).

@@ -109,7 +109,7 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
     // A team's scratch: its lanes' state, per stack slot and lane 4 words, per parent-tape
     // entry a left operand and the lanes' decision and sweep flags: a word per lane, or a byte
     // (prune_bytes.comp, where the device has 8-bit storage).
-    s.kernel = ctx.can_run(KernelId::kPruneBytes) ? KernelId::kPruneBytes : KernelId::kPrune;
+    s.kernel = byte_flags ? KernelId::kPruneBytes : KernelId::kPrune;
     const uint64_t flag_bytes = s.kernel == KernelId::kPruneBytes ? 1 : 4;
     const uint64_t fixed_bytes = (kPruneStateWords + 4ull * max_depth) * kPruneTeam * 4;
     const uint64_t entry_bytes = 4 + kPruneTeam * flag_bytes;
@@ -385,7 +385,7 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_word
         split *= 2;
     // A workgroup's scratch: per tape entry two words, and the items of its own boxes.
     const auto group_bytes_for = [&](uint64_t sp) {
-        return (len * (2 + kPruneWideEntryWords * (kPruneTeam / sp)) +
+        return (len * 2 + prune_wide_item_words(len * (kPruneTeam / sp)) +
                 kPruneWideHeightWords * heights) *
                4;
     };
@@ -397,7 +397,7 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_word
     // Where scratch holds the step to fewer workgroups than it has jobs and the device runs
     // (the million-sphere fluid's top levels: parent tapes of a million words and more), the
     // jobs are split further, as long as more workgroups then fit: a workgroup of 1 box in 8
-    // needs 6 words an entry instead of 34.
+    // needs 5.25 words an entry instead of 28.
     while (split < kPruneTeam && fitting(split) < std::min(s.team_jobs * split, resident_groups) &&
            fitting(2 * split) > fitting(split))
         split *= 2;
@@ -460,8 +460,11 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_word
     // items. The generated fluid's level-1 cells (512 jobs of 8 cells, a workgroup each, over
     // parent tapes of up to 5,000 words summing to 4.5 million) then take 0.66 GB instead of
     // 1.4 (planned as on an H100).
-    const uint64_t items_bytes = len * kPruneWideEntryWords * (kPruneTeam / split) * 4;
-    const uint64_t claim_bytes = claimable_words * kPruneWideEntryWords * kPruneTeam * 4;
+    // (A job's `split` workgroups claim at most 3.25 words an entry and box, and a word each
+    // for their flags' last bytes.)
+    const uint64_t items_bytes = prune_wide_item_words(len * (kPruneTeam / split)) * 4;
+    const uint64_t claim_bytes =
+        (claimable_words * kPruneTeam * 13 / 4 + s.team_jobs * split + 3) * 4;
     s.push.claim_words = 0;
     if (claims && spread == 1 && claimable_words > 0 && claim_bytes / 4 <= 0xffffffffull &&
         groups * (group_bytes - items_bytes) + claim_bytes < scratch_bytes) {

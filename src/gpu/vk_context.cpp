@@ -67,11 +67,11 @@ const KernelCode kKernels[] = {
     {"prune_bytes", kPruneBytesSpv, sizeof(kPruneBytesSpv), 13, kWorkgroupSize, false, true},
     {"prune_refine_lanes", kPruneRefineLanesSpv, sizeof(kPruneRefineLanesSpv), 13},
     {"prune_refine", kPruneRefineSpv, sizeof(kPruneRefineSpv), 13},
-    {"prune_wide", kPruneWideSpv, sizeof(kPruneWideSpv), 13, uint32_t(kPruneWide)},
+    {"prune_wide", kPruneWideSpv, sizeof(kPruneWideSpv), 13, uint32_t(kPruneWide), false, true},
     {"prune_wide_subgroups", kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 13,
-     uint32_t(kPruneWide), true},
+     uint32_t(kPruneWide), true, true},
     {"prune_wide_runs", kPruneWideRunsSpv, sizeof(kPruneWideRunsSpv), 13, uint32_t(kPruneWide),
-     true},
+     true, true},
     {"expand", kExpandSpv, sizeof(kExpandSpv), 4},
     {"cell_info", kCellInfoSpv, sizeof(kCellInfoSpv), 3},
     {"trace", kTraceSpv, sizeof(kTraceSpv), 10},
@@ -267,7 +267,7 @@ Context::Context() {
         f2.pNext = &storage8;
         vkGetPhysicalDeviceFeatures2(physical_, &f2);
         byte_storage_ = storage8.storageBuffer8BitAccess == VK_TRUE &&
-                        env_flag("SDFPRUNE_VULKAN_BYTE_FLAGS", true);
+                        env_flag("SDFPRUNE_VULKAN_8BIT_STORAGE", true);
     }
     {
         // Invocations resident at once (resident_threads): the vendors' core counts where the

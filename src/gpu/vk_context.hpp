@@ -26,10 +26,10 @@ inline constexpr uint32_t kWorkgroupSize = 64;
 enum class KernelId : uint32_t {
     kPrune,
     kPruneBytes,  // the same, its decision and sweep flags a byte a lane (needs byte_storage())
-    kPruneRefineLanes,  // refinement's (mode 3) lane pass: a lane per cell with a short tape
-    kPruneRefine,       // refinement: a squad of lanes per cell
-    kPruneWide,
-    kPruneWideSubgroups,  // needs subgroups() (else not built)
+    kPruneRefineLanes,    // refinement's (mode 3) lane pass: a lane per cell with a short tape
+    kPruneRefine,         // refinement: a squad of lanes per cell
+    kPruneWide,           // the wide kernels need byte_storage() (else not built)
+    kPruneWideSubgroups,  // needs subgroups() too
     kPruneWideRuns,       // the same, its long runs walked from shared memory
     kExpand,
     kCellInfo,
@@ -85,8 +85,9 @@ class Context {
     // Subgroup arithmetic and ballot in compute shaders (Vulkan 1.1), for the kernels that use
     // them; SDFPRUNE_VULKAN_SUBGROUPS=0 turns them off (the fallbacks, for tests).
     bool subgroups() const { return subgroups_; }
-    // 8-bit storage buffer access (VK_KHR_8bit_storage), for prune_bytes.comp;
-    // SDFPRUNE_VULKAN_BYTE_FLAGS=0 turns it off (prune.comp's word flags, to compare).
+    // 8-bit storage buffer access (VK_KHR_8bit_storage), for prune_bytes.comp and the wide
+    // kernels (not built without it: their steps then run in teams, prune.comp);
+    // SDFPRUNE_VULKAN_8BIT_STORAGE=0: a device without it, for tests.
     bool byte_storage() const { return byte_storage_; }
     // Whether this device runs kernel k (prune_wide's 256-lane workgroups need a device that
     // allows them; the subgroup kernels need subgroups()).
