@@ -732,7 +732,9 @@ TEST(Gpu, ByteFlagsChangeNoCell) {
     const gpu::Grid wide = gpu::prune(*dev, sc, o);
     EXPECT_TRUE(std::any_of(wide.stats().steps.begin(), wide.stats().steps.end(),
                             [](const gpu::GpuStepShape& st) { return st.wide; }));
-    expect_same_device_cells(teams, wide, "without 8-bit storage");
+    // (Two kernels' float rounding may differ on a GPU: there each against the CPU.)
+    if (exact_device(*dev)) expect_same_device_cells(teams, wide, "without 8-bit storage");
+    expect_matches_cpu(sc, prune(sc, o), teams, *no_bytes, "without 8-bit storage");
 }
 
 // By default the top levels' steps, few jobs over long parent tapes, run wide: a workgroup
