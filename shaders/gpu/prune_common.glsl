@@ -17,7 +17,7 @@ layout(std430, binding = 7) buffer Counters {
     uint pool_capacity;
     uint overflow;  // 1: the main pool overflowed, 2: the octant pool
     uint max_len;  // longest tape written or shared in this step
-    uint near_jobs;  // near-field cells in this step
+    uint near_jobs;  // near-field cells (octants) in this step
     uint next_blocks;
     uint max_depth;  // deepest evaluation stack of the tapes written or shared in this step
     uint octant_used;      // the octant pool, as pool_used, pool_capacity
@@ -231,8 +231,12 @@ void store(uint dest, bool near, float value, float constant, uint tape, uint wo
     }
     Cell result = Cell(near ? tape : kFarField, 0u, value, constant);
     if (pc.mode == 1u) {
-        // The octants' tape words (shared ones too), which bound their cells' (gpu_prune.cpp).
-        if (near) atomicAdd(s_counts[1], words + 2u);
+        // The near octants and their tape words (shared ones too), which bound their cells'
+        // (gpu_prune.cpp: the cells to list for refinement, their tapes' words).
+        if (near) {
+            atomicAdd(s_counts[0], 1u);
+            atomicAdd(s_counts[1], words + 2u);
+        }
         octants[dest] = result;
         return;
     }

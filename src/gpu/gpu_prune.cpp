@@ -229,8 +229,6 @@ void Pruner::prune_level(uint32_t li) {
     lv.cells = &local.create((lv.total + coarser) * sizeof(PrunedCell), false, lv.finest);
     lv.octants = &local.create(lv.split ? block_count * 8 * sizeof(PrunedCell) : 16);
     lv.next = &local.create(lv.finest ? 16 : lv.total * sizeof(GpuBlock));
-    // Room to list every finest cell for refinement.
-    if (lv.refine) hold(refine_list, lv.total * 4);
     lv.first_shape = st.steps.size();
 
     const GpuCounters c = prune_slices(lv);
@@ -298,6 +296,9 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             // new buffers, held at once while its words are copied, are not held beside it.)
             release_scratch();
             if (lv.refine) {
+                // Room to list the cells of the near octants for refinement (the others are
+                // far-field): molecule's finest level, 4.2 million cells, lists at most 1.4.
+                hold(refine_list, 4 * std::max<uint64_t>(hf * hf * hf * sc->near_jobs, 1));
                 if (octant_keep + cells_bound > octant_capacity)
                     resize(octant_pool, octant_capacity, octant_keep + cells_bound, octant_keep);
             } else if (g.pool_words + cells_bound > capacity) {
@@ -308,6 +309,8 @@ GpuCounters Pruner::prune_slices(Level& lv) {
                               *lv.cells, lv.refine);
         } else {
             lv.parent_tape_words = parent_words;
+            // Room to list every cell of the slice for refinement.
+            if (lv.refine) hold(refine_list, 4 * blocks_in * lv.per_block);
             steps = plan_step(lv, 0, b0, blocks_in, blocks_in * lv.per_block, *lv.cells, *lv.cells,
                               lv.refine);
         }
