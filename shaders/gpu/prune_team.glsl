@@ -38,8 +38,8 @@ const uint kWindow = 64u;  // tape entries a lane advances per step (gpu_prune.c
 // lane (value, lo, hi, entry), then per entry of its job's parent tape (len words) the entry's
 // left operand (one word, the same in every lane) and its decision and sweep flags
 // (kEntryFlagWords: a word per lane, or with PRUNE_BYTE_FLAGS a byte, a third of the entry's
-// scratch). Lane l's word (or byte) of item k is at k · kTeam + l. A team's entries are sized for the
-// step's longest parent tape, or, where the jobs' tapes are known to sum to less
+// scratch). Lane l's word (or byte) of item k is at k · kTeam + l. A team's entries are sized
+// for the step's longest parent tape, or, where the jobs' tapes are known to sum to less
 // (pc.claim_words > 0, gpu_prune_plan.cpp), each job claims room for its own tape's entries
 // from the area past the teams' (claim_entries): molecule's level-3 octants, 31,556 jobs on as
 // many teams, whose tapes reach 199 words but sum to 2.9 million, take 129 MB of scratch

@@ -21,6 +21,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <limits>
+#include <numeric>
 #include <optional>
 
 #include "../core/clock.hpp"
@@ -224,8 +225,8 @@ void Pruner::prune_level(uint32_t li) {
     // The finest level's cells buffer has room for the coarser levels' after its own
     // (gather_cells): all levels' cells end in it without a buffer of their own. (Its
     // capacity exactly that: its class could be a quarter more.)
-    uint64_t coarser = 0;
-    for (const uint64_t n : level_totals) coarser += lv.finest ? n : 0;
+    const uint64_t coarser =
+        lv.finest ? std::accumulate(level_totals.begin(), level_totals.end(), uint64_t(0)) : 0;
     lv.cells = &local.create((lv.total + coarser) * sizeof(PrunedCell), false, lv.finest);
     lv.octants = &local.create(lv.split ? block_count * 8 * sizeof(PrunedCell) : 16);
     lv.next = &local.create(lv.finest ? 16 : lv.total * sizeof(GpuBlock));

@@ -110,7 +110,7 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
     // entry a left operand and the lanes' decision and sweep flags: a word per lane, or a byte
     // (prune_bytes.comp, where the device has 8-bit storage).
     s.kernel = byte_flags ? KernelId::kPruneBytes : KernelId::kPrune;
-    const uint64_t flag_bytes = s.kernel == KernelId::kPruneBytes ? 1 : 4;
+    const uint64_t flag_bytes = byte_flags ? 1 : 4;
     const uint64_t fixed_bytes = (kPruneStateWords + 4ull * max_depth) * kPruneTeam * 4;
     const uint64_t entry_bytes = 4 + kPruneTeam * flag_bytes;
     const uint64_t team_bytes = fixed_bytes + uint64_t(max_len) * entry_bytes;
@@ -460,11 +460,11 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_word
     // items. The generated fluid's level-1 cells (512 jobs of 8 cells, a workgroup each, over
     // parent tapes of up to 5,000 words summing to 4.5 million) then take 0.66 GB instead of
     // 1.4 (planned as on an H100).
-    // (A job's `split` workgroups claim at most 3.25 words an entry and box, and a word each
-    // for their flags' last bytes.)
+    // (Each of a job's `split` workgroups claims the items of its boxes: all of them together
+    // at most the items of all boxes at once and a word each for their flags' last bytes.)
     const uint64_t items_bytes = prune_wide_item_words(len * (kPruneTeam / split)) * 4;
     const uint64_t claim_bytes =
-        (claimable_words * kPruneTeam * 13 / 4 + s.team_jobs * split + 3) * 4;
+        (prune_wide_item_words(claimable_words * kPruneTeam) + s.team_jobs * split) * 4;
     s.push.claim_words = 0;
     if (claims && spread == 1 && claimable_words > 0 && claim_bytes / 4 <= 0xffffffffull &&
         groups * (group_bytes - items_bytes) + claim_bytes < scratch_bytes) {
