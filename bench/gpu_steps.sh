@@ -9,7 +9,8 @@
 # first scene 3–4 times slower. One line per scene and variant: prune_ms, near-field cells,
 # average active primitives (equal across variants, or the variants disagree), the first call's
 # wall time, buffer time, peak memory and the device memory it allocated (a first call
-# allocates its buffers) and each step's
+# allocates its buffers, but for what the device's reserve holds), the device's making and its
+# reserve (its size, its thread's time, the first call's wait for it) and each step's
 # GPU time (L level, o octants, c cells, x refinement, W wide; [lane pass's part]).
 # SDFPRUNE_GPU_SCENES names the scenes (default: molecule, trees and five generated kinds);
 # molecule and trees are read from SDFPRUNE_SCENES (default ../shared/scenes), the others
@@ -72,6 +73,10 @@ else:
             d["first_wall_ms"], d["first_host_buffer_ms"], d["first_prune_peak_bytes"] / 1e6)
         if "first_host_allocated_bytes" in d:  # (builds from stop 42 on)
             first += ", allocated %.0f MB" % (d["first_host_allocated_bytes"] / 1e6)
+        if "device_ms" in d:  # (builds from stop 43 on): making the device, and its reserve
+            first += ", device %.1f ms, reserve %.0f MB in %.1f ms, waited %.1f ms" % (
+                d["device_ms"], d["device_reserve_bytes"] / 1e6, d["device_reserve_ms"],
+                d["first_host_reserve_wait_ms"])
     print(scene, label, "%.2f ms" % d["prune_ms"], "near", d["near_field_cells"],
           "active %.5f" % d["active_avg"], first, steps)
 ' "$1" "$2"

@@ -12,6 +12,8 @@
 #include <memory>
 #include <optional>
 #include <set>
+#include <string>
+#include <utility>
 
 #include "prune_check.hpp"
 #include "sdfprune/builtin.hpp"
@@ -270,16 +272,20 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
 void expect_same_device_cells(const gpu::Grid& a, const gpu::Grid& b, const std::string& what);
 
 // A device made with an environment variable set (for the figures it reads once).
-std::unique_ptr<gpu::Device> device_with_env(const char* name, const char* value) {
-    setenv(name, value, 1);
+std::unique_ptr<gpu::Device> device_with_envs(
+    std::initializer_list<std::pair<const char*, const char*>> settings) {
+    for (const auto& [name, value] : settings) setenv(name, value, 1);
     std::unique_ptr<gpu::Device> d;
     try {
         d = std::make_unique<gpu::Device>();
     } catch (const gpu::GpuError& e) {
         ADD_FAILURE() << "no Vulkan device (install mesa-vulkan-drivers): " << e.what();
     }
-    unsetenv(name);
+    for (const auto& setting : settings) unsetenv(setting.first);
     return d;
+}
+std::unique_ptr<gpu::Device> device_with_env(const char* name, const char* value) {
+    return device_with_envs({{name, value}});
 }
 
 // A pruning with the environment variable `name` set to `value` (a setting read by the pruner)
@@ -975,7 +981,9 @@ TEST(Gpu, LargeBuffersShareBlocks) {
     const Scene sc = builtin_scene("demo");
     PruneOptions o;
     o.resolution = 128;
-    const std::unique_ptr<gpu::Device> blocks = device_with_env("SDFPRUNE_VULKAN_BLOCKS", "1");
+    // (No reserve: a first call then allocates what it holds.)
+    const std::unique_ptr<gpu::Device> blocks =
+        device_with_envs({{"SDFPRUNE_VULKAN_BLOCKS", "1"}, {"SDFPRUNE_VULKAN_RESERVE_BYTES", "0"}});
     const std::unique_ptr<gpu::Device> cache = device_with_env("SDFPRUNE_VULKAN_BLOCKS", "0");
     ASSERT_TRUE(blocks && cache);
     std::optional<gpu::Grid> a(gpu::prune(*blocks, sc, o));
@@ -1006,6 +1014,59 @@ TEST(Gpu, LargeBuffersShareBlocks) {
     EXPECT_GT(blocks->memory_cached(), 0u);
     blocks->release_cached_memory();
     EXPECT_EQ(blocks->memory_cached(), 0u);
+}
+
+// A device's reserve (SDFPRUNE_VULKAN_RESERVE_BYTES), allocated while the device is made, is
+// idle memory until the first call, whose large buffers take their room in it: that call
+// allocates less than the same call on a device without one, and only its small buffers'
+// slabs where the reserve holds its peak; the grid is the same. Without blocks, without an
+// idle cache or below kReserveMin there is none; by default GPUs have one, CPU devices none.
+TEST(Gpu, ReserveServesTheFirstCall) {
+    if (!gpu::built_with_vulkan()) GTEST_SKIP() << "built without the Vulkan backend";
+    const Scene sc = builtin_scene("demo");
+    PruneOptions o;
+    o.resolution = 128;
+    const std::unique_ptr<gpu::Device> none = device_with_env("SDFPRUNE_VULKAN_RESERVE_BYTES", "0");
+    ASSERT_TRUE(none);
+    EXPECT_EQ(none->memory_reserved(), 0u);
+    const gpu::Grid b = gpu::prune(*none, sc, o);
+    const gpu::DevicePruneStats& sb = b.stats();
+    // Room for the call's buffers wherever first fit places them: 4 times its peak.
+    const uint64_t reserve = (sb.prune_peak_bytes * 4 + (1 << 20)) & ~uint64_t(15);
+    const std::unique_ptr<gpu::Device> reserved =
+        device_with_env("SDFPRUNE_VULKAN_RESERVE_BYTES", std::to_string(reserve).c_str());
+    ASSERT_TRUE(reserved);
+    EXPECT_EQ(reserved->memory_reserved(), reserve);
+    EXPECT_GE(reserved->reserve_ms(), 0.0);
+    EXPECT_GE(reserved->memory_cached(), reserve);  // an empty block until a call takes it
+    const gpu::Grid a = gpu::prune(*reserved, sc, o);
+    const gpu::DevicePruneStats& sa = a.stats();
+    EXPECT_LT(sa.host_allocated_bytes, sb.host_allocated_bytes);
+    EXPECT_GE(sb.host_allocated_bytes, sb.prune_peak_bytes);
+    // Only slabs (16 MiB of device memory, 2 MiB host-visible) were allocated in the call.
+    EXPECT_LE(sa.host_allocated_bytes, uint64_t(18) << 20);
+    EXPECT_GE(sa.host_reserve_wait_ms, 0.0);
+    EXPECT_LE(sa.host_reserve_wait_ms, sa.host_buffer_ms);
+    EXPECT_EQ(sa.prune_peak_bytes, sb.prune_peak_bytes);
+    expect_same_stats(sb, sa, "reserve");
+    expect_same_device_cells(a, b, "reserve");
+
+    for (const auto& [name, value] : {std::pair{"SDFPRUNE_VULKAN_BLOCKS", "0"},
+                                      std::pair{"SDFPRUNE_VULKAN_CACHE_BYTES", "0"}}) {
+        const std::unique_ptr<gpu::Device> without =
+            device_with_envs({{"SDFPRUNE_VULKAN_RESERVE_BYTES", "67108864"}, {name, value}});
+        ASSERT_TRUE(without);
+        EXPECT_EQ(without->memory_reserved(), 0u) << name;
+    }
+    const std::unique_ptr<gpu::Device> small =
+        device_with_env("SDFPRUNE_VULKAN_RESERVE_BYTES", "1048576");
+    const std::unique_ptr<gpu::Device> plain = device_with_envs({});
+    ASSERT_TRUE(small && plain);
+    EXPECT_EQ(small->memory_reserved(), 0u);
+    if (plain->name().find("llvmpipe") != std::string::npos)
+        EXPECT_EQ(plain->memory_reserved(), 0u);
+    else
+        EXPECT_GT(plain->memory_reserved(), 0u);
 }
 
 // The idle cache keeps to its budget (SDFPRUNE_VULKAN_CACHE_BYTES), buffers cached longest

@@ -12,6 +12,7 @@
 #include <atomic>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <optional>
 
 #include "sdfprune/gpu.hpp"
@@ -24,12 +25,31 @@ namespace py = pybind11;
 
 using ScenePtr = std::shared_ptr<Scene>;  // immutable once built; Python shares it
 
+// The process's Vulkan device, shared by its GPU grids: made at the first GPU pruning (which
+// takes hundreds of milliseconds: its kernels are built and its memory reserve allocated) and
+// gone with the last grid that holds it (queries.cpp: shared_device). One thread at a time
+// uses a device: every call on it (pruning, rendering, discretizing, a grid's end) holds
+// `lock`, and none takes the GIL while it does.
+struct SharedDevice {
+    std::mutex lock;
+    gpu::Device device;
+};
+
 // A grid pruned on the Vulkan device: the device and scene are kept alive by the grid holder
-// (gpu::Grid refers to both; declared last, so it is destroyed first).
+// (gpu::Grid refers to both; declared last, so it is destroyed first, its buffers given back
+// to the device under its lock).
 struct GpuGrid {
     ScenePtr scene;
-    std::shared_ptr<gpu::Device> device;
+    std::shared_ptr<SharedDevice> device;
     std::optional<gpu::Grid> grid;
+    GpuGrid() = default;
+    GpuGrid(const GpuGrid&) = delete;
+    GpuGrid& operator=(const GpuGrid&) = delete;
+    ~GpuGrid() {
+        if (!grid) return;
+        const std::lock_guard<std::mutex> hold(device->lock);
+        grid.reset();
+    }
 };
 
 // Progress reports and Ctrl-C during long work run with the GIL released. The engine calls

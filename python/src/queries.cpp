@@ -265,6 +265,19 @@ uint32_t check_res(uint32_t res) {
 using GridPtr = std::shared_ptr<PrunedGrid>;
 using GpuGridPtr = std::shared_ptr<GpuGrid>;
 
+// The device every GPU grid alive shares, made where none is (binding.hpp: SharedDevice).
+std::shared_ptr<SharedDevice> shared_device() {
+    static std::mutex making;
+    static std::weak_ptr<SharedDevice> current;
+    const std::lock_guard<std::mutex> hold(making);
+    std::shared_ptr<SharedDevice> d = current.lock();
+    if (!d) {
+        d = std::make_shared<SharedDevice>();
+        current = d;
+    }
+    return d;
+}
+
 }  // namespace
 
 void bind_queries(py::module_& m) {
@@ -274,11 +287,11 @@ void bind_queries(py::module_& m) {
 
     py::class_<GpuGrid, GpuGridPtr>(m, "GpuGrid", "A grid pruned on the Vulkan device.")
         .def_property_readonly("resolution", [](const GpuGrid& g) { return g.grid->stats().grid; })
-        .def_property_readonly("device", [](const GpuGrid& g) { return g.device->name(); })
+        .def_property_readonly("device", [](const GpuGrid& g) { return g.device->device.name(); })
         .def("stats", [](const GpuGrid& g) {
             py::dict d = stats_dict(g.grid->stats(), {}, *g.scene);
             d["wall_ms"] = g.grid->stats().wall_ms;
-            d["device"] = g.device->name();
+            d["device"] = g.device->device.name();
             return d;
         });
 
@@ -318,8 +331,9 @@ void bind_queries(py::module_& m) {
             py::gil_scoped_release nogil;
             auto g = std::make_shared<GpuGrid>();
             g->scene = scene;
-            g->device = std::make_shared<gpu::Device>();
-            g->grid.emplace(gpu::prune(*g->device, *g->scene, o));
+            g->device = shared_device();
+            const std::lock_guard<std::mutex> hold(g->device->lock);
+            g->grid.emplace(gpu::prune(g->device->device, *g->scene, o));
             return g;
         },
         py::arg("scene"), py::arg("grid"), py::arg("far_field"), py::arg("hierarchy"),
@@ -380,7 +394,8 @@ void bind_queries(py::module_& m) {
             std::vector<float> v(size_t(n) * n * n);
             {
                 py::gil_scoped_release nogil;
-                gpu::discretize(*g->device, *g->grid, n, v);
+                const std::lock_guard<std::mutex> hold(g->device->lock);
+                gpu::discretize(g->device->device, *g->grid, n, v);
             }
             return adopt(std::move(v), {n, n, n});
         },
@@ -432,7 +447,8 @@ void bind_queries(py::module_& m) {
                 RenderOptions ro = render_options(*g->scene, width, height, yaw, pitch,
                                                   distance, fov, target, shading, shadows, 0);
                 py::gil_scoped_release nogil;
-                img = gpu::render(*g->device, *g->grid, ro);
+                const std::lock_guard<std::mutex> hold(g->device->lock);
+                img = gpu::render(g->device->device, *g->grid, ro);
             } else if (py::isinstance<PrunedGrid>(source)) {
                 const auto g = py::cast<GridPtr>(source);
                 RenderOptions ro = render_options(g->scene(), width, height, yaw, pitch,

@@ -99,6 +99,43 @@ def test_vulkan_backend_or_clear_error():
     np.testing.assert_array_equal(d, f.prune(32).discretize())
 
 
+def test_vulkan_grids_share_one_device_across_threads():
+    # The GPU grids alive share one device; threads take turns on it (its lock), and a grid
+    # outlives the others it was made beside.
+    import gc
+    import threading
+    try:
+        sp.sphere(1).prune(16, backend="vulkan")
+    except sp.GpuError:
+        pytest.skip("this sdfprune has no Vulkan backend or device")
+    shapes = [sp.sphere(1),
+              sp.union(sp.sphere(0.6).translate([0.4, 0, 0]), sp.sphere(0.5), k=0.2),
+              sp.sphere(0.8) - sp.sphere(0.5).translate([0.5, 0.2, 0])]
+    made = {}
+    errors = []
+
+    def work(i):
+        try:
+            g = shapes[i].prune(32, backend="vulkan")
+            made[i] = (g, g.discretize(32), g.render(64, 48))
+        except Exception as e:  # pragma: no cover - reported below
+            errors.append(e)
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in range(len(shapes))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    assert len({made[i][0].stats["device"] for i in made}) == 1
+    for i, f in enumerate(shapes):
+        np.testing.assert_array_equal(made[i][1], f.prune(32).discretize(32))
+    keep = made.pop(1)
+    made.clear()
+    gc.collect()
+    np.testing.assert_array_equal(keep[0].discretize(32), keep[1])
+
+
 def test_pruned_grid_reuse(example):
     g = example.prune(64)
     assert g is example.prune(64)

@@ -29,6 +29,14 @@ void Device::release_cached_memory() {
     context_->trim();
 }
 
+uint64_t Device::memory_reserved() const {
+    return context_->reserve_bytes();
+}
+
+double Device::reserve_ms() const {
+    return context_->reserve_ms();
+}
+
 Grid::Grid() = default;
 Grid::~Grid() = default;
 Grid::Grid(Grid&&) noexcept = default;

@@ -36,6 +36,12 @@ uint64_t Device::memory_cached() const {
 void Device::release_cached_memory() {
     missing();
 }
+uint64_t Device::memory_reserved() const {
+    missing();
+}
+double Device::reserve_ms() const {
+    missing();
+}
 Grid::Grid() = default;
 Grid::~Grid() = default;
 Grid::Grid(Grid&&) noexcept = default;

@@ -390,6 +390,9 @@ Context::Context() {
         check(vkCreateQueryPool(device_, &qpi, nullptr, &timestamps_), "vkCreateQueryPool");
     }
 
+    // The reserve's allocation runs beside the kernels' building (the driver's compiles).
+    start_reserve(props.deviceType);
+
     for (const KernelCode& code : kKernels) {
         Kernel k;
         k.bindings = code.bindings;

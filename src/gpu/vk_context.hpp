@@ -8,11 +8,13 @@
 
 #include <vulkan/vulkan.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <deque>
 #include <initializer_list>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "sdfprune/gpu.hpp"
@@ -152,6 +154,18 @@ class Context {
     uint64_t bytes_cached() const { return cached_; }
     uint64_t cache_budget() const { return cache_budget_; }
     void set_cache_budget(uint64_t bytes);
+    // The reserve: device memory allocated while the context is made, on a thread of its own,
+    // so that a fresh process's first pruning call finds its large buffers' room already
+    // allocated (on an H100 a call's allocations cost the host about 0.016 ms per MB, the
+    // better part of a first call's wall time). It becomes an empty block (idle memory, in
+    // bytes_cached()) once the thread is done; the first buffer that looks for room in a
+    // block waits for it. Its bytes (0: none, or its allocation failed) and the thread's time.
+    // By default a quarter of the idle cache's budget (1 GiB on an H100) on GPUs, none on CPU
+    // devices, whose allocations cost nothing; SDFPRUNE_VULKAN_RESERVE_BYTES=N sets it (at
+    // most the cache's budget; none below kReserveMin).
+    static constexpr uint64_t kReserveMin = 16 << 20;
+    uint64_t reserve_bytes();
+    double reserve_ms();
     // Frees idle buffers, those cached longest first, until at most `keep_bytes` are cached.
     void trim(uint64_t keep_bytes = 0);
 
@@ -164,6 +178,7 @@ class Context {
         uint64_t allocations = 0;      // device memory allocations (buffers' own and slabs)
         uint64_t allocated_bytes = 0;  // their bytes
         double buffer_ms = 0, submit_ms = 0;
+        double reserve_wait_ms = 0;  // of buffer_ms: waiting for the reserve's thread
     };
     const HostTime& host_time() const { return host_; }
 
@@ -236,6 +251,14 @@ class Context {
     bool bind_to_block(Buffer& b, const VkMemoryRequirements& req, uint32_t type);
     // Gives a block-bound buffer's room back to its block (its buffer destroyed).
     void unbind_from_block(Buffer& b);
+    // Starts the reserve's allocation (reserve_bytes) on reserve_thread_.
+    void start_reserve(VkPhysicalDeviceType type);
+    // Waits for the reserve's thread, if it runs, and makes its memory an empty block (and
+    // takes its slabs).
+    void join_reserve();
+    // Waits for the reserve's slabs, if its thread makes them, and adds them to slabs_; false
+    // where none came.
+    bool take_reserved_slabs();
 
     VkInstance instance_ = VK_NULL_HANDLE;
     VkPhysicalDevice physical_ = VK_NULL_HANDLE;
@@ -296,6 +319,17 @@ class Context {
     };
     std::vector<Block> blocks_;
     bool use_blocks_ = true;
+    // The reserve (reserve_bytes): its thread, and what the thread made: a slab of each kind
+    // (read once slabs_ready is set), then the block's memory (read after the thread ends).
+    struct Reserve {
+        Slab slabs[2];  // device, host-visible (none without slabs)
+        std::atomic<bool> slabs_ready{false};
+        VkDeviceMemory memory = VK_NULL_HANDLE;
+        uint64_t size = 0;
+        uint32_t type = 0;
+        double ms = 0;  // the thread's time in vkAllocateMemory
+    } reserve_;
+    std::jthread reserve_thread_;
     // Idle buffers, cached longest first, and empty blocks; cached_ counts their bytes.
     std::vector<Buffer> idle_;
     uint64_t cached_ = 0, cache_budget_ = 0;

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <bit>
 #include <chrono>
+#include <cstdlib>
 #include <iterator>
 #include <string>
 #include <utility>
@@ -26,6 +27,11 @@ uint32_t Context::memory_type(uint32_t bits, bool host_visible) const {
 }
 
 namespace {
+// Every buffer's usage.
+constexpr VkBufferUsageFlags kBufferUsage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT |
+                                            VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
+                                            VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+
 // The place in `v` of an entry without memory (a freed slab's or block's), made if none.
 template <class T>
 size_t free_place(std::vector<T>& v) {
@@ -80,8 +86,7 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible, bool exact) {
     b.capacity = capacity;
     auto bci = vk_struct<VkBufferCreateInfo>(VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO);
     bci.size = capacity;
-    bci.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
-                VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+    bci.usage = kBufferUsage;
     bci.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
     check(vkCreateBuffer(device_, &bci, nullptr, &b.buffer), "vkCreateBuffer");
     VkMemoryRequirements req;
@@ -94,6 +99,7 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible, bool exact) {
     }
     const bool in_block =
         !host_visible && use_blocks_ && cache_budget_ > 0 && req.size > kSlabBufferMax[0];
+    if (in_block) join_reserve();
     if (in_block && bind_to_block(b, req, type)) {
         ++host_.buffers_reused;
         if (host_log_) log_host("device buffer in a block's free room", capacity, start, 0);
@@ -236,13 +242,17 @@ bool Context::bind_to_slab(Buffer& b, const VkMemoryRequirements& req, uint32_t 
         return (s.used + req.alignment - 1) / req.alignment * req.alignment;
     };
     // The most recent slab of the type with room (a slab never holds buffers of two types).
-    size_t pick = slabs_.size();
-    for (size_t i = slabs_.size(); i-- > 0;)
-        if (slabs_[i].memory && slabs_[i].type == type && slabs_[i].host_visible == host_visible &&
-            offset_in(slabs_[i]) + req.size <= slabs_[i].size) {
-            pick = i;
-            break;
-        }
+    const auto most_recent_fit = [&] {
+        for (size_t i = slabs_.size(); i-- > 0;)
+            if (slabs_[i].memory && slabs_[i].type == type &&
+                slabs_[i].host_visible == host_visible &&
+                offset_in(slabs_[i]) + req.size <= slabs_[i].size)
+                return i;
+        return slabs_.size();
+    };
+    size_t pick = most_recent_fit();
+    // Before a slab is allocated: the reserve's, where it has them.
+    if (pick == slabs_.size() && take_reserved_slabs()) pick = most_recent_fit();
     if (pick == slabs_.size()) {
         Slab slab;
         slab.size = kSlabBytes[host_visible];
@@ -288,6 +298,7 @@ void Context::free_empty_slabs() {
 }
 
 void Context::trim(uint64_t keep_bytes) {
+    join_reserve();
     size_t n = 0;  // idle_'s first n, the oldest, are freed
     while (n < idle_.size() && cached_ > keep_bytes) {
         cached_ -= idle_[n].capacity;
@@ -301,6 +312,110 @@ void Context::trim(uint64_t keep_bytes) {
             block = Block{};
         }
     if (keep_bytes == 0) free_empty_slabs();
+}
+
+void Context::start_reserve(VkPhysicalDeviceType device_type) {
+    uint64_t bytes = device_type == VK_PHYSICAL_DEVICE_TYPE_CPU ? 0 : cache_budget_ / 4;
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_RESERVE_BYTES"); env && *env)
+        bytes = std::strtoull(env, nullptr, 10);
+    // Past the cache's budget an empty block is freed; without blocks no buffer takes it; and
+    // one smaller than a few large buffers is not worth a thread.
+    bytes = std::min(bytes, cache_budget_) & ~uint64_t(15);
+    if (bytes < kReserveMin || !use_blocks_) return;
+    // The memory types of the buffers that will take its room (create_buffer's usage).
+    auto bci = vk_struct<VkBufferCreateInfo>(VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO);
+    bci.size = bytes;
+    bci.usage = kBufferUsage;
+    bci.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+    VkBuffer probe;
+    if (vkCreateBuffer(device_, &bci, nullptr, &probe) != VK_SUCCESS) return;
+    VkMemoryRequirements req;
+    vkGetBufferMemoryRequirements(device_, probe, &req);
+    vkDestroyBuffer(device_, probe, nullptr);
+    reserve_.size = bytes;
+    reserve_.type = memory_type(req.memoryTypeBits, false);
+    for (int host_visible = 0; host_visible < 2; ++host_visible) {
+        reserve_.slabs[host_visible].size = use_slabs_ ? kSlabBytes[host_visible] : 0;
+        reserve_.slabs[host_visible].type = memory_type(req.memoryTypeBits, host_visible != 0);
+        reserve_.slabs[host_visible].host_visible = host_visible != 0;
+    }
+    // (vkAllocateMemory needs no external synchronization: the thread allocates while this one
+    // builds the kernels and the caller uploads its scene.) The slabs first, for the first
+    // call's first buffers (take_reserved_slabs), then the block.
+    reserve_.slabs_ready.store(false);
+    reserve_thread_ = std::jthread([this] {
+        const auto start = std::chrono::steady_clock::now();
+        const auto allocate = [&](uint64_t size, uint32_t type) {
+            auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
+            mai.allocationSize = size;
+            mai.memoryTypeIndex = type;
+            VkDeviceMemory memory = VK_NULL_HANDLE;
+            return size > 0 && vkAllocateMemory(device_, &mai, nullptr, &memory) == VK_SUCCESS
+                       ? memory
+                       : VK_NULL_HANDLE;
+        };
+        for (Slab& slab : reserve_.slabs) {
+            slab.memory = allocate(slab.size, slab.type);
+            void* mapped = nullptr;
+            if (slab.memory && slab.host_visible &&
+                vkMapMemory(device_, slab.memory, 0, slab.size, 0, &mapped) != VK_SUCCESS) {
+                vkFreeMemory(device_, slab.memory, nullptr);
+                slab.memory = VK_NULL_HANDLE;
+            }
+            slab.mapped = static_cast<uint8_t*>(mapped);
+        }
+        reserve_.slabs_ready.store(true);
+        reserve_.slabs_ready.notify_all();
+        reserve_.memory = allocate(reserve_.size, reserve_.type);
+        reserve_.ms = ms_since(start);
+    });
+}
+
+bool Context::take_reserved_slabs() {
+    if (!reserve_thread_.joinable() && !reserve_.slabs_ready.load()) return false;
+    const auto start = std::chrono::steady_clock::now();
+    reserve_.slabs_ready.wait(false);
+    host_.reserve_wait_ms += ms_since(start);
+    bool taken = false;
+    for (Slab& slab : reserve_.slabs) {
+        if (!slab.memory) continue;
+        if (host_log_)
+            log_host(slab.host_visible ? "host-visible slab from the reserve"
+                                       : "device slab from the reserve",
+                     slab.size, start, 0);
+        slabs_[free_place(slabs_)] = slab;
+        slab = Slab{};
+        taken = true;
+    }
+    return taken;
+}
+
+void Context::join_reserve() {
+    if (!reserve_thread_.joinable()) return;
+    const auto start = std::chrono::steady_clock::now();
+    reserve_thread_.join();
+    host_.reserve_wait_ms += ms_since(start);
+    take_reserved_slabs();
+    reserve_.slabs_ready.store(false);
+    if (!reserve_.memory) {  // the device had no room for it: buffers allocate as before
+        reserve_.size = 0;
+        return;
+    }
+    if (host_log_)
+        log_host("device reserve (allocated beside the context's making)", reserve_.size, start, 0);
+    const size_t slot = free_place(blocks_);
+    blocks_[slot] = Block{reserve_.memory, reserve_.size, reserve_.type, 0, {{0, reserve_.size}}};
+    cached_ += reserve_.size;
+}
+
+uint64_t Context::reserve_bytes() {
+    join_reserve();
+    return reserve_.size;
+}
+
+double Context::reserve_ms() {
+    join_reserve();
+    return reserve_.ms;
 }
 
 void Context::set_cache_budget(uint64_t bytes) {

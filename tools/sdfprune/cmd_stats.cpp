@@ -168,8 +168,11 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
              std::unique_ptr<gpu::Device> device;
              std::unique_ptr<gpu::Grid> device_grid;
              gpu::DevicePruneStats first;  // the first call's, with --repeat
+             double device_ms = 0;         // the device's making (its reserve's thread apart)
              if (args->backend == "vulkan") {
+                 const auto made = std::chrono::steady_clock::now();
                  device = std::make_unique<gpu::Device>();
+                 device_ms = ms_since(made);
                  device_grid = std::make_unique<gpu::Grid>(gpu::prune(*device, sc, o));
                  first = device_grid->stats();
                  for (uint32_t i = 1; i < args->repeat; ++i) {
@@ -245,7 +248,11 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          .add("host_allocated_bytes", device_grid->stats().host_allocated_bytes)
                          .add("host_buffer_ms", device_grid->stats().host_buffer_ms)
                          .add("host_submissions", device_grid->stats().host_submissions)
-                         .add("host_submit_ms", device_grid->stats().host_submit_ms);
+                         .add("host_submit_ms", device_grid->stats().host_submit_ms)
+                         .add("host_reserve_wait_ms", device_grid->stats().host_reserve_wait_ms)
+                         .add("device_ms", device_ms)
+                         .add("device_reserve_bytes", device->memory_reserved())
+                         .add("device_reserve_ms", device->reserve_ms());
                      // The device's idle buffers, kept for the next call (the grid held).
                      j.add("idle_cache_bytes", device->memory_cached());
                      if (args->repeat > 1)
@@ -257,7 +264,8 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                              .add("first_host_buffers_reused", first.host_buffers_reused)
                              .add("first_host_allocations", first.host_allocations)
                              .add("first_host_allocated_bytes", first.host_allocated_bytes)
-                             .add("first_host_buffer_ms", first.host_buffer_ms);
+                             .add("first_host_buffer_ms", first.host_buffer_ms)
+                             .add("first_host_reserve_wait_ms", first.host_reserve_wait_ms);
                      j.add("gpu_steps", steps);
                  }
                  if (args->edit_bench > 0)
@@ -298,6 +306,14 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                      (unsigned long long)ds.host_allocations, double(ds.host_allocated_bytes) / 1e6,
                      (unsigned long long)ds.host_buffers_reused, ds.host_buffer_ms,
                      (unsigned long long)ds.host_submissions, ds.host_submit_ms);
+                 std::printf("    device made in %.1f ms", device_ms);
+                 if (device->memory_reserved() > 0)
+                     std::printf(
+                         "; its reserve of %.1f MB allocated beside it in %.1f ms (the "
+                         "first call waited %.1f ms for it)",
+                         double(device->memory_reserved()) / 1e6, device->reserve_ms(),
+                         first.host_reserve_wait_ms);
+                 std::printf("\n");
                  static const char* const kModes[] = {"cells", "octants", "cells from octants",
                                                       "refinement"};
                  for (const gpu::GpuStepShape& st : device_grid->stats().steps) {

@@ -24,9 +24,10 @@ class JsonLine {
         s_ += buf;
         return *this;
     }
-    JsonLine& add(std::string_view key, int v) { return add(key, double(v)); }
-    JsonLine& add(std::string_view key, uint32_t v) { return add(key, double(v)); }
-    JsonLine& add(std::string_view key, uint64_t v) { return add(key, double(v)); }
+    // Integers exactly (byte counts pass 10^9, where "%.9g" would round them).
+    JsonLine& add(std::string_view key, int v) { return integer_(key, std::to_string(v)); }
+    JsonLine& add(std::string_view key, uint32_t v) { return integer_(key, std::to_string(v)); }
+    JsonLine& add(std::string_view key, uint64_t v) { return integer_(key, std::to_string(v)); }
     JsonLine& add(std::string_view key, bool v) {
         key_(key);
         s_ += v ? "true" : "false";
@@ -62,6 +63,11 @@ class JsonLine {
     std::string str() const { return "{" + s_ + "}"; }
 
   private:
+    JsonLine& integer_(std::string_view key, const std::string& digits) {
+        key_(key);
+        s_ += digits;
+        return *this;
+    }
     void key_(std::string_view k) {
         if (!s_.empty()) s_ += ",";
         quote_(k);
