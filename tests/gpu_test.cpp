@@ -1642,8 +1642,8 @@ TEST(GpuCli, BadBackendUseExitsTwo) {
     EXPECT_EQ(cpu.status, 0) << cpu.err;
 }
 
-// A device that runs out of memory while pruning (SDFPRUNE_VULKAN_MEMORY_LIMIT: one of 4 MB)
-// gets a one-line message and exit status 2, not a crash, and no output file; render and
+// A device that runs out of memory while pruning (SDFPRUNE_VULKAN_MEMORY_LIMIT: one of 4 MB,
+// with or without a reserve) gets a one-line message and exit status 2, not a crash, and no output file; render and
 // discretize too. With the memory it needs, the same command succeeds.
 TEST(GpuCli, DeviceOutOfMemoryExitsTwo) {
     if (!gpu::built_with_vulkan()) GTEST_SKIP() << "built without the Vulkan backend";
@@ -1655,12 +1655,16 @@ TEST(GpuCli, DeviceOutOfMemoryExitsTwo) {
     for (const auto& [command, output] : commands) {
         SCOPED_TRACE(command);
         if (!output.empty()) std::remove(output.c_str());
-        const CliResult small = run_cli(command, "SDFPRUNE_VULKAN_MEMORY_LIMIT=4000000");
-        EXPECT_EQ(small.status, 2);
-        EXPECT_NE(small.err.find("out of memory"), std::string::npos) << small.err;
-        EXPECT_EQ(std::count(small.err.begin(), small.err.end(), '\n'), 1) << small.err;
-        if (!output.empty()) {
-            EXPECT_FALSE(std::filesystem::exists(output));
+        // (With a reserve too: its room is no way past the limit.)
+        for (const char* reserve : {"", " SDFPRUNE_VULKAN_RESERVE_BYTES=268435456"}) {
+            const CliResult small =
+                run_cli(command, std::string("SDFPRUNE_VULKAN_MEMORY_LIMIT=4000000") + reserve);
+            EXPECT_EQ(small.status, 2) << reserve;
+            EXPECT_NE(small.err.find("out of memory"), std::string::npos) << small.err;
+            EXPECT_EQ(std::count(small.err.begin(), small.err.end(), '\n'), 1) << small.err;
+            if (!output.empty()) {
+                EXPECT_FALSE(std::filesystem::exists(output));
+            }
         }
         const CliResult enough = run_cli(command);
         EXPECT_EQ(enough.status, 0) << enough.err;

@@ -100,7 +100,8 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible, bool exact) {
     const bool in_block =
         !host_visible && use_blocks_ && cache_budget_ > 0 && req.size > kSlabBufferMax[0];
     if (in_block) join_reserve();
-    if (in_block && bind_to_block(b, req, type)) {
+    // (A block's room, the reserve's too, is no way past SDFPRUNE_VULKAN_MEMORY_LIMIT.)
+    if (in_block && live_ + capacity <= memory_limit_ && bind_to_block(b, req, type)) {
         ++host_.buffers_reused;
         if (host_log_) log_host("device buffer in a block's free room", capacity, start, 0);
         return hand_out(b);
