@@ -14,6 +14,7 @@
 #include <set>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "prune_check.hpp"
 #include "sdfprune/builtin.hpp"
@@ -274,14 +275,27 @@ void expect_same_device_cells(const gpu::Grid& a, const gpu::Grid& b, const std:
 // A device made with an environment variable set (for the figures it reads once).
 std::unique_ptr<gpu::Device> device_with_envs(
     std::initializer_list<std::pair<const char*, const char*>> settings) {
-    for (const auto& [name, value] : settings) setenv(name, value, 1);
+    // (Each setting's value before, put back after: a run may set some for all tests.)
+    std::vector<std::optional<std::string>> before;
+    for (const auto& [name, value] : settings) {
+        const char* was = std::getenv(name);
+        before.push_back(was ? std::optional<std::string>(was) : std::nullopt);
+        setenv(name, value, 1);
+    }
     std::unique_ptr<gpu::Device> d;
     try {
         d = std::make_unique<gpu::Device>();
     } catch (const gpu::GpuError& e) {
         ADD_FAILURE() << "no Vulkan device (install mesa-vulkan-drivers): " << e.what();
     }
-    for (const auto& setting : settings) unsetenv(setting.first);
+    size_t i = 0;
+    for (const auto& setting : settings) {
+        const std::optional<std::string>& was = before[i++];
+        if (was)
+            setenv(setting.first, was->c_str(), 1);
+        else
+            unsetenv(setting.first);
+    }
     return d;
 }
 std::unique_ptr<gpu::Device> device_with_env(const char* name, const char* value) {
@@ -947,8 +961,11 @@ TEST(Gpu, SmallBuffersShareSlabs) {
     const Scene sc = builtin_scene("demo");
     PruneOptions o;
     o.resolution = 32;
-    const std::unique_ptr<gpu::Device> own = device_with_env("SDFPRUNE_VULKAN_SLABS", "0");
-    const std::unique_ptr<gpu::Device> slabs = device_with_env("SDFPRUNE_VULKAN_SLABS", "1");
+    // (No reserve, whose slabs would spare the call its own.)
+    const std::unique_ptr<gpu::Device> own =
+        device_with_envs({{"SDFPRUNE_VULKAN_SLABS", "0"}, {"SDFPRUNE_VULKAN_RESERVE_BYTES", "0"}});
+    const std::unique_ptr<gpu::Device> slabs =
+        device_with_envs({{"SDFPRUNE_VULKAN_SLABS", "1"}, {"SDFPRUNE_VULKAN_RESERVE_BYTES", "0"}});
     ASSERT_TRUE(own && slabs);
     const gpu::Grid a = gpu::prune(*own, sc, o);
     const gpu::Grid b = gpu::prune(*slabs, sc, o);
@@ -1063,6 +1080,7 @@ TEST(Gpu, ReserveServesTheFirstCall) {
     const std::unique_ptr<gpu::Device> plain = device_with_envs({});
     ASSERT_TRUE(small && plain);
     EXPECT_EQ(small->memory_reserved(), 0u);
+    if (std::getenv("SDFPRUNE_VULKAN_RESERVE_BYTES")) return;  // (a run that sets one for all)
     if (plain->name().find("llvmpipe") != std::string::npos)
         EXPECT_EQ(plain->memory_reserved(), 0u);
     else
@@ -1643,8 +1661,8 @@ TEST(GpuCli, BadBackendUseExitsTwo) {
 }
 
 // A device that runs out of memory while pruning (SDFPRUNE_VULKAN_MEMORY_LIMIT: one of 4 MB,
-// with or without a reserve) gets a one-line message and exit status 2, not a crash, and no output file; render and
-// discretize too. With the memory it needs, the same command succeeds.
+// with or without a reserve) gets a one-line message and exit status 2, not a crash, and no output
+// file; render and discretize too. With the memory it needs, the same command succeeds.
 TEST(GpuCli, DeviceOutOfMemoryExitsTwo) {
     if (!gpu::built_with_vulkan()) GTEST_SKIP() << "built without the Vulkan backend";
     const std::string png = "/tmp/sdfprune_oom_test.png", npy = "/tmp/sdfprune_oom_test.npy";
