@@ -8,8 +8,9 @@
 # REPEAT`, the last run kept), after one untimed warm-up pruning: a fresh machine's GPU ran its
 # first scene 3–4 times slower. One line per scene and variant: prune_ms, near-field cells,
 # average active primitives (equal across variants, or the variants disagree), the first call's
-# wall time, buffer time, peak memory and the device memory it allocated (a first call
-# allocates its buffers, but for what the device's reserve holds), the device's making and its
+# wall time, buffer time, peak memory, the device memory it allocated (a first call
+# allocates its buffers, but for what the device's reserve holds) and its submissions' time
+# (the host's wait for them, the GPU's time in it), the device's making and its
 # reserve (its size, its thread's time, the first call's wait for it) and each step's
 # GPU time (L level, o octants, c cells, x refinement, W wide; [lane pass's part]).
 # SDFPRUNE_GPU_SCENES names the scenes (default: molecule, trees and five generated kinds);
@@ -73,6 +74,9 @@ else:
             d["first_wall_ms"], d["first_host_buffer_ms"], d["first_prune_peak_bytes"] / 1e6)
         if "first_host_allocated_bytes" in d:  # (builds from stop 42 on)
             first += ", allocated %.0f MB" % (d["first_host_allocated_bytes"] / 1e6)
+        if "first_host_submit_ms" in d:  # (stop 43 on): its submissions, waited for, and GPU time
+            first += ", submissions %.1f ms (GPU %.1f)" % (d["first_host_submit_ms"],
+                                                            d["first_prune_ms"])
         if "device_ms" in d:  # (builds from stop 43 on): making the device, and its reserve
             first += ", device %.1f ms, reserve %.0f MB in %.1f ms, waited %.1f ms" % (
                 d["device_ms"], d["device_reserve_bytes"] / 1e6, d["device_reserve_ms"],

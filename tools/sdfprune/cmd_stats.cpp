@@ -265,6 +265,8 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                              .add("first_host_allocations", first.host_allocations)
                              .add("first_host_allocated_bytes", first.host_allocated_bytes)
                              .add("first_host_buffer_ms", first.host_buffer_ms)
+                             .add("first_host_submissions", first.host_submissions)
+                             .add("first_host_submit_ms", first.host_submit_ms)
                              .add("first_host_reserve_wait_ms", first.host_reserve_wait_ms);
                      j.add("gpu_steps", steps);
                  }
