@@ -131,7 +131,7 @@ struct DevicePruneStats : PruneStats {
     // The host's share of wall_ms: buffers newly made (staging buffers of uploads and
     // readbacks too), buffers taken instead from the device's idle cache (those a previous
     // level or call gave back), the time of both; the device memory allocations among the new
-    // buffers (buffers up to 1 MiB, host-visible up to 128 KiB, share slabs of 16 MiB and
+    // buffers (buffers up to 1 MiB, host-visible up to 256 KiB, share slabs of 16 MiB and
     // 2 MiB allocated once: SDFPRUNE_VULKAN_SLABS=0 gives every buffer its own); and every
     // submission's (uploads and readbacks included) from the end of its recording to its
     // results being back, which holds the GPU's time.

@@ -299,7 +299,7 @@ class Context {
         uint32_t buffers = 0;       // bound into it now
     };
     static constexpr uint64_t kSlabBytes[2] = {16 << 20, 2 << 20};       // device, host
-    static constexpr uint64_t kSlabBufferMax[2] = {1 << 20, 128 << 10};  // device, host
+    static constexpr uint64_t kSlabBufferMax[2] = {1 << 20, 256 << 10};  // device, host
     std::vector<Slab> slabs_;
     bool use_slabs_ = true;  // SDFPRUNE_VULKAN_SLABS=0: every buffer allocates its own
     // Large device-local buffers' memory (over kSlabBufferMax). A pruning call's pools and
