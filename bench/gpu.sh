@@ -5,8 +5,8 @@
 # machine's CPU backend (all its cores). Writes one JSON object per scene and device to
 # RESULTS.json (default BUILD_DIR/gpu-results.json): device, scene, prune_ms, prune_lipschitz_ms,
 # wall_ms, trace_ms, prune_trace_ms, discretize_ms, prune_peak_bytes, cpu_prune_ms, cpu_threads,
-# stats_equal, and the first call's host side: device_ms (making the device), device_reserve_bytes,
-# host_reserve_wait_ms and host_allocated_bytes (README: the device's reserve). bench/gpu-results.json holds a real GPU's, made with
+# stats_equal, and the first call's host side: device_ms (making the device), device_reserve_bytes
+# and host_allocated_bytes (README: the device's reserve). bench/gpu-results.json holds a real GPU's, made with
 # `bash bench/gpu.sh build bench/gpu-results.json`. A note instead when there is no Vulkan
 # device. Called by bench/targets.sh. SDFPRUNE_GPU_SCENES names the scenes (space-separated);
 # on lavapipe, which runs on the CPU, the default is molecule, trees and fluid.
@@ -103,9 +103,8 @@ for name, r in runs.items():
         "device": (g or t or d or {}).get("device"), "scene": name,
         "prune_ms": g and g["prune_ms"], "prune_lipschitz_ms": gl and gl["prune_ms"],
         "wall_ms": g and g.get("wall_ms"),
-        # (builds from stop 43 on) making the device, its reserve, the first call's wait for it
+        # (builds from stop 43 on) making the device, and its reserve
         "device_ms": g and g.get("device_ms"), "device_reserve_bytes": g and g.get("device_reserve_bytes"),
-        "host_reserve_wait_ms": g and g.get("host_reserve_wait_ms"),
         "host_allocated_bytes": g and g.get("host_allocated_bytes"),
         "trace_ms": t and t["trace_ms"], "prune_trace_ms": t and t["prune_ms"] + t["trace_ms"],
         "discretize_ms": d and d["eval_ms"], "prune_peak_bytes": g and g["prune_peak_bytes"],

@@ -11,7 +11,8 @@
 # wall time, buffer time, peak memory, the device memory it allocated (a first call
 # allocates its buffers, but for what the device's reserve holds) and its submissions' time
 # (the host's wait for them, the GPU's time in it), the device's making and its
-# reserve (its size, its thread's time, the first call's wait for it) and each step's
+# reserve (its size and its thread's time: the first call did not wait for it, so where it
+# allocated much, the reserve came too late) and each step's
 # GPU time (L level, o octants, c cells, x refinement, W wide; [lane pass's part]).
 # SDFPRUNE_GPU_SCENES names the scenes (default: molecule, trees and five generated kinds);
 # molecule and trees are read from SDFPRUNE_SCENES (default ../shared/scenes), the others
@@ -78,9 +79,8 @@ else:
             first += ", submissions %.1f ms (GPU %.1f)" % (d["first_host_submit_ms"],
                                                             d["first_prune_ms"])
         if "device_ms" in d:  # (builds from stop 43 on): making the device, and its reserve
-            first += ", device %.1f ms, reserve %.0f MB in %.1f ms, waited %.1f ms" % (
-                d["device_ms"], d["device_reserve_bytes"] / 1e6, d["device_reserve_ms"],
-                d["first_host_reserve_wait_ms"])
+            first += ", device %.1f ms, reserve %.0f MB in %.1f ms" % (
+                d["device_ms"], d["device_reserve_bytes"] / 1e6, d["device_reserve_ms"])
     print(scene, label, "%.2f ms" % d["prune_ms"], "near", d["near_field_cells"],
           "active %.5f" % d["active_avg"], first, steps)
 ' "$1" "$2"

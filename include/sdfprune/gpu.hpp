@@ -51,13 +51,15 @@ class Device {
     // sets the budget).
     uint64_t memory_in_use() const;
     uint64_t memory_cached() const;
-    // Frees the idle memory (the next pruning allocates its buffers again).
+    // Frees the idle memory (the next pruning allocates its buffers again; a reserve still
+    // being made comes later, as idle memory).
     void release_cached_memory();
     // Device memory allocated while the device was made, on a thread of its own, for the
-    // first pruning call's large buffers (it is idle memory until then, in memory_cached); 0
-    // where there is none. By default a quarter of the idle memory's budget (1 GiB on an H100)
-    // on GPUs, none on CPU devices; SDFPRUNE_VULKAN_RESERVE_BYTES=N sets it (0: none). And the
-    // milliseconds its thread took to allocate it.
+    // first pruning call's buffers (idle memory until then, in memory_cached; a call that
+    // comes before the thread is done does not wait for it, and allocates its own); 0 where
+    // there is none. By default a quarter of the idle memory's budget (1 GiB on an H100) on
+    // GPUs, none on CPU devices; SDFPRUNE_VULKAN_RESERVE_BYTES=N sets it (0: none). And the
+    // milliseconds its thread took to allocate it. Both wait for the thread.
     uint64_t memory_reserved() const;
     double reserve_ms() const;
     Context& context() { return *context_; }
@@ -140,9 +142,6 @@ struct DevicePruneStats : PruneStats {
     // cost the host about 0.016 ms per MB (BENCHMARKS.md, stop 29).
     uint64_t host_allocated_bytes = 0;
     double host_buffer_ms = 0, host_submit_ms = 0;
-    // Of host_buffer_ms: the wait for the device's reserve (Device::memory_reserved) to be
-    // allocated, where the call came before its thread was done.
-    double host_reserve_wait_ms = 0;
     // Whether the wide steps used subgroup operations (the device has them and
     // SDFPRUNE_VULKAN_SUBGROUPS is not 0), else shared memory.
     bool subgroups = false;

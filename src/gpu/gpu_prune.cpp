@@ -710,7 +710,6 @@ Grid prune(Device& device, const Scene& sc, const PruneOptions& opt) {
     st.host_submissions = host.submissions - host_before.submissions;
     st.host_buffer_ms = host.buffer_ms - host_before.buffer_ms;
     st.host_submit_ms = host.submit_ms - host_before.submit_ms;
-    st.host_reserve_wait_ms = host.reserve_wait_ms - host_before.reserve_wait_ms;
     pruner.read_statistics();
     return grid;
 }

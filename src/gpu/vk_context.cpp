@@ -446,6 +446,8 @@ Context::Context() {
 Context::~Context() {
     if (device_) {
         vkDeviceWaitIdle(device_);
+        reserve_thread_.request_stop();  // (a delayed reserve is not made at all)
+        adopt_reserve(true);
         trim(0);
         // (with buffers still bound, if a grid outlived its device)
         for (Slab& slab : slabs_)

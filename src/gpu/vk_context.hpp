@@ -155,14 +155,16 @@ class Context {
     uint64_t cache_budget() const { return cache_budget_; }
     void set_cache_budget(uint64_t bytes);
     // The reserve: device memory allocated while the context is made, on a thread of its own,
-    // so that a fresh process's first pruning call finds its large buffers' room already
-    // allocated (on an H100 a call's allocations cost the host about 0.016 ms per MB, the
-    // better part of a first call's wall time). It becomes an empty block (idle memory, in
-    // bytes_cached()) once the thread is done; the first buffer that looks for room in a
-    // block waits for it. Its bytes (0: none, or its allocation failed) and the thread's time.
-    // By default a quarter of the idle cache's budget (1 GiB on an H100) on GPUs, none on CPU
-    // devices, whose allocations cost nothing; SDFPRUNE_VULKAN_RESERVE_BYTES=N sets it (at
-    // most the cache's budget; none below kReserveMin).
+    // so that a fresh process's first pruning call finds its buffers' room already allocated
+    // (on an H100 a call's allocations cost the host about 0.016 ms per MB and 0.13 ms each,
+    // the better part of a first call's wall time): two slabs (device and host-visible), then
+    // an empty block (idle memory, in bytes_cached()). A call takes what the thread has made
+    // by then, and never waits for the rest: where it comes first, it allocates as it would
+    // without a reserve, and the reserve serves later calls. reserve_bytes() is its block's
+    // bytes (0: none, or its allocation failed), reserve_ms() the thread's time (both wait for
+    // the thread). By default a quarter of the idle cache's budget (1 GiB on an H100) on GPUs,
+    // none on CPU devices, whose allocations cost nothing; SDFPRUNE_VULKAN_RESERVE_BYTES=N
+    // sets it (at most the cache's budget; none below kReserveMin).
     static constexpr uint64_t kReserveMin = 16 << 20;
     uint64_t reserve_bytes();
     double reserve_ms();
@@ -178,7 +180,6 @@ class Context {
         uint64_t allocations = 0;      // device memory allocations (buffers' own and slabs)
         uint64_t allocated_bytes = 0;  // their bytes
         double buffer_ms = 0, submit_ms = 0;
-        double reserve_wait_ms = 0;  // of buffer_ms: waiting for the reserve's thread
     };
     const HostTime& host_time() const { return host_; }
 
@@ -253,10 +254,10 @@ class Context {
     void unbind_from_block(Buffer& b);
     // Starts the reserve's allocation (reserve_bytes) on reserve_thread_.
     void start_reserve(VkPhysicalDeviceType type);
-    // Waits for the reserve's thread, if it runs, and makes its memory an empty block (and
-    // takes its slabs).
-    void join_reserve();
-    // Waits for the reserve's slabs, if its thread makes them, and adds them to slabs_; false
+    // Where the reserve's thread is done (or, with `wait`, once it is), ends it and makes its
+    // memory an empty block (and takes its slabs).
+    void adopt_reserve(bool wait);
+    // Adds the reserve's slabs to slabs_ where its thread has made them (never waits); false
     // where none came.
     bool take_reserved_slabs();
 
@@ -320,10 +321,10 @@ class Context {
     std::vector<Block> blocks_;
     bool use_blocks_ = true;
     // The reserve (reserve_bytes): its thread, and what the thread made: a slab of each kind
-    // (read once slabs_ready is set), then the block's memory (read after the thread ends).
+    // (read once slabs_ready is set), then the block's memory (read once done is set).
     struct Reserve {
         Slab slabs[2];  // device, host-visible (none without slabs)
-        std::atomic<bool> slabs_ready{false};
+        std::atomic<bool> slabs_ready{false}, done{false};
         VkDeviceMemory memory = VK_NULL_HANDLE;
         uint64_t size = 0;
         uint32_t type = 0;

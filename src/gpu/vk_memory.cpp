@@ -1,12 +1,17 @@
 // vk_memory.cpp — the device memory behind Context's buffers: memory types, the idle cache
 // that recycles buffers by capacity class, the slabs small buffers share, and the blocks whose
-// free room large buffers take (vk_context.hpp says why each exists).
+// free room large buffers take, and the reserve made beside the context (vk_context.hpp says
+// why each exists).
 #include <algorithm>
 #include <bit>
 #include <chrono>
+#include <condition_variable>
 #include <cstdlib>
 #include <iterator>
+#include <mutex>
+#include <stop_token>
 #include <string>
+#include <thread>
 #include <utility>
 
 #include "../core/clock.hpp"
@@ -99,7 +104,7 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible, bool exact) {
     }
     const bool in_block =
         !host_visible && use_blocks_ && cache_budget_ > 0 && req.size > kSlabBufferMax[0];
-    if (in_block) join_reserve();
+    if (in_block) adopt_reserve(false);
     // (A block's room, the reserve's too, is no way past SDFPRUNE_VULKAN_MEMORY_LIMIT.)
     if (in_block && live_ + capacity <= memory_limit_ && bind_to_block(b, req, type)) {
         ++host_.buffers_reused;
@@ -299,7 +304,7 @@ void Context::free_empty_slabs() {
 }
 
 void Context::trim(uint64_t keep_bytes) {
-    join_reserve();
+    adopt_reserve(false);
     size_t n = 0;  // idle_'s first n, the oldest, are freed
     while (n < idle_.size() && cached_ > keep_bytes) {
         cached_ -= idle_[n].capacity;
@@ -342,9 +347,22 @@ void Context::start_reserve(VkPhysicalDeviceType device_type) {
     }
     // (vkAllocateMemory needs no external synchronization: the thread allocates while this one
     // builds the kernels and the caller uploads its scene.) The slabs first, for the first
-    // call's first buffers (take_reserved_slabs), then the block.
-    reserve_.slabs_ready.store(false);
-    reserve_thread_ = std::jthread([this] {
+    // call's first buffers (take_reserved_slabs), then the block (adopt_reserve).
+    // (SDFPRUNE_VULKAN_RESERVE_DELAY_MS: the thread starts that late, for tests of a call that
+    // comes before its reserve.)
+    const char* delay_env = std::getenv("SDFPRUNE_VULKAN_RESERVE_DELAY_MS");
+    const uint64_t delay_ms = delay_env ? std::strtoull(delay_env, nullptr, 10) : 0;
+    reserve_thread_ = std::jthread([this, delay_ms](std::stop_token stop) {
+        if (delay_ms > 0) {  // (ended early where the context is destroyed first)
+            std::mutex m;
+            std::condition_variable_any cv;
+            std::unique_lock<std::mutex> lock(m);
+            cv.wait_for(lock, stop, std::chrono::milliseconds(delay_ms), [] { return false; });
+            if (stop.stop_requested()) {
+                reserve_.done.store(true, std::memory_order_release);
+                return;
+            }
+        }
         const auto start = std::chrono::steady_clock::now();
         const auto allocate = [&](uint64_t size, uint32_t type) {
             auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
@@ -365,25 +383,22 @@ void Context::start_reserve(VkPhysicalDeviceType device_type) {
             }
             slab.mapped = static_cast<uint8_t*>(mapped);
         }
-        reserve_.slabs_ready.store(true);
-        reserve_.slabs_ready.notify_all();
+        reserve_.slabs_ready.store(true, std::memory_order_release);
         reserve_.memory = allocate(reserve_.size, reserve_.type);
         reserve_.ms = ms_since(start);
+        reserve_.done.store(true, std::memory_order_release);
     });
 }
 
 bool Context::take_reserved_slabs() {
-    if (!reserve_thread_.joinable() && !reserve_.slabs_ready.load()) return false;
-    const auto start = std::chrono::steady_clock::now();
-    reserve_.slabs_ready.wait(false);
-    host_.reserve_wait_ms += ms_since(start);
+    if (!reserve_.slabs_ready.load(std::memory_order_acquire)) return false;  // (not waited for)
     bool taken = false;
     for (Slab& slab : reserve_.slabs) {
         if (!slab.memory) continue;
         if (host_log_)
             log_host(slab.host_visible ? "host-visible slab from the reserve"
                                        : "device slab from the reserve",
-                     slab.size, start, 0);
+                     slab.size, std::chrono::steady_clock::now(), 0);
         slabs_[free_place(slabs_)] = slab;
         slab = Slab{};
         taken = true;
@@ -391,31 +406,30 @@ bool Context::take_reserved_slabs() {
     return taken;
 }
 
-void Context::join_reserve() {
+void Context::adopt_reserve(bool wait) {
     if (!reserve_thread_.joinable()) return;
-    const auto start = std::chrono::steady_clock::now();
+    if (!wait && !reserve_.done.load(std::memory_order_acquire)) return;
     reserve_thread_.join();
-    host_.reserve_wait_ms += ms_since(start);
     take_reserved_slabs();
-    reserve_.slabs_ready.store(false);
     if (!reserve_.memory) {  // the device had no room for it: buffers allocate as before
         reserve_.size = 0;
         return;
     }
     if (host_log_)
-        log_host("device reserve (allocated beside the context's making)", reserve_.size, start, 0);
+        log_host("device reserve (allocated beside the context's making)", reserve_.size,
+                 std::chrono::steady_clock::now(), 0);
     const size_t slot = free_place(blocks_);
     blocks_[slot] = Block{reserve_.memory, reserve_.size, reserve_.type, 0, {{0, reserve_.size}}};
     cached_ += reserve_.size;
 }
 
 uint64_t Context::reserve_bytes() {
-    join_reserve();
+    adopt_reserve(true);
     return reserve_.size;
 }
 
 double Context::reserve_ms() {
-    join_reserve();
+    adopt_reserve(true);
     return reserve_.ms;
 }
 

@@ -249,7 +249,6 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          .add("host_buffer_ms", device_grid->stats().host_buffer_ms)
                          .add("host_submissions", device_grid->stats().host_submissions)
                          .add("host_submit_ms", device_grid->stats().host_submit_ms)
-                         .add("host_reserve_wait_ms", device_grid->stats().host_reserve_wait_ms)
                          .add("device_ms", device_ms)
                          .add("device_reserve_bytes", device->memory_reserved())
                          .add("device_reserve_ms", device->reserve_ms());
@@ -266,8 +265,7 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                              .add("first_host_allocated_bytes", first.host_allocated_bytes)
                              .add("first_host_buffer_ms", first.host_buffer_ms)
                              .add("first_host_submissions", first.host_submissions)
-                             .add("first_host_submit_ms", first.host_submit_ms)
-                             .add("first_host_reserve_wait_ms", first.host_reserve_wait_ms);
+                             .add("first_host_submit_ms", first.host_submit_ms);
                      j.add("gpu_steps", steps);
                  }
                  if (args->edit_bench > 0)
@@ -310,11 +308,8 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                      (unsigned long long)ds.host_submissions, ds.host_submit_ms);
                  std::printf("    device made in %.1f ms", device_ms);
                  if (device->memory_reserved() > 0)
-                     std::printf(
-                         "; its reserve of %.1f MB allocated beside it in %.1f ms (the "
-                         "first call waited %.1f ms for it)",
-                         double(device->memory_reserved()) / 1e6, device->reserve_ms(),
-                         first.host_reserve_wait_ms);
+                     std::printf("; its reserve of %.1f MB allocated beside it in %.1f ms",
+                                 double(device->memory_reserved()) / 1e6, device->reserve_ms());
                  std::printf("\n");
                  static const char* const kModes[] = {"cells", "octants", "cells from octants",
                                                       "refinement"};
