@@ -245,6 +245,11 @@ class Context {
     // Binds a new buffer of memory requirements `req` into a slab of memory type `type`
     // (making a slab if none has room); false if the device has no memory for one.
     bool bind_to_slab(Buffer& b, const VkMemoryRequirements& req, uint32_t type, bool host_visible);
+    // A new slab of kSlabBytes[host_visible] of memory type `type` (mapped where host-visible),
+    // or one without memory where the device has none for it. Counts nothing (the reserve's
+    // thread calls it too).
+    struct Slab;
+    Slab allocate_slab(uint32_t type, bool host_visible) const;
     // Frees the slabs no buffer is bound into.
     void free_empty_slabs();
     // Binds a new device-local buffer of memory requirements `req` into free room of a block of
@@ -323,12 +328,13 @@ class Context {
     // The reserve (reserve_bytes): its thread, and what the thread made: a slab of each kind
     // (read once slabs_ready is set), then the block's memory (read once done is set).
     struct Reserve {
-        Slab slabs[2];  // device, host-visible (none without slabs)
+        uint32_t slab_types[2] = {0, 0};  // their memory types
+        Slab slabs[2];                    // device, host-visible (none without slabs)
         std::atomic<bool> slabs_ready{false}, done{false};
         VkDeviceMemory memory = VK_NULL_HANDLE;
         uint64_t size = 0;
         uint32_t type = 0;
-        double ms = 0;  // the thread's time in vkAllocateMemory
+        double ms = 0;  // the thread's time making them
     } reserve_;
     std::jthread reserve_thread_;
     // Idle buffers, cached longest first, and empty blocks; cached_ counts their bytes.

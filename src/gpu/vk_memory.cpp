@@ -260,24 +260,11 @@ bool Context::bind_to_slab(Buffer& b, const VkMemoryRequirements& req, uint32_t 
     // Before a slab is allocated: the reserve's, where it has them.
     if (pick == slabs_.size() && take_reserved_slabs()) pick = most_recent_fit();
     if (pick == slabs_.size()) {
-        Slab slab;
-        slab.size = kSlabBytes[host_visible];
-        slab.type = type;
-        slab.host_visible = host_visible;
-        auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
-        mai.allocationSize = slab.size;
-        mai.memoryTypeIndex = type;
         const auto start = std::chrono::steady_clock::now();
         ++host_.allocations;
-        host_.allocated_bytes += slab.size;
-        if (vkAllocateMemory(device_, &mai, nullptr, &slab.memory) != VK_SUCCESS) return false;
-        void* mapped = nullptr;
-        if (host_visible &&
-            vkMapMemory(device_, slab.memory, 0, slab.size, 0, &mapped) != VK_SUCCESS) {
-            vkFreeMemory(device_, slab.memory, nullptr);
-            return false;
-        }
-        slab.mapped = static_cast<uint8_t*>(mapped);
+        host_.allocated_bytes += kSlabBytes[host_visible];
+        const Slab slab = allocate_slab(type, host_visible);
+        if (!slab.memory) return false;
         if (host_log_)
             log_host(host_visible ? "host-visible slab" : "device slab", slab.size, start, 0);
         pick = free_place(slabs_);  // (a freed slab's place is taken first)
@@ -292,6 +279,24 @@ bool Context::bind_to_slab(Buffer& b, const VkMemoryRequirements& req, uint32_t 
     slab.used = offset + req.size;
     ++slab.buffers;
     return true;
+}
+
+Context::Slab Context::allocate_slab(uint32_t type, bool host_visible) const {
+    Slab slab;
+    slab.size = kSlabBytes[host_visible];
+    slab.type = type;
+    slab.host_visible = host_visible;
+    auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
+    mai.allocationSize = slab.size;
+    mai.memoryTypeIndex = type;
+    if (vkAllocateMemory(device_, &mai, nullptr, &slab.memory) != VK_SUCCESS) return Slab{};
+    void* mapped = nullptr;
+    if (host_visible && vkMapMemory(device_, slab.memory, 0, slab.size, 0, &mapped) != VK_SUCCESS) {
+        vkFreeMemory(device_, slab.memory, nullptr);
+        return Slab{};
+    }
+    slab.mapped = static_cast<uint8_t*>(mapped);
+    return slab;
 }
 
 void Context::free_empty_slabs() {
@@ -340,11 +345,8 @@ void Context::start_reserve(VkPhysicalDeviceType device_type) {
     vkDestroyBuffer(device_, probe, nullptr);
     reserve_.size = bytes;
     reserve_.type = memory_type(req.memoryTypeBits, false);
-    for (int host_visible = 0; host_visible < 2; ++host_visible) {
-        reserve_.slabs[host_visible].size = use_slabs_ ? kSlabBytes[host_visible] : 0;
-        reserve_.slabs[host_visible].type = memory_type(req.memoryTypeBits, host_visible != 0);
-        reserve_.slabs[host_visible].host_visible = host_visible != 0;
-    }
+    for (int host_visible = 0; host_visible < 2; ++host_visible)
+        reserve_.slab_types[host_visible] = memory_type(req.memoryTypeBits, host_visible != 0);
     // (vkAllocateMemory needs no external synchronization: the thread allocates while this one
     // builds the kernels and the caller uploads its scene.) The slabs first, for the first
     // call's first buffers (take_reserved_slabs), then the block (adopt_reserve).
@@ -364,27 +366,16 @@ void Context::start_reserve(VkPhysicalDeviceType device_type) {
             }
         }
         const auto start = std::chrono::steady_clock::now();
-        const auto allocate = [&](uint64_t size, uint32_t type) {
-            auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
-            mai.allocationSize = size;
-            mai.memoryTypeIndex = type;
-            VkDeviceMemory memory = VK_NULL_HANDLE;
-            return size > 0 && vkAllocateMemory(device_, &mai, nullptr, &memory) == VK_SUCCESS
-                       ? memory
-                       : VK_NULL_HANDLE;
-        };
-        for (Slab& slab : reserve_.slabs) {
-            slab.memory = allocate(slab.size, slab.type);
-            void* mapped = nullptr;
-            if (slab.memory && slab.host_visible &&
-                vkMapMemory(device_, slab.memory, 0, slab.size, 0, &mapped) != VK_SUCCESS) {
-                vkFreeMemory(device_, slab.memory, nullptr);
-                slab.memory = VK_NULL_HANDLE;
-            }
-            slab.mapped = static_cast<uint8_t*>(mapped);
-        }
+        if (use_slabs_)
+            for (int host_visible = 0; host_visible < 2; ++host_visible)
+                reserve_.slabs[host_visible] =
+                    allocate_slab(reserve_.slab_types[host_visible], host_visible != 0);
         reserve_.slabs_ready.store(true, std::memory_order_release);
-        reserve_.memory = allocate(reserve_.size, reserve_.type);
+        auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
+        mai.allocationSize = reserve_.size;
+        mai.memoryTypeIndex = reserve_.type;
+        if (vkAllocateMemory(device_, &mai, nullptr, &reserve_.memory) != VK_SUCCESS)
+            reserve_.memory = VK_NULL_HANDLE;
         reserve_.ms = ms_since(start);
         reserve_.done.store(true, std::memory_order_release);
     });
