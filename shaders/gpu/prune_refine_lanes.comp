@@ -25,8 +25,9 @@ layout(local_size_x = 64) in;
 const uint kLaneTape = 32u;  // the longest tape a lane refines (device_layout.hpp)
 
 uint r_word[kLaneTape], r_left[kLaneTape];
-// Bit i of each: entry i was decided 0, 1, 2 in some sub-box; is kept, skipped, negated.
-uint r_seen0, r_seen1, r_seen2, r_kept, r_skipped, r_negated;
+// Bit i of each: entry i was decided 0, 1, 2 in some sub-box; is kept, skipped, negated; is a
+// primitive (noted by the pass's first walk).
+uint r_seen0, r_seen1, r_seen2, r_kept, r_skipped, r_negated, r_primitive;
 
 uint refine_seen(uint i) {
     return ((r_seen0 >> i) & 1u) | (((r_seen1 >> i) & 1u) << 1) | (((r_seen2 >> i) & 1u) << 2);
@@ -54,6 +55,8 @@ void refine_set_flag(uint i, uint f) {
 #define REFINE_SET_LEFT(i, l) r_left[i] = (l)
 #define REFINE_FLAG(i) refine_flag(i)
 #define REFINE_SET_FLAG(i, f) refine_set_flag(i, f)
+#define REFINE_NOTE_PRIMITIVE(i) r_primitive |= 1u << (i)
+#define REFINE_IS_PRIMITIVE(i) (((r_primitive >> (i)) & 1u) != 0u)
 const uint kRefineStack = kLaneTape / 2u + 1u;
 // Sub-boxes a lane walks its tape for at once: a row of the default 3³, so that an entry's
 // node and primitive are read once for three boxes. On an H200 (BENCHMARKS.md, stop 35) the
@@ -164,7 +167,7 @@ void main() {
         bool copy = false;
         uint far_flags = far_field ? 3u : 0u;
         float lowest = kInfinity, highest = -kInfinity;
-        r_seen0 = r_seen1 = r_seen2 = r_kept = r_skipped = r_negated = 0u;
+        r_seen0 = r_seen1 = r_seen2 = r_kept = r_skipped = r_negated = r_primitive = 0u;
         if (second) {
             uint at = pc.more_start + job * kMoreWords;
             cell = scratch[at];

@@ -66,8 +66,13 @@ const uint kPhaseEvaluate = 0u, kPhaseSweep = 1u, kPhaseWrite = 2u, kPhaseDone =
 // new tape's stack depth now and at most, whether the sweep kept an operator that refinement
 // might decide (list_near_cell), where the job's entries are (lbase).
 // An entry's word per lane: bits 0-1 its decision, bit 5 whether its operands at the centre
-// pass blend_may_decide (operators), then the sweep's flags: bits 2-3 alive (0 dead, 1 kept,
-// 2 skipped), bit 4 negate.
+// pass blend_may_decide (operators), bit 6 its tape word's sign, bit 7 whether it is a
+// primitive, then the sweep's flags: bits 2-3 alive (0 dead, 1 kept, 2 skipped), bit 4 negate.
+// Bits 6 and 7 are set with the decision, so that the sweep and the write read neither the
+// tape word nor the node of an entry to know them: each was a dependent load of device memory
+// in a serial walk.
+const uint kFlagNegated = 64u, kFlagPrimitive = 128u;
+const uint kEvaluationFlags = 3u | 32u | kFlagNegated | kFlagPrimitive;  // not the sweep's
 
 // An entry's flags for lane `lane` (entry_flags), past the entries' left operands (dbase).
 #ifdef PRUNE_BYTE_FLAGS
@@ -94,15 +99,12 @@ uint team_words() {
     return team_fixed_words() + (pc.claim_words != 0u ? 0u : pc.max_len * kEntryWords);
 }
 
-// An entry's sweep flags set, its decision bits (0-1 and 5) kept.
-void set_sweep_flags(uint dbase, uint e, uint lane, uint flags) {
-    set_entry_flags(dbase, e, lane, (entry_flags(dbase, e, lane) & 35u) | flags);
-}
-// The sweep's flags of a tape's root (its last entry, `len` words at `parent`): alive, with its
-// own sign.
-uint root_sweep_flags(uint parent, uint len) {
-    uint root_neg = tape_negated(tape_read(parent, 2u + len - 1u)) ? 1u : 0u;
-    return (1u << 2) | (root_neg << 4);
+// Entry e kept by the sweep, its sign its tape word's flipped where `flip` (1: the operator
+// above it was decided for it, and negated); its evaluation flags kept.
+void keep_entry(uint dbase, uint e, uint lane, uint flip) {
+    uint fl = entry_flags(dbase, e, lane);
+    uint neg = ((fl & kFlagNegated) != 0u ? 1u : 0u) ^ flip;
+    set_entry_flags(dbase, e, lane, (fl & kEvaluationFlags) | (1u << 2) | (neg << 4));
 }
 
 // Each team's claim (claim_entries): its job's entries' words, then their first word.
@@ -324,6 +326,7 @@ void main() {
                     vec3 x;
                     uint decision = kKeepBoth;
                     if (nd.kind < kPrimitiveKindCount) {
+                        decision |= kFlagPrimitive;
                         x = primitive_range(nd, centre, half_size, R, interval);
                         if (top > 0u)
                             store_slot(sbase + 4u * (top - 1u) * kTeam + lane, tx, t_entry);
@@ -338,8 +341,11 @@ void main() {
                         x = combine_operator(nd, R, interval, false, left, tx, decision);
                         if (lists && blend_may_decide(left.x, tx.x, nd.blend)) decision |= 32u;
                     }
-                    if (tape_negated(w)) x = negate_range(x);
-                    // The decision, its sweep flags cleared for stage 3.
+                    if (tape_negated(w)) {
+                        x = negate_range(x);
+                        decision |= kFlagNegated;
+                    }
+                    // The decision and what the entry is, its sweep flags cleared for stage 3.
                     set_entry_flags(dbase, i, lane, decision);
                     tx = x;
                     t_entry = i;
@@ -366,7 +372,7 @@ void main() {
                     } else if (!valid) {
                         phase = kPhaseDone;  // a lane past the boxes
                     } else {
-                        set_sweep_flags(dbase, len - 1u, lane, root_sweep_flags(parent, len));
+                        keep_entry(dbase, len - 1u, lane, 0u);  // the root, with its own sign
                         phase = kPhaseSweep;
                     }
                 }
@@ -380,8 +386,7 @@ void main() {
                     uint e = i - 1u;
                     uint fl = entry_flags(dbase, e, lane);
                     if (((fl >> 2) & 3u) != 1u) continue;
-                    uint w = tape_read(parent, 2u + e);
-                    if (is_primitive(tape_node(w))) {
+                    if ((fl & kFlagPrimitive) != 0u) {
                         ++out_len;
                         ++prims;
                         continue;
@@ -391,17 +396,13 @@ void main() {
                     if (d == kKeepBoth) {
                         ++out_len;
                         may_decide = may_decide || (fl & 32u) != 0u;
-                        uint nl = tape_negated(tape_read(parent, 2u + l)) ? 1u : 0u;
-                        uint nr = tape_negated(tape_read(parent, 2u + r)) ? 1u : 0u;
-                        set_sweep_flags(dbase, l, lane, (1u << 2) | (nl << 4));
-                        set_sweep_flags(dbase, r, lane, (1u << 2) | (nr << 4));
+                        keep_entry(dbase, l, lane, 0u);
+                        keep_entry(dbase, r, lane, 0u);
                         continue;
                     }
-                    uint wn = d == kLeftWins ? l : r;
-                    uint neg = ((fl >> 4) & 1u) ^
-                               (tape_negated(tape_read(parent, 2u + wn)) ? 1u : 0u);
-                    set_sweep_flags(dbase, e, lane, (2u << 2) | (fl & 16u));
-                    set_sweep_flags(dbase, wn, lane, (1u << 2) | (neg << 4));
+                    uint skipped = (fl & kEvaluationFlags) | (2u << 2) | (fl & 16u);
+                    set_entry_flags(dbase, e, lane, skipped);
+                    keep_entry(dbase, d == kLeftWins ? l : r, lane, (fl >> 4) & 1u);
                 }
                 if (i == 0u) {
                     note_len(out_len);
@@ -434,7 +435,7 @@ void main() {
                     tape_write(top++, tape_word(node, ((fl >> 4) & 1u) != 0u));
                     // Stack depth of the new tape: a primitive pushes, an operator pops two,
                     // pushes one.
-                    depth = is_primitive(node) ? depth + 1u : depth - 1u;
+                    depth = (fl & kFlagPrimitive) != 0u ? depth + 1u : depth - 1u;
                     depth_max = max(depth_max, depth);
                 }
                 if (i == len) {

@@ -167,18 +167,35 @@ uint item_flags(uint e, uint b) { return uint(scratch_bytes[g_flags + e * g_boxe
 void set_item_flags(uint e, uint b, uint flags) {
     scratch_bytes[g_flags + e * g_boxes + (b - g_b0)] = uint8_t(flags);
 }
-// The flags an entry's operand gets from a kept operator above it, its decision kept.
-void set_kept(uint e, uint b, uint flags) { set_item_flags(e, b, (item_flags(e, b) & 3u) | flags); }
+// An item's flags: bits 0-1 its decision, bit 6 its entry's tape sign, bit 7 whether the entry
+// is a primitive (set in stage 2, so that stages 4 and 5 read neither its tape word nor its
+// node), then the sweep's: bits 2-3 alive (0 dead, 1 kept, 2 skipped), bit 4 negate.
+const uint kFlagNegated = 64u, kFlagPrimitive = 128u;
+const uint kEvaluationFlags = 3u | kFlagNegated | kFlagPrimitive;  // not the sweep's
+// What stage 2 stores as an item's flags.
+uint evaluation_flags(uint decision, uint word, bool primitive) {
+    return decision | (tape_negated(word) ? kFlagNegated : 0u) | (primitive ? kFlagPrimitive : 0u);
+}
+// The flags an entry's operand gets from a kept operator above it, its evaluation flags kept.
+void set_kept(uint e, uint b, uint flags) {
+    set_item_flags(e, b, (item_flags(e, b) & kEvaluationFlags) | flags);
+}
+// Entry e kept, its sign its tape word's flipped where `flip`.
+void keep_item(uint e, uint b, uint flip) {
+    uint fl = item_flags(e, b);
+    uint neg = ((fl & kFlagNegated) != 0u ? 1u : 0u) ^ flip;
+    set_item_flags(e, b, (fl & kEvaluationFlags) | (1u << 2) | (neg << 4));
+}
 vec3 item_range(uint at) {
     return vec3(uintBitsToFloat(scratch[at]), uintBitsToFloat(scratch[at + 1u]),
                 uintBitsToFloat(scratch[at + 2u]));
 }
-void store_item(uint vbase, uint e, uint b, vec3 x, uint decision) {
+void store_item(uint vbase, uint e, uint b, vec3 x, uint flags) {
     uint at = item_at(vbase, e, b);
     scratch[at] = floatBitsToUint(x.x);
     scratch[at + 1u] = floatBitsToUint(x.y);
     scratch[at + 2u] = floatBitsToUint(x.z);
-    set_item_flags(e, b, decision);  // the sweep's flags cleared
+    set_item_flags(e, b, flags);  // the sweep's flags cleared
 }
 // Round q's record in a run: its entry, left operand, and `third` (kRunWord or kRunSigns).
 uvec3 run_record(uint rbase, uint q, uint third) {
@@ -257,7 +274,7 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
                                           item_range(item_at(vbase, rec.y, b)),
                                           item_range(item_at(vbase, rec.x - 1u, b)), decision);
                 if (tape_negated(rec.z)) x = negate_range(x);
-                store_item(vbase, rec.x, b, x, decision);
+                store_item(vbase, rec.x, b, x, evaluation_flags(decision, rec.z, false));
             }
         sync_all();
         return;
@@ -287,7 +304,7 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
                 vec3 x = combine_operator(s_run_node[q], spread_r, interval, false, left, right,
                                           decision);
                 if (tape_negated(rec.z)) x = negate_range(x);
-                store_item(vbase, rec.x, b, x, decision);
+                store_item(vbase, rec.x, b, x, evaluation_flags(decision, rec.z, false));
                 s_run_own[q * kTeam + b] = uvec4(floatBitsToUint(x), 0u);
             }
         sync_all();
@@ -317,7 +334,7 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
                 } else {
                     bool left = d == kLeftWins;
                     uint neg = ((fl >> 4) & 1u) ^ (left ? nl : nr);
-                    set_item_flags(e, b, (fl & 3u) | (2u << 2) | (fl & 16u));
+                    set_item_flags(e, b, (fl & kEvaluationFlags) | (2u << 2) | (fl & 16u));
                     set_kept(left ? l : r, b, (1u << 2) | (neg << 4));
                 }
             }
@@ -332,8 +349,8 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
             uvec4 rec = s_run_rec[k / g_boxes];
             uint box = g_b0 + k % g_boxes;
             s_run_own[(k / g_boxes) * kTeam + box] =
-                uvec4(item_flags(rec.x, box), item_flags(rec.y, box) & 3u,
-                      item_flags(rec.x - 1u, box) & 3u, 0u);
+                uvec4(item_flags(rec.x, box), item_flags(rec.y, box) & kEvaluationFlags,
+                      item_flags(rec.x - 1u, box) & kEvaluationFlags, 0u);
         }
         sync_all();
         if (id < g_boxes && s_state[b] == 1u)
@@ -356,7 +373,7 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
                     bool left = d == kLeftWins;
                     uint wn = left ? l : r, jw = left ? jl : jr;
                     uint neg = ((fl >> 4) & 1u) ^ (left ? nl : nr);
-                    set_item_flags(e, b, (fl & 3u) | (2u << 2) | (fl & 16u));
+                    set_item_flags(e, b, (fl & kEvaluationFlags) | (2u << 2) | (fl & 16u));
                     uint set_w = (left ? own.y : own.z) | (1u << 2) | (neg << 4);
                     set_item_flags(wn, b, set_w);
                     if (jw != kNotInChunk) s_run_own[jw * kTeam + b].x = set_w;
@@ -532,7 +549,8 @@ void main() {
                     x = combine_operator(nd, spread_r, interval, false, left, right, decision);
                 }
                 if (tape_negated(w)) x = negate_range(x);
-                store_item(vbase, e, box, x, decision);
+                store_item(vbase, e, box, x,
+                           evaluation_flags(decision, w, kind < kPrimitiveKindCount));
             }
             sync_all();
             ++r;
@@ -556,8 +574,7 @@ void main() {
                 float constant = (far_flags & 1u) != 0u ? lowest : highest;
                 if (valid) store(dest, false, v, constant, kFarField, 0u, Cell(0u, 0u, 0.0, 0.0));
             } else if (valid) {
-                uint root_neg = tape_negated(root_word) ? 1u : 0u;
-                set_kept(len - 1u, box, (1u << 2) | (root_neg << 4));
+                keep_item(len - 1u, box, 0u);  // the root, with its own sign
                 s_state[box] = 1u;
             }
         }
@@ -582,16 +599,12 @@ void main() {
                 uint l = scratch[lbase + e], r = e - 1u;
                 uint d = fl & 3u;
                 if (d == kKeepBoth) {
-                    uint nl = tape_negated(tape_read(parent, 2u + l)) ? 1u : 0u;
-                    uint nr = tape_negated(tape_read(parent, 2u + r)) ? 1u : 0u;
-                    set_kept(l, box, (1u << 2) | (nl << 4));
-                    set_kept(r, box, (1u << 2) | (nr << 4));
+                    keep_item(l, box, 0u);
+                    keep_item(r, box, 0u);
                     continue;
                 }
-                uint wn = d == kLeftWins ? l : r;
-                uint neg = ((fl >> 4) & 1u) ^ (tape_negated(tape_read(parent, 2u + wn)) ? 1u : 0u);
-                set_item_flags(e, box, (fl & 3u) | (2u << 2) | (fl & 16u));
-                set_kept(wn, box, (1u << 2) | (neg << 4));
+                set_item_flags(e, box, (fl & kEvaluationFlags) | (2u << 2) | (fl & 16u));
+                keep_item(d == kLeftWins ? l : r, box, (fl >> 4) & 1u);
             }
             sync_all();
             --r;
@@ -609,7 +622,7 @@ void main() {
         for (uint e = e0; mine && e < e1; ++e) {
             uint fl = item_flags(e, cbox);
             if (((fl >> 2) & 3u) != 1u) continue;
-            bool prim = is_primitive(tape_node(tape_read(parent, 2u + e)));
+            bool prim = (fl & kFlagPrimitive) != 0u;
             if (prim) ++kept_prims;
             depth += prim ? 1 : -1;
             depth_peak = kept == 0u ? depth : max(depth_peak, depth);

@@ -11,7 +11,14 @@
 //                         negate; cleared before the sweep
 //   REFINE_SET_FLAG(i, f) sets them
 //   kRefineStack          the deepest evaluation stack of a tape it walks
+// and may define REFINE_NOTE_PRIMITIVE(i) (a recording walk found entry i a primitive) with
+// REFINE_IS_PRIMITIVE(i) (whether it is one), so that the sweep and the write need not read
+// each kept entry's node again; without them, they do.
 // Include after prune_common.glsl.
+#ifndef REFINE_IS_PRIMITIVE
+#define REFINE_NOTE_PRIMITIVE(i)
+#define REFINE_IS_PRIMITIVE(i) is_primitive(tape_node(REFINE_WORD(i)))
+#endif
 
 // REFINE_BATCH (default 1): how many sub-boxes one walk takes at once. The includer may set it
 // before the include; the sub-boxes' order changes nothing (their decisions are or-ed, their
@@ -43,6 +50,7 @@ void refine_sub_boxes(uint len, vec3 p[REFINE_BATCH], vec3 sub_half, float sub_R
             PrimitiveParams prm = params[prim];
             vec4 b0 = extras[prim].bound0;
             vec2 b1 = extras[prim].bound1.xy;
+            if (record) REFINE_NOTE_PRIMITIVE(i);
             if (top > 0u) {
                 for (uint j = 0u; j < REFINE_BATCH; ++j) st[(top - 1u) * REFINE_BATCH + j] = tx[j];
                 st_entry[top - 1u] = t_entry;
@@ -81,8 +89,7 @@ void refine_write(uint cell, uint len, Cell c0) {
         uint e = i - 1u;
         uint fl = REFINE_FLAG(e);
         if ((fl & 3u) != 1u) continue;
-        uint w = REFINE_WORD(e);
-        if (is_primitive(tape_node(w))) {
+        if (REFINE_IS_PRIMITIVE(e)) {
             ++out_len;
             ++prims;
             continue;
@@ -115,7 +122,7 @@ void refine_write(uint cell, uint len, Cell c0) {
         if ((fl & 3u) != 1u) continue;
         uint node = tape_node(REFINE_WORD(i));
         tape_write(next++, tape_word(node, (fl & 4u) != 0u));
-        depth = is_primitive(node) ? depth + 1u : depth - 1u;
+        depth = REFINE_IS_PRIMITIVE(i) ? depth + 1u : depth - 1u;
         depth_max = max(depth_max, depth);
     }
     note_depth(depth_max);
