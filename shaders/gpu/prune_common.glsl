@@ -181,10 +181,11 @@ vec3 primitive_range_of(Node nd, PrimitiveParams prm, vec4 b0, vec2 b1, vec3 p, 
     }
     return vec3(v, lo, hi);
 }
-vec3 primitive_range(Node nd, vec3 p, vec3 h, float spread_r, bool interval) {
-    uint prim = nd.primitive;
-    return primitive_range_of(nd, params[prim], extras[prim].bound0, extras[prim].bound1.xy, p,
-                              h, spread_r, interval);
+// primitive_range: of node n (nd: nodes[n]), whose parameters are at n (node order), so that
+// they may be read beside the node.
+vec3 primitive_range(uint n, Node nd, vec3 p, vec3 h, float spread_r, bool interval) {
+    return primitive_range_of(nd, params[n], extras[n].bound0, extras[n].bound1.xy, p, h,
+                              spread_r, interval);
 }
 
 // An operator's value and range and its decision, from its operands'. An undecided operator's

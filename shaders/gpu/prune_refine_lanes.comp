@@ -26,7 +26,7 @@ const uint kLaneTape = 32u;  // the longest tape a lane refines (device_layout.h
 
 uint r_word[kLaneTape], r_left[kLaneTape];
 // Bit i of each: entry i was decided 0, 1, 2 in some sub-box; is kept, skipped, negated; is a
-// primitive (noted by the pass's first walk).
+// primitive (set as the tape is read, before the walks).
 uint r_seen0, r_seen1, r_seen2, r_kept, r_skipped, r_negated, r_primitive;
 
 uint refine_seen(uint i) {
@@ -55,7 +55,6 @@ void refine_set_flag(uint i, uint f) {
 #define REFINE_SET_LEFT(i, l) r_left[i] = (l)
 #define REFINE_FLAG(i) refine_flag(i)
 #define REFINE_SET_FLAG(i, f) refine_set_flag(i, f)
-#define REFINE_NOTE_PRIMITIVE(i) r_primitive |= 1u << (i)
 #define REFINE_IS_PRIMITIVE(i) (((r_primitive >> (i)) & 1u) != 0u)
 const uint kRefineStack = kLaneTape / 2u + 1u;
 // Sub-boxes a lane walks its tape for at once: a row of the default 3³, so that an entry's
@@ -197,7 +196,11 @@ void main() {
             refine_copy(cell, parent, len, c0);
             continue;
         }
-        for (uint k = 0u; k < len; ++k) r_word[k] = tape_read(parent, 2u + k);
+        for (uint k = 0u; k < len; ++k) {
+            uint w = tape_read(parent, 2u + k);
+            r_word[k] = w;
+            if (is_primitive(tape_node(w))) r_primitive |= 1u << k;
+        }
         // Stage 1 over each sub-box, then stage 2: the far-field test of is_near_field on the
         // sub-box's root range against the whole cell's clearance. The sub-boxes in visiting
         // order: the first ones, then the others b by b (x fastest), the first ones skipped.

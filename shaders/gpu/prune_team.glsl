@@ -54,8 +54,14 @@ const uint kWindow = 64u;  // tape entries a lane advances per step (gpu_prune.c
 // (BENCHMARKS.md, stop 30). This kernel does not use the coherent view.
 layout(std430, binding = 12) buffer LaneScratch { uint lane_scratch[]; };
 
-// A team's window of its parent tape, staged for the step.
+// A team's window of its parent tape, staged for the step: each entry's tape word with bit 30
+// set where its node is a primitive (kStagedPrimitive; node indices are below 2^28 on a device,
+// gpu_prune.cpp). The staging reads the entries' nodes side by side, a lane taking every
+// kTeam-th; the walk then knows a primitive from its word and reads the primitive's parameters
+// (in node order, scene.glsl) beside its node, where it read them after the node.
 shared uint s_word[kTeams * kWindow];
+const uint kStagedPrimitive = 1u << 30;  // device_layout.hpp: kStagedPrimitiveBit
+uint staged_node(uint w) { return w & (kStagedPrimitive - 1u); }
 // Lanes still busy after a step, counted in one word while the other is reset.
 shared uint s_busy[2];
 
@@ -302,7 +308,7 @@ void main() {
                 uint we = min(i + kWindow, len);
                 for (uint k = i + lane; k < we; k += kTeam) {
                     uint w = tape_read(parent, 2u + k);
-                    s_word[win + k - w0] = w;
+                    s_word[win + k - w0] = is_primitive(tape_node(w)) ? w | kStagedPrimitive : w;
                 }
             }
             memoryBarrierShared();
@@ -322,12 +328,13 @@ void main() {
                 }
                 for (; i < we; ++i) {
                     uint w = s_word[win + i - w0];
-                    Node nd = nodes[tape_node(w)];
+                    uint n = staged_node(w);
+                    Node nd = nodes[n];
                     vec3 x;
                     uint decision = kKeepBoth;
-                    if (nd.kind < kPrimitiveKindCount) {
+                    if ((w & kStagedPrimitive) != 0u) {
                         decision |= kFlagPrimitive;
-                        x = primitive_range(nd, centre, half_size, R, interval);
+                        x = primitive_range(n, nd, centre, half_size, R, interval);
                         if (top > 0u)
                             store_slot(sbase + 4u * (top - 1u) * kTeam + lane, tx, t_entry);
                         ++top;
@@ -359,7 +366,7 @@ void main() {
                     // Stage 2: the far-field test on the root range against the box's margin
                     // (is_near_field); the root is in this window.
                     value = tx.x;
-                    float L = nodes[tape_node(s_word[win + len - 1u - w0])].lipschitz;
+                    float L = nodes[staged_node(s_word[win + len - 1u - w0])].lipschitz;
                     vec2 range = far_field_range(value, tx.y, tx.z, L, R);
                     float clearance = far_field_clearance(pc.csize.w, L, R);
                     bool far_field = (pc.flags & 1u) != 0u;

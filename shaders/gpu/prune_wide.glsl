@@ -542,7 +542,7 @@ void main() {
                 vec3 x;
                 uint decision = kKeepBoth;
                 if (kind < kPrimitiveKindCount) {
-                    x = primitive_range(nd, centre, half_size, spread_r, interval);
+                    x = primitive_range(tape_node(w), nd, centre, half_size, spread_r, interval);
                 } else {
                     vec3 left = item_range(item_at(vbase, scratch[lbase + e], box));
                     vec3 right = item_range(item_at(vbase, e - 1u, box));

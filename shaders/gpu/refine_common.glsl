@@ -11,12 +11,11 @@
 //                         negate; cleared before the sweep
 //   REFINE_SET_FLAG(i, f) sets them
 //   kRefineStack          the deepest evaluation stack of a tape it walks
-// and may define REFINE_NOTE_PRIMITIVE(i) (a recording walk found entry i a primitive) with
-// REFINE_IS_PRIMITIVE(i) (whether it is one), so that the sweep and the write need not read
-// each kept entry's node again; without them, they do.
+// and may define REFINE_IS_PRIMITIVE(i), whether entry i is a primitive, known before the walks
+// (else each use reads the entry's node): the walks then read a primitive's parameters beside
+// its node, not after it (node order, scene.glsl), and the sweep and the write read no node.
 // Include after prune_common.glsl.
 #ifndef REFINE_IS_PRIMITIVE
-#define REFINE_NOTE_PRIMITIVE(i)
 #define REFINE_IS_PRIMITIVE(i) is_primitive(tape_node(REFINE_WORD(i)))
 #endif
 
@@ -43,14 +42,13 @@ void refine_sub_boxes(uint len, vec3 p[REFINE_BATCH], vec3 sub_half, float sub_R
     uint top = 0u;
     for (uint i = 0u; i < len; ++i) {
         uint w = REFINE_WORD(i);
-        Node nd = nodes[tape_node(w)];
+        uint n = tape_node(w);
+        Node nd = nodes[n];
         bool negated = tape_negated(w);
-        if (nd.kind < kPrimitiveKindCount) {
-            uint prim = nd.primitive;
-            PrimitiveParams prm = params[prim];
-            vec4 b0 = extras[prim].bound0;
-            vec2 b1 = extras[prim].bound1.xy;
-            if (record) REFINE_NOTE_PRIMITIVE(i);
+        if (REFINE_IS_PRIMITIVE(i)) {
+            PrimitiveParams prm = params[n];
+            vec4 b0 = extras[n].bound0;
+            vec2 b1 = extras[n].bound1.xy;
             if (top > 0u) {
                 for (uint j = 0u; j < REFINE_BATCH; ++j) st[(top - 1u) * REFINE_BATCH + j] = tx[j];
                 st_entry[top - 1u] = t_entry;

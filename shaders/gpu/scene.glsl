@@ -6,7 +6,7 @@
 
 struct Node {
     uint kind;       // kPrim* or kOp*
-    uint primitive;  // primitives: index into params/extras
+    uint primitive;  // primitives: index into params/extras, the node's own (node order)
     float blend;     // operators: k
     float lipschitz;
 };
@@ -16,6 +16,9 @@ struct PrimitiveExtra {
     vec4 color;   // rgb
 };
 
+// Node n's parameters and extras are params[n] and extras[n] (gpu_prune.cpp uploads them in
+// node order; operators' records are unused), so that a kernel that knows an entry is a
+// primitive may read them beside its node.
 layout(std430, binding = 0) readonly buffer Nodes { Node nodes[]; };
 layout(std430, binding = 1) readonly buffer Params { PrimitiveParams params[]; };
 layout(std430, binding = 2) readonly buffer Extras { PrimitiveExtra extras[]; };

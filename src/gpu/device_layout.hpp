@@ -14,6 +14,9 @@ namespace sdfprune::gpu {
 using math::vec4;
 
 // The scene (scene.glsl). PrimitiveParams is sdf_math.h's, the same struct on both sides.
+// Parameters and extras are in node order: node n's at n (gpu_prune.cpp).
+// kStagedPrimitiveBit: bit 30 of a tape word staged by prune_team.glsl, set for a primitive.
+inline constexpr uint32_t kStagedPrimitiveBit = 1u << 30;
 struct GpuNode {  // Node
     uint32_t kind, primitive;
     float blend, lipschitz;

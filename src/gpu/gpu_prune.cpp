@@ -65,20 +65,29 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
       scratch(local.slot()),
       octant_pool(local.create(octant_capacity * 4)),
       refine_list(local.create(16)) {
-    // The scene.
+    // The scene. The primitives' parameters and bounds are in node order (a primitive node's
+    // `primitive` is its own index; an operator's record is unused, zeros), so that a kernel that
+    // knows an entry is a primitive reads its parameters by the entry's node at once, beside
+    // the node, not after it (scene.glsl). The staged tape words of prune_team.glsl take bit 30
+    // for that: a node index is below 2^28 wherever 16-byte nodes fit one storage buffer.
+    if (sc.size() >= kStagedPrimitiveBit)
+        throw GpuError("scene too large for the device's largest storage buffer");
     std::vector<GpuNode> nodes(sc.size());
-    for (uint32_t n = 0; n < sc.size(); ++n)
-        nodes[n] = {sc.kind[n], sc.is_primitive(n) ? sc.primitive[n] : 0u, sc.blend[n],
-                    sc.lipschitz[n]};
-    std::vector<GpuPrimitiveExtra> extras(sc.primitive_count());
-    for (uint32_t p = 0; p < sc.primitive_count(); ++p) {
+    std::vector<math::PrimitiveParams> params(sc.size());
+    std::vector<GpuPrimitiveExtra> extras(sc.size());
+    for (uint32_t n = 0; n < sc.size(); ++n) {
+        const bool prim = sc.is_primitive(n);
+        nodes[n] = {sc.kind[n], prim ? n : 0u, sc.blend[n], sc.lipschitz[n]};
+        if (!prim) continue;
+        const uint32_t p = sc.primitive[n];
         const PrimitiveBound& b = sc.bound[p];
-        extras[p] = {vec4(b.centre.x, b.centre.y, b.centre.z, b.scale), vec4(b.f0, b.rho, 0, 0),
+        params[n] = sc.params[p];
+        extras[n] = {vec4(b.centre.x, b.centre.y, b.centre.z, b.scale), vec4(b.f0, b.rho, 0, 0),
                      vec4(sc.color[p].x, sc.color[p].y, sc.color[p].z, 1)};
     }
     const auto bytes_of = [](const auto& v) { return uint64_t(v.size() * sizeof(v[0])); };
     g.nodes = ctx.create_buffer(bytes_of(nodes));
-    g.params = ctx.create_buffer(bytes_of(sc.params));
+    g.params = ctx.create_buffer(bytes_of(params));
     g.extras = ctx.create_buffer(bytes_of(extras));
     // For prune_wide.comp: per node the first node of its subtree and its height (post-order:
     // operands first, so one pass), and the highest, the root's.
@@ -109,7 +118,7 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
     // All of it in one submission.
     const GpuBlock root_block{0, 0, 0, 0};
     ctx.upload({{&g.nodes, nodes.data(), bytes_of(nodes)},
-                {&g.params, sc.params.data(), bytes_of(sc.params)},
+                {&g.params, params.data(), bytes_of(params)},
                 {&g.extras, extras.data(), bytes_of(extras)},
                 {&node_spans, spans.data(), bytes_of(spans)},
                 {&g.pool, head.data(), bytes_of(head)},
