@@ -5,6 +5,14 @@
 // step's buffers (bindings 4–11) and push constants, the tape pools, the boxes of a job
 // (modes 0–2) and the store of a box's result.
 // Include after scene.glsl and cells.glsl.
+// PRUNE_SUBGROUPS (prune_bytes.comp, prune_refine_lanes.comp; built only where the device has
+// subgroup arithmetic and ballot): a subgroup's lanes that append to a pool or to refinement's
+// list together take their places with one atomic (pool_allocate, list_near_cell).
+#ifdef PRUNE_SUBGROUPS
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#endif
 
 const uint kTeam = 8u;  // boxes per job: lanes per team (gpu_prune.cpp: kPruneTeam)
 const uint kWalkClasses = 8u;  // refine_walk_class's (device_layout.hpp: kRefineWalkClasses)
@@ -148,9 +156,22 @@ void tape_write(uint ref, uint value) {
 // (`transient`): its reference (kInOctantPool set for the octant pool), or kFarField where the
 // pool has no room. Then the overflow is flagged: the host grows the pool and runs the steps
 // again, and until then the box is stored far-field, so that the steps after this one in the
-// same submission read no garbage.
+// same submission read no garbage. `transient` is the same for every lane of a dispatch.
+// With PRUNE_SUBGROUPS, the lanes of a subgroup that call it together (the active ones) sum
+// their words and one of them adds the sum to the pool's counter; each takes its place by a
+// prefix sum. Every near box of a step appends to one of two counters, and on a GPU atomics on
+// one address queue one after another (molecule's finest cells step: some 700,000 appends):
+// together they queue a subgroup's worth at once.
 uint pool_allocate(bool transient, uint words) {
+#ifdef PRUNE_SUBGROUPS
+    uint offset = subgroupExclusiveAdd(words), sum = subgroupAdd(words);
+    uint first = 0u;
+    if (subgroupElect())
+        first = transient ? atomicAdd(octant_used, sum) : atomicAdd(pool_used, sum);
+    uint at = subgroupBroadcastFirst(first) + offset;
+#else
     uint at = transient ? atomicAdd(octant_used, words) : atomicAdd(pool_used, words);
+#endif
     uint start = transient ? pc.octant_start : pc.pool_start;
     uint capacity = transient ? octant_capacity : pool_capacity;
     if (at < start || at + words > capacity || at + words < at || at >= kInOctantPool) {
@@ -274,14 +295,31 @@ bool refine_far_may_pass(uint tape, uint len, float value) {
 const uint kCellBits = 0x0fffffffu;  // a list entry's cell (below 2^28: 16-byte cells in a buffer)
 const uint kCopyOnly = 0x80000000u;  // set on the entries of cells only copied (refine_job)
 uint refine_walk_class(uint len) { return min((len - 1u) / 4u, kWalkClasses - 1u); }
+// With PRUNE_SUBGROUPS, the lanes of a subgroup that list cells together take their places in
+// both lists with one atomic each (as pool_allocate).
 void list_near_cell(uint dest, uint tape, uint len, float value, bool may_decide) {
     if ((pc.flags & 4u) == 0u || pc.mode == 1u) return;
-    if (len <= kRefineMaxTape && (may_decide || refine_far_may_pass(tape, len, value))) {
+    bool decide = len <= kRefineMaxTape && (may_decide || refine_far_may_pass(tape, len, value));
+#ifdef PRUNE_SUBGROUPS
+    uvec4 front = subgroupBallot(decide), back = subgroupBallot(!decide);
+    uint first_front = 0u, first_back = 0u;
+    if (subgroupElect()) {
+        uint n_front = subgroupBallotBitCount(front), n_back = subgroupBallotBitCount(back);
+        if (n_front != 0u) first_front = atomicAdd(refine_cells, n_front);
+        if (n_back != 0u) first_back = atomicAdd(copy_cells, n_back);
+    }
+    uint at_front = subgroupBroadcastFirst(first_front) + subgroupBallotExclusiveBitCount(front);
+    uint at_back = subgroupBroadcastFirst(first_back) + subgroupBallotExclusiveBitCount(back);
+#else
+    uint at_front = decide ? atomicAdd(refine_cells, 1u) : 0u;
+    uint at_back = decide ? 0u : atomicAdd(copy_cells, 1u);
+#endif
+    if (decide) {
         uint c = refine_walk_class(len);
-        refine_list[atomicAdd(refine_cells, 1u)] = dest | (c << 28);
+        refine_list[at_front] = dest | (c << 28);
         atomicAdd(s_counts[4u + c], 1u);
     } else {
-        refine_list[uint(refine_list.length()) - 1u - atomicAdd(copy_cells, 1u)] = dest;
+        refine_list[uint(refine_list.length()) - 1u - at_back] = dest;
     }
 }
 

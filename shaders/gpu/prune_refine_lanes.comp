@@ -15,6 +15,10 @@
 // Job k takes refinement's job k (refine_job), for k below refine_cells + copy_cells (listed by
 // the cells step): the cells to decide again, then those only copied, whose lanes copy alike;
 // the far-field cells stay in binding 5 as they are.
+// Built where the device has subgroup arithmetic and ballot: a subgroup's lanes take their
+// tapes' room in the pool with one atomic (prune_common.glsl: PRUNE_SUBGROUPS). Elsewhere the
+// squads refine every cell.
+#define PRUNE_SUBGROUPS
 #include "scene.glsl"
 
 layout(local_size_x = 64) in;

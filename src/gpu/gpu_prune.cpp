@@ -141,10 +141,11 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
             wide_split = uint32_t(split);
     }
     // The longest tape refinement's lane pass takes, at most its arrays' (0: no lane pass,
-    // squads for every cell; for tests and measurements).
+    // squads for every cell; for tests and measurements; and where the device cannot run it).
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE"); env && *env)
         refine_lane_tape =
             std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), kLaneTapeMax);
+    if (!ctx.can_run(KernelId::kPruneRefineLanes)) refine_lane_tape = 0;
     refine_second_pass = env_flag("SDFPRUNE_VULKAN_REFINE_SECOND_PASS", refine_second_pass);
     refine_order = env_flag("SDFPRUNE_VULKAN_REFINE_ORDER", refine_order);
     team_order = env_flag("SDFPRUNE_VULKAN_TEAM_ORDER", team_order);

@@ -27,8 +27,10 @@ inline constexpr uint32_t kWorkgroupSize = 64;
 // The kernels, one per compute shader in shaders/gpu/.
 enum class KernelId : uint32_t {
     kPrune,
-    kPruneBytes,  // the same, its decision and sweep flags a byte a lane (needs byte_storage())
+    kPruneBytes,  // the same, its decision and sweep flags a byte a lane (needs byte_storage()
+                  // and subgroups())
     kPruneRefineLanes,    // refinement's (mode 3) lane pass: a lane per cell with a short tape
+                          // (needs subgroups())
     kPruneRefine,         // refinement: a squad of lanes per cell
     kPruneWide,           // the wide kernels need byte_storage() (else not built)
     kPruneWideSubgroups,  // needs subgroups() too
