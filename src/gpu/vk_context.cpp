@@ -65,8 +65,8 @@ struct KernelCode {
 const KernelCode kKernels[] = {
     {"prune", kPruneSpv, sizeof(kPruneSpv), 13},
     {"prune_bytes", kPruneBytesSpv, sizeof(kPruneBytesSpv), 13, kWorkgroupSize, true, true},
-    {"prune_refine_lanes", kPruneRefineLanesSpv, sizeof(kPruneRefineLanesSpv), 13,
-     kWorkgroupSize, true},
+    {"prune_refine_lanes", kPruneRefineLanesSpv, sizeof(kPruneRefineLanesSpv), 13, kWorkgroupSize,
+     true},
     {"prune_refine", kPruneRefineSpv, sizeof(kPruneRefineSpv), 13},
     {"prune_wide", kPruneWideSpv, sizeof(kPruneWideSpv), 13, uint32_t(kPruneWide), false, true},
     {"prune_wide_subgroups", kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 13,
