@@ -30,6 +30,7 @@
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #extension GL_KHR_shader_subgroup_ballot : require
+#define PRUNE_SUBGROUPS  // the pool appends and refinement's list (prune_common.glsl)
 #endif
 
 const uint kWide = 256u;  // lanes per workgroup (gpu_prune.cpp: kPruneWide)
@@ -654,28 +655,13 @@ void main() {
                 store(dest, true, s_value[box], 0.0, parent, out_len, Cell(0u, 0u, 0.0, 0.0));
                 list_near_cell(dest, parent, out_len, s_value[box], true);
             } else {
-#ifdef PRUNE_WIDE_SUBGROUPS
-                // One append per subgroup: the boxes' places by a prefix sum.
-                uint need = out_len + 2u;
-                uint offset = subgroupExclusiveAdd(need), sum = subgroupAdd(need);
-                uint first = 0u;
-                if (subgroupElect())
-                    first = transient ? atomicAdd(octant_used, sum) : atomicAdd(pool_used, sum);
-                uint at = subgroupBroadcastFirst(first) + offset;
-#else
-                uint at = transient ? atomicAdd(octant_used, out_len + 2u)
-                                    : atomicAdd(pool_used, out_len + 2u);
-#endif
-                uint start = transient ? pc.octant_start : pc.pool_start;
-                uint capacity = transient ? octant_capacity : pool_capacity;
-                if (at < start || at + out_len + 2u > capacity || at + out_len + 2u < at ||
-                    at >= kInOctantPool) {
-                    // The host grows the pool and redoes the level (see prune.comp).
-                    atomicOr(overflow, transient ? 2u : 1u);
+                // (With subgroups, one append per subgroup.) On overflow the host grows the
+                // pool and redoes the level (see prune.comp).
+                uint at = pool_allocate(transient, out_len + 2u);
+                if (at == kFarField) {
                     s_state[box] = 0u;
                     store(dest, false, s_value[box], 0.0, kFarField, 0u, Cell(0u, 0u, 0.0, 0.0));
                 } else {
-                    if (transient) at |= kInOctantPool;
                     tape_write(at, out_len);
                     tape_write(at + 1u, s_prims[box]);
                     s_at[box] = at;
