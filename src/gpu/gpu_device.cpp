@@ -61,6 +61,11 @@ void Grid::for_each_finest_cell(
     const Scene& sc = *g.scene;
     const vec3 cs = (sc.aabb.max - sc.aabb.min) / float(N);
     const float L = sc.lipschitz[sc.root()];
+    // What the device wrote is read with bounds: a cell or tape out of place (a kernel's bug, a
+    // driver's) is an error, not a read past the copies.
+    const auto malformed = [](const char* what) {
+        return GpuError(std::string("the device's grid is malformed: ") + what);
+    };
     for (uint32_t z = 0; z < N; ++z)
         for (uint32_t y = 0; y < N; ++y)
             for (uint32_t x = 0; x < N; ++x) {
@@ -71,8 +76,10 @@ void Grid::for_each_finest_cell(
                     const GpuLevel& l = g.level_info[li];
                     const uint32_t scale = N / l.res, f = l.factor;
                     const uint32_t sx = x / scale, sy = y / scale, sz = z / scale;
-                    const PrunedCell& c =
-                        cells[l.offset + block_start + ((sz % f) * f + sy % f) * f + sx % f];
+                    const uint64_t at = uint64_t(l.offset) + block_start +
+                                        ((sz % f) * f + sy % f) * f + sx % f;
+                    if (at >= cells.size()) throw malformed("a cell past the cells");
+                    const PrunedCell& c = cells[at];
                     if (c.tape == PrunedCell::kFarField) {
                         out.constant =
                             far_field_cell_constant(sc.aabb.min, cs, scale, L, c, x, y, z);
@@ -80,6 +87,9 @@ void Grid::for_each_finest_cell(
                     }
                     if (li + 1 == g.level_info.size()) {
                         out.far_field = false;
+                        if (uint64_t(c.tape) + 2 > pool.size() ||
+                            pool[c.tape] > pool.size() - c.tape - 2)
+                            throw malformed("a tape past the pool");
                         out.tape = {pool.data() + c.tape + 2, pool[c.tape]};
                         break;
                     }
