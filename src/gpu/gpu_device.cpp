@@ -76,8 +76,8 @@ void Grid::for_each_finest_cell(
                     const GpuLevel& l = g.level_info[li];
                     const uint32_t scale = N / l.res, f = l.factor;
                     const uint32_t sx = x / scale, sy = y / scale, sz = z / scale;
-                    const uint64_t at = uint64_t(l.offset) + block_start +
-                                        ((sz % f) * f + sy % f) * f + sx % f;
+                    const uint64_t at =
+                        uint64_t(l.offset) + block_start + ((sz % f) * f + sy % f) * f + sx % f;
                     if (at >= cells.size()) throw malformed("a cell past the cells");
                     const PrunedCell& c = cells[at];
                     if (c.tape == PrunedCell::kFarField) {
