@@ -242,6 +242,11 @@ class Context {
     double submit_part();
     void check(VkResult r, const char* what) const;
     uint32_t memory_type(uint32_t bits, bool host_visible) const;
+    // A buffer handle of `bytes` with every buffer's usage (no memory bound), and device memory
+    // of `bytes` and memory type `type`: the one place each is asked for (create_buffer, the
+    // slabs, the reserve's thread; neither counts anything).
+    VkResult create_buffer_handle(uint64_t bytes, VkBuffer* buffer) const;
+    VkResult allocate_memory(uint64_t bytes, uint32_t type, VkDeviceMemory* memory) const;
     // Unmaps and frees b's memory (not through the idle cache).
     void free_buffer(Buffer& b);
     // Binds a new buffer of memory requirements `req` into a slab of memory type `type`

@@ -32,11 +32,6 @@ uint32_t Context::memory_type(uint32_t bits, bool host_visible) const {
 }
 
 namespace {
-// Every buffer's usage.
-constexpr VkBufferUsageFlags kBufferUsage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT |
-                                            VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
-                                            VK_BUFFER_USAGE_TRANSFER_DST_BIT;
-
 // The place in `v` of an entry without memory (a freed slab's or block's), made if none.
 template <class T>
 size_t free_place(std::vector<T>& v) {
@@ -89,11 +84,7 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible, bool exact) {
 
     Buffer b;
     b.capacity = capacity;
-    auto bci = vk_struct<VkBufferCreateInfo>(VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO);
-    bci.size = capacity;
-    bci.usage = kBufferUsage;
-    bci.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
-    check(vkCreateBuffer(device_, &bci, nullptr, &b.buffer), "vkCreateBuffer");
+    check(create_buffer_handle(capacity, &b.buffer), "vkCreateBuffer");
     VkMemoryRequirements req;
     vkGetBufferMemoryRequirements(device_, b.buffer, &req);
     const uint32_t type = memory_type(req.memoryTypeBits, host_visible);
@@ -111,15 +102,12 @@ Buffer Context::create_buffer(uint64_t bytes, bool host_visible, bool exact) {
         if (host_log_) log_host("device buffer in a block's free room", capacity, start, 0);
         return hand_out(b);
     }
-    auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
-    mai.allocationSize = req.size;
-    mai.memoryTypeIndex = type;
     ++host_.allocations;
-    host_.allocated_bytes += mai.allocationSize;
+    host_.allocated_bytes += req.size;
     const auto allocate = [&] {
         return !host_visible && live_ + capacity > memory_limit_
                    ? VK_ERROR_OUT_OF_DEVICE_MEMORY
-                   : vkAllocateMemory(device_, &mai, nullptr, &b.memory);
+                   : allocate_memory(req.size, type, &b.memory);
     };
     VkResult r = allocate();
     if (r != VK_SUCCESS && cached_ > 0) {  // the idle buffers may be what is in the way
@@ -281,15 +269,28 @@ bool Context::bind_to_slab(Buffer& b, const VkMemoryRequirements& req, uint32_t 
     return true;
 }
 
+VkResult Context::create_buffer_handle(uint64_t bytes, VkBuffer* buffer) const {
+    auto bci = vk_struct<VkBufferCreateInfo>(VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO);
+    bci.size = bytes;
+    bci.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
+                VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+    bci.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+    return vkCreateBuffer(device_, &bci, nullptr, buffer);
+}
+
+VkResult Context::allocate_memory(uint64_t bytes, uint32_t type, VkDeviceMemory* memory) const {
+    auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
+    mai.allocationSize = bytes;
+    mai.memoryTypeIndex = type;
+    return vkAllocateMemory(device_, &mai, nullptr, memory);
+}
+
 Context::Slab Context::allocate_slab(uint32_t type, bool host_visible) const {
     Slab slab;
     slab.size = kSlabBytes[host_visible];
     slab.type = type;
     slab.host_visible = host_visible;
-    auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
-    mai.allocationSize = slab.size;
-    mai.memoryTypeIndex = type;
-    if (vkAllocateMemory(device_, &mai, nullptr, &slab.memory) != VK_SUCCESS) return Slab{};
+    if (allocate_memory(slab.size, type, &slab.memory) != VK_SUCCESS) return Slab{};
     void* mapped = nullptr;
     if (host_visible && vkMapMemory(device_, slab.memory, 0, slab.size, 0, &mapped) != VK_SUCCESS) {
         vkFreeMemory(device_, slab.memory, nullptr);
@@ -333,13 +334,9 @@ void Context::start_reserve(VkPhysicalDeviceType device_type) {
     // one smaller than a few large buffers is not worth a thread.
     bytes = std::min(bytes, cache_budget_) & ~uint64_t(15);
     if (bytes < kReserveMin || !use_blocks_) return;
-    // The memory types of the buffers that will take its room (create_buffer's usage).
-    auto bci = vk_struct<VkBufferCreateInfo>(VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO);
-    bci.size = bytes;
-    bci.usage = kBufferUsage;
-    bci.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+    // The memory types of the buffers that will take its room.
     VkBuffer probe;
-    if (vkCreateBuffer(device_, &bci, nullptr, &probe) != VK_SUCCESS) return;
+    if (create_buffer_handle(bytes, &probe) != VK_SUCCESS) return;
     VkMemoryRequirements req;
     vkGetBufferMemoryRequirements(device_, probe, &req);
     vkDestroyBuffer(device_, probe, nullptr);
@@ -371,10 +368,7 @@ void Context::start_reserve(VkPhysicalDeviceType device_type) {
                 reserve_.slabs[host_visible] =
                     allocate_slab(reserve_.slab_types[host_visible], host_visible != 0);
         reserve_.slabs_ready.store(true, std::memory_order_release);
-        auto mai = vk_struct<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
-        mai.allocationSize = reserve_.size;
-        mai.memoryTypeIndex = reserve_.type;
-        if (vkAllocateMemory(device_, &mai, nullptr, &reserve_.memory) != VK_SUCCESS)
+        if (allocate_memory(reserve_.size, reserve_.type, &reserve_.memory) != VK_SUCCESS)
             reserve_.memory = VK_NULL_HANDLE;
         reserve_.ms = ms_since(start);
         reserve_.done.store(true, std::memory_order_release);
