@@ -12,7 +12,21 @@
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #extension GL_KHR_shader_subgroup_ballot : require
+// `place` = the counter as it was before the (active) lanes of the subgroup whose `take` holds
+// added their number, plus the lane's rank among them: one atomic for all of them. (A macro: a
+// buffer's member is no function argument in GLSL.)
+#define SUBGROUP_APPEND(place, counter, take)                                              \
+    {                                                                                      \
+        uvec4 taking_ = subgroupBallot(take);                                              \
+        uint first_ = 0u;                                                                  \
+        if (subgroupElect() && subgroupBallotBitCount(taking_) != 0u)                      \
+            first_ = atomicAdd(counter, subgroupBallotBitCount(taking_));                  \
+        place = subgroupBroadcastFirst(first_) + subgroupBallotExclusiveBitCount(taking_); \
+    }
 #endif
+// The bits of an entry's flags that say what it is, set with its decision (prune_team.glsl's
+// entries, prune_wide.glsl's items): its tape word's sign, and whether it is a primitive.
+const uint kFlagNegated = 64u, kFlagPrimitive = 128u;
 
 const uint kTeam = 8u;  // boxes per job: lanes per team (gpu_prune.cpp: kPruneTeam)
 const uint kWalkClasses = 8u;  // refine_walk_class's (device_layout.hpp: kRefineWalkClasses)
@@ -301,15 +315,9 @@ void list_near_cell(uint dest, uint tape, uint len, float value, bool may_decide
     if ((pc.flags & 4u) == 0u || pc.mode == 1u) return;
     bool decide = len <= kRefineMaxTape && (may_decide || refine_far_may_pass(tape, len, value));
 #ifdef PRUNE_SUBGROUPS
-    uvec4 front = subgroupBallot(decide), back = subgroupBallot(!decide);
-    uint first_front = 0u, first_back = 0u;
-    if (subgroupElect()) {
-        uint n_front = subgroupBallotBitCount(front), n_back = subgroupBallotBitCount(back);
-        if (n_front != 0u) first_front = atomicAdd(refine_cells, n_front);
-        if (n_back != 0u) first_back = atomicAdd(copy_cells, n_back);
-    }
-    uint at_front = subgroupBroadcastFirst(first_front) + subgroupBallotExclusiveBitCount(front);
-    uint at_back = subgroupBroadcastFirst(first_back) + subgroupBallotExclusiveBitCount(back);
+    uint at_front, at_back;
+    SUBGROUP_APPEND(at_front, refine_cells, decide);
+    SUBGROUP_APPEND(at_back, copy_cells, !decide);
 #else
     uint at_front = decide ? atomicAdd(refine_cells, 1u) : 0u;
     uint at_back = decide ? 0u : atomicAdd(copy_cells, 1u);

@@ -241,11 +241,9 @@ void main() {
         uint open_operators = (r_seen1 ^ r_seen2) & ~r_seen0;
         if (k1 < nsub && (open_operators != 0u || far_flags != 0u)) {
             // The lanes that list a cell together take their places with one atomic.
-            uvec4 listing = subgroupBallot(true);
-            uint first = 0u;
-            if (subgroupElect()) first = atomicAdd(more_jobs, subgroupBallotBitCount(listing));
-            uint at = pc.more_start + (subgroupBroadcastFirst(first) +
-                                       subgroupBallotExclusiveBitCount(listing)) * kMoreWords;
+            uint listed;
+            SUBGROUP_APPEND(listed, more_jobs, true);
+            uint at = pc.more_start + listed * kMoreWords;
             scratch[at] = cell;
             scratch[at + 1u] = r_seen0;
             scratch[at + 2u] = r_seen1;

@@ -77,7 +77,6 @@ const uint kPhaseEvaluate = 0u, kPhaseSweep = 1u, kPhaseWrite = 2u, kPhaseDone =
 // Bits 6 and 7 are set with the decision, so that the sweep and the write read neither the
 // tape word nor the node of an entry to know them: each was a dependent load of device memory
 // in a serial walk.
-const uint kFlagNegated = 64u, kFlagPrimitive = 128u;
 const uint kEvaluationFlags = 3u | 32u | kFlagNegated | kFlagPrimitive;  // not the sweep's
 
 // An entry's flags for lane `lane` (entry_flags), past the entries' left operands (dbase).

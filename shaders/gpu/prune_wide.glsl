@@ -171,7 +171,6 @@ void set_item_flags(uint e, uint b, uint flags) {
 // An item's flags: bits 0-1 its decision, bit 6 its entry's tape sign, bit 7 whether the entry
 // is a primitive (set in stage 2, so that stages 4 and 5 read neither its tape word nor its
 // node), then the sweep's: bits 2-3 alive (0 dead, 1 kept, 2 skipped), bit 4 negate.
-const uint kFlagNegated = 64u, kFlagPrimitive = 128u;
 const uint kEvaluationFlags = 3u | kFlagNegated | kFlagPrimitive;  // not the sweep's
 // What stage 2 stores as an item's flags.
 uint evaluation_flags(uint decision, uint word, bool primitive) {
