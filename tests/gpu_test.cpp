@@ -329,6 +329,35 @@ Scene right_deep_chain(uint32_t depth) {
     return b.build(chain);
 }
 
+// The kernels' subgroup appends and prefix sums hold for any subgroup size: 32 lanes on NVIDIA,
+// 8 on lavapipe by default. ctest runs the tests that compare whole grids with the CPU's again on
+// lavapipe with 4 and with 16 lanes a subgroup (LP_NATIVE_VECTOR_WIDTH=128 and 512,
+// CMakeLists.txt), SDFPRUNE_TEST_SUBGROUP_SIZE saying which; this test checks that the device
+// gave them that size, so those runs test what they say.
+TEST(Gpu, SubgroupSizeIsTheOneAskedFor) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Scene sc = builtin_scene("demo");
+    PruneOptions o;
+    o.resolution = 16;
+    const uint32_t size = gpu::prune(*dev, sc, o).stats().subgroup_size;
+    // (Only lavapipe takes its subgroup size from LP_NATIVE_VECTOR_WIDTH.)
+    const char* asked = std::getenv("SDFPRUNE_TEST_SUBGROUP_SIZE");
+    if (asked && dev->name().find("llvmpipe") != std::string::npos) {
+        EXPECT_EQ(size, uint32_t(std::strtoul(asked, nullptr, 10)));
+    }
+    if (size != 0) {
+        EXPECT_EQ(size & (size - 1), 0u) << "a subgroup of " << size << " lanes";
+        EXPECT_LE(size, 128u);
+    }
+    // Without subgroup operations the kernels use none, and the size says so.
+    ::setenv("SDFPRUNE_VULKAN_SUBGROUPS", "0", 1);
+    gpu::Device without;
+    ::unsetenv("SDFPRUNE_VULKAN_SUBGROUPS");
+    const gpu::Grid g = gpu::prune(without, sc, o);
+    EXPECT_EQ(g.stats().subgroup_size, 0u);
+    EXPECT_FALSE(g.stats().subgroups);
+}
+
 TEST(Gpu, StepShapesFollowTheLevels) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = builtin_scene("demo");

@@ -145,6 +145,9 @@ struct DevicePruneStats : PruneStats {
     // Whether the wide steps used subgroup operations (the device has them and
     // SDFPRUNE_VULKAN_SUBGROUPS is not 0), else shared memory.
     bool subgroups = false;
+    // The device's subgroup size (lanes that run in lockstep: 32 on NVIDIA, 4-16 on lavapipe
+    // by LP_NATIVE_VECTOR_WIDTH), or 0 where the kernels use no subgroup operations.
+    uint32_t subgroup_size = 0;
     // Whether the team steps kept their decision and sweep flags a byte a lane (the device has
     // 8-bit storage and SDFPRUNE_VULKAN_BYTE_FLAGS is not 0: prune_bytes.comp), else a word.
     // (The wide steps always do: without 8-bit storage every step runs in teams.)

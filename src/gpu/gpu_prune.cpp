@@ -638,6 +638,7 @@ void Pruner::gather_cells() {
     }
     st.prune_ms = gpu_ms;
     st.subgroups = ctx.can_run(KernelId::kPruneWideSubgroups);
+    st.subgroup_size = ctx.subgroup_size();
     st.byte_flags = byte_flags;
 }
 

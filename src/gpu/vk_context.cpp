@@ -258,6 +258,7 @@ Context::Context() {
                      (sg.supportedStages & VK_SHADER_STAGE_COMPUTE_BIT) != 0 &&
                      (sg.supportedOperations & need) == need && sg.subgroupSize >= 1;
         subgroups_ = subgroups_ && env_flag("SDFPRUNE_VULKAN_SUBGROUPS", true);
+        subgroup_size_ = sg.subgroupSize;
     }
     // 8-bit storage (enabled at device creation below, where offered).
     auto storage8 = vk_struct<VkPhysicalDevice8BitStorageFeaturesKHR>(

@@ -89,6 +89,8 @@ class Context {
     // Subgroup arithmetic and ballot in compute shaders (Vulkan 1.1), for the kernels that use
     // them; SDFPRUNE_VULKAN_SUBGROUPS=0 turns them off (the fallbacks, for tests).
     bool subgroups() const { return subgroups_; }
+    // Lanes per subgroup where subgroups(), else 0.
+    uint32_t subgroup_size() const { return subgroups_ ? subgroup_size_ : 0u; }
     // 8-bit storage buffer access (VK_KHR_8bit_storage), for prune_bytes.comp and the wide
     // kernels (not built without it: their steps then run in teams, prune.comp);
     // SDFPRUNE_VULKAN_8BIT_STORAGE=0: a device without it, for tests.
@@ -294,6 +296,7 @@ class Context {
     uint64_t device_heap_ = 0;  // the largest device-local heap (or any heap), in bytes
     bool loop_limited_ = false;
     bool subgroups_ = false;
+    uint32_t subgroup_size_ = 0;
     bool byte_storage_ = false;
     uint64_t live_ = 0, peak_ = 0;
     uint64_t memory_limit_ = ~uint64_t(0);  // SDFPRUNE_VULKAN_MEMORY_LIMIT

@@ -240,6 +240,7 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          .add("wall_ms", device_grid->stats().wall_ms)
                          .add("submissions", device_grid->stats().submissions)
                          .add("subgroups", device_grid->stats().subgroups)
+                         .add("subgroup_size", device_grid->stats().subgroup_size)
                          .add("pool_grows", device_grid->stats().pool_grows)
                          .add("slices", device_grid->stats().slices)
                          .add("host_buffers", device_grid->stats().host_buffers)
