@@ -410,9 +410,7 @@ class PrunedGrid {
         // Index within its block of the level cell holding finest cell (ix, iy, iz).
         uint32_t local_index(uint32_t ix, uint32_t iy, uint32_t iz, uint32_t N) const {
             if (pow2) return local_index_pow2(ix, iy, iz);
-            const uint32_t scale = N / res;
-            return (((iz / scale) % factor) * factor + (iy / scale) % factor) * factor +
-                   (ix / scale) % factor;
+            return math::block_local_index(ix, iy, iz, N / res, factor);
         }
         // The same, for a pow2 level (shifts and masks only).
         uint32_t local_index_pow2(uint32_t ix, uint32_t iy, uint32_t iz) const {
@@ -493,9 +491,9 @@ class PrunedGrid {
     if (!(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z))
         return false;
     const uint32_t last = resolution() - 1;
-    ix = std::min(uint32_t((p.x - lo.x) * inv_cell_size_.x), last);
-    iy = std::min(uint32_t((p.y - lo.y) * inv_cell_size_.y), last);
-    iz = std::min(uint32_t((p.z - lo.z) * inv_cell_size_.z), last);
+    ix = math::finest_cell_on_axis(p.x, lo.x, inv_cell_size_.x, last);
+    iy = math::finest_cell_on_axis(p.y, lo.y, inv_cell_size_.y, last);
+    iz = math::finest_cell_on_axis(p.z, lo.z, inv_cell_size_.z, last);
     return true;
 }
 

@@ -27,8 +27,8 @@ void main() {
     uint n = prm.n;
     uvec3 i = uvec3(index % n, (index / n) % n, index / (n * n));
     GridParams g = prm.grid;
-    // precise: no fused multiply-add, so p rounds as on the CPU and lands in the same cell.
-    precise vec3 p = g.aabb_min.xyz + (vec3(i) + 0.5) * prm.sample_size.xyz;
+    // (cell_centre: no fused multiply-add, so p rounds as on the CPU and lands in the same cell)
+    vec3 p = cell_centre(g.aabb_min.xyz, prm.sample_size.xyz, i.x, i.y, i.z);
     Located at;
     float v;
     if (!locate(g, p, at)) {

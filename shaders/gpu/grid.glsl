@@ -28,26 +28,24 @@ struct Located {
 
 bool locate(GridParams g, vec3 p, out Located at) {
     uint N = uint(g.cell_size.w);
-    vec3 q = p - g.aabb_min.xyz;
     at.level = 0u;
     at.cell = uvec3(0u);
     at.finest = uvec3(0u);
     at.c = Cell(kFarField, 0u, 0.0, 0.0);
     for (int a = 0; a < 3; ++a) {
         if (!(p[a] >= g.aabb_min[a]) || !(p[a] <= g.aabb_max[a])) return false;
-        at.finest[a] = min(uint(q[a] * g.inv_cell[a]), N - 1u);
+        at.finest[a] = finest_cell_on_axis(p[a], g.aabb_min[a], g.inv_cell[a], N - 1u);
     }
     uint count = uint(g.inv_cell.w);
     uint block_start = 0u;
     for (uint li = 0u; li < count; ++li) {
         Level l = levels[li];
         uint scale = N / l.res, f = l.factor;
-        uvec3 s = at.finest / scale;
-        uint local = ((s.z % f) * f + (s.y % f)) * f + (s.x % f);
+        uint local = block_local_index(at.finest.x, at.finest.y, at.finest.z, scale, f);
         Cell c = cells[l.offset + block_start + local];
         if (c.tape == kFarField || li + 1u == count) {
             at.level = li;
-            at.cell = s;
+            at.cell = at.finest / scale;
             at.c = c;
             return true;
         }
@@ -60,16 +58,9 @@ vec3 level_cell_size(GridParams g, uint level) {
     return (g.aabb_max.xyz - g.aabb_min.xyz) / float(levels[level].res);
 }
 
-vec3 finest_cell_center(GridParams g, uvec3 i) {
-    return g.aabb_min.xyz + (vec3(i) + 0.5) * g.cell_size.xyz;
-}
-
 // The far-field constant of a finest cell inside far-field cell `at` (far_field_constant).
 float far_field_constant_at(GridParams g, Located at) {
-    uint N = uint(g.cell_size.w);
-    uint scale = N / levels[at.level].res;
-    vec3 coarse = g.aabb_min.xyz + (vec3(at.finest / scale) + 0.5) *
-                                       (g.cell_size.xyz * float(scale));
-    vec3 d = abs(finest_cell_center(g, at.finest) - coarse) + g.cell_size.xyz * 0.5;
-    return far_field_combine(at.c.value, at.c.bound, far_field_reach(g.aabb_min.w, length(d)));
+    uint scale = uint(g.cell_size.w) / levels[at.level].res;
+    return far_field_cell_constant(g.aabb_min.xyz, g.cell_size.xyz, scale, g.aabb_min.w,
+                                   at.c.value, at.c.bound, at.finest.x, at.finest.y, at.finest.z);
 }

@@ -206,15 +206,10 @@ vec3 negate_range(vec3 x) { return vec3(-x.x, -x.z, -x.y); }
 // b1: bound1's f0 and rho) as read, for a caller that evaluates several boxes from one read.
 vec3 primitive_range_of(Node nd, PrimitiveParams prm, vec4 b0, vec2 b1, vec3 p, vec3 h,
                         float spread_r, bool interval) {
-    float spread = nd.lipschitz * spread_r;
     float v = eval_primitive(nd.kind, prm, p);
-    float lo = v - spread, hi = v + spread;
-    if (interval && b0.w > 0.0) {
-        vec2 r = similarity_range(b0.xyz, b0.w, b1.x, b1.y, p, h);
-        lo = max(lo, r.x);
-        hi = min(hi, r.y);
-    }
-    return vec3(v, lo, hi);
+    vec2 r = primitive_box_range(v, nd.lipschitz * spread_r, primitive_narrows(interval, b0.w),
+                                 b0.xyz, b0.w, b1.x, b1.y, p, h);
+    return vec3(v, r.x, r.y);
 }
 // primitive_range: of node n (nd: nodes[n]), whose parameters are at n (node order), so that
 // they may be read beside the node.
@@ -229,26 +224,12 @@ vec3 primitive_range(uint n, Node nd, vec3 p, vec3 h, float spread_r, bool inter
 // Lipschitz range up to rounding.
 vec3 combine_operator(Node nd, float spread_r, bool interval, bool refining, vec3 left,
                       vec3 right, out uint decision) {
-    float spread = nd.lipschitz * spread_r;
     float sgn = operator_s(nd.kind), k2 = nd.blend;
     decision = prune_decision(sgn, k2, left.y, left.z, right.y, right.z);
     float v = apply_operator(sgn, k2, left.x, right.x);
-    float lo, hi;
-    if (decision == kLeftWins) {
-        lo = left.y;
-        hi = left.z;
-    } else if (decision == kRightWins) {
-        lo = right.y;
-        hi = right.z;
-    } else if (interval) {
-        vec2 r2 = operator_range(sgn, k2, left.y, left.z, right.y, right.z);
-        lo = refining ? r2.x : max(v - spread, r2.x);
-        hi = refining ? r2.y : min(v + spread, r2.y);
-    } else {
-        lo = v - spread;
-        hi = v + spread;
-    }
-    return vec3(v, lo, hi);
+    vec2 r = operator_box_range(decision, sgn, k2, v, nd.lipschitz * spread_r, interval,
+                                !refining, left.y, left.z, right.y, right.z);
+    return vec3(v, r.x, r.y);
 }
 
 // Stores a finished box's result: `tape` of `words` words (near), or the far-field constant.
@@ -394,7 +375,7 @@ bool job_box(uint job, uint lane, out vec3 centre_out, out vec3 half_size, out f
     }
     Block b = blocks[bi];
     uvec3 lc = uvec3(local % f, (local / f) % f, local / (f * f));
-    centre = origin + (vec3(b.x + lc.x, b.y + lc.y, b.z + lc.z) + 0.5) * cs;
+    centre = cell_centre(origin, cs, b.x + lc.x, b.y + lc.y, b.z + lc.z);
     centre_out = centre;
     dest = bi * per_block + local;
     parent = b.tape;

@@ -127,16 +127,14 @@ void refine_write(uint cell, uint len, Cell c0) {
     store(cell, true, c0.value, 0.0, at, out_len, c0);
 }
 
-// A listed cell's centre (exact: `precise`, as the CPU computes it), from its block.
+// A listed cell's centre (cell_centre: as the CPU computes it), from its block.
 vec3 refine_cell_centre(uint cell) {
     uint f = pc.factor;
     uint per_block = f * f * f;
     uint bi = cell / per_block, local = cell % per_block;
     Block b = blocks[bi];
     uvec3 lc = uvec3(local % f, (local / f) % f, local / (f * f));
-    precise vec3 centre = pc.origin.xyz + (vec3(b.x + lc.x, b.y + lc.y, b.z + lc.z) + 0.5) *
-                                              pc.csize.xyz;
-    return centre;
+    return cell_centre(pc.origin.xyz, pc.csize.xyz, b.x + lc.x, b.y + lc.y, b.z + lc.z);
 }
 
 // A listed cell's tape (`len` words at `parent`) copied as it is into the level's pool by one

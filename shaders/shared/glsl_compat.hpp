@@ -58,6 +58,7 @@ constexpr vec3 operator-(vec3 a, float s) { return {a.x - s, a.y - s, a.z - s}; 
 inline float abs(float a) { return std::fabs(a); }
 inline float min(float a, float b) { return a < b ? a : b; }
 inline float max(float a, float b) { return a > b ? a : b; }
+inline uint min(uint a, uint b) { return a < b ? a : b; }
 inline float clamp(float a, float lo, float hi) { return min(max(a, lo), hi); }
 inline float sqrt(float a) { return std::sqrt(a); }
 inline vec2 abs(vec2 a) { return {std::fabs(a.x), std::fabs(a.y)}; }

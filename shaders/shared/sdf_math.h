@@ -10,11 +10,13 @@
 #include "glsl_compat.hpp"
 #define SDFPRUNE_FN inline
 #define SDFPRUNE_CONST inline constexpr
+#define SDFPRUNE_PRECISE  // the CPU build contracts nothing (-ffp-contract=off)
 namespace sdfprune::math {
 using namespace sdfprune::glsl;
 #else
 #define SDFPRUNE_FN
 #define SDFPRUNE_CONST const
+#define SDFPRUNE_PRECISE precise  // no fused multiply-add: it rounds as on the CPU
 #endif
 
 // ---- ids, defined once ----------------------------------------------------------------------
@@ -309,6 +311,43 @@ SDFPRUNE_FN vec2 similarity_range(vec3 centre, float scale, float f0, float rho,
     return vec2(scale * near_dist - rho, scale * (1.0f + 6e-6f) * far_dist + f0);
 }
 
+// ---- a node's range over a box (the pruning steps of both backends) -------------------------------
+// A primitive's range over a box (centre p, half sizes h) from its value v at the centre: v ±
+// spread (spread: its Lipschitz bound times the box's radius), narrowed by its similarity range
+// where `narrow` (similarity_range's arguments): with interval bounds, for a primitive that has
+// one (scale > 0; primitive_narrows).
+SDFPRUNE_FN bool primitive_narrows(bool interval, float scale) { return interval && scale > 0.0f; }
+SDFPRUNE_FN vec2 primitive_box_range(float v, float spread, bool narrow, vec3 centre, float scale,
+                                     float f0, float rho, vec3 p, vec3 h) {
+    vec2 r = vec2(v - spread, v + spread);
+    if (narrow) {
+        vec2 s = similarity_range(centre, scale, f0, rho, p, h);
+        r = vec2(max(r.x, s.x), min(r.y, s.y));
+    }
+    return r;
+}
+// An operator's range over a box, from its decision there (prune_decision) and its operands'
+// ranges [a_lo, a_hi] and [b_lo, b_hi]: a skipped operator's range is its winner's. Else, with
+// `lipschitz`, v ± spread around its value v at the centre, narrowed with interval bounds by its
+// range over its operands' ranges (operator_range); without (refinement's sub-boxes, interval
+// bounds only), that range alone. It holds the Lipschitz range up to rounding: every operator
+// is 1-Lipschitz in the max-norm of its operands and shift-invariant (op(a − t, b − t) =
+// op(a, b) − t), and each operand's range holds its own Lipschitz range, so op(a_lo, b_lo) >=
+// op(a, b) − max(L_a, L_b)·R (the operator's L is that max), and alike above. Selects, no
+// branches on the decision, so that the CPU's loop over boxes vectorizes.
+SDFPRUNE_FN vec2 operator_box_range(uint decision, float s, float k, float v, float spread,
+                                    bool interval, bool lipschitz, float a_lo, float a_hi,
+                                    float b_lo, float b_hi) {
+    float lo = v - spread, hi = v + spread;
+    if (interval) {
+        vec2 r = operator_range(s, k, a_lo, a_hi, b_lo, b_hi);
+        lo = lipschitz ? max(lo, r.x) : r.x;
+        hi = lipschitz ? min(hi, r.y) : r.y;
+    }
+    bool left = decision == kLeftWins, right = decision == kRightWins;
+    return vec2(left ? a_lo : (right ? b_lo : lo), left ? a_hi : (right ? b_hi : hi));
+}
+
 // ---- far field -------------------------------------------------------------------------------
 // The far-field test of a (sub-)box of radius R: its root's range [lo, hi], widened by the
 // rounding margin of the value v at its centre (L: the root's Lipschitz bound) ...
@@ -357,6 +396,39 @@ SDFPRUNE_FN float far_field_reach(float lipschitz, float distance) {
 SDFPRUNE_FN float far_field_combine(float value, float bound, float reach) {
     float lipschitz_bound = abs(value) - reach;
     return value > 0.0f ? max(bound, lipschitz_bound) : min(bound, -lipschitz_bound);
+}
+
+// ---- the grid's cells (PrunedGrid and shaders/gpu/grid.glsl, the pruning steps) ---------------
+// The centre of cell (x, y, z) of a grid of cells of size `size` from `origin`. Computed as
+// written (SDFPRUNE_PRECISE), so that both backends find the same centre, and a point the same
+// cell.
+SDFPRUNE_FN vec3 cell_centre(vec3 origin, vec3 size, uint x, uint y, uint z) {
+    SDFPRUNE_PRECISE vec3 centre =
+        origin + vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * size;
+    return centre;
+}
+// The finest cell along one axis that holds coordinate x of a point in the grid's closed box
+// (lo: its min face; inv_cell: 1 / the finest cells' size, as the host computes it; last: the
+// finest resolution − 1): (x − lo) · inv_cell rounded down, at most `last` (on the max face it
+// rounds to N or past).
+SDFPRUNE_FN uint finest_cell_on_axis(float x, float lo, float inv_cell, uint last) {
+    SDFPRUNE_PRECISE float q = (x - lo) * inv_cell;
+    return min(uint(q), last);
+}
+// The index within its block of the cell of a level that holds finest cell (x, y, z): the
+// level's cells are `scale` finest cells a side, its blocks `factor` cells a side, x fastest.
+SDFPRUNE_FN uint block_local_index(uint x, uint y, uint z, uint scale, uint factor) {
+    return (((z / scale) % factor) * factor + (y / scale) % factor) * factor + (x / scale) % factor;
+}
+// The far-field constant of finest cell (x, y, z) (of size `cell`, from `origin`) inside the
+// far-field cell that decides it, `scale` finest cells a side, with centre value `value` and bound
+// `bound`: the Lipschitz bound from the coarse centre over the distance to this finest cell's far
+// corner, which is tighter than the coarse cell's own constant for cells near its centre.
+SDFPRUNE_FN float far_field_cell_constant(vec3 origin, vec3 cell, uint scale, float lipschitz,
+                                          float value, float bound, uint x, uint y, uint z) {
+    vec3 coarse = cell_centre(origin, cell * float(scale), x / scale, y / scale, z / scale);
+    vec3 d = abs(cell_centre(origin, cell, x, y, z) - coarse) + cell * 0.5f;
+    return far_field_combine(value, bound, far_field_reach(lipschitz, length(d)));
 }
 
 #ifdef __cplusplus

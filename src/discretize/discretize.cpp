@@ -226,9 +226,7 @@ void discretize_pruned(const PrunedGrid& grid, uint32_t n, std::span<float> out,
     const vec3 cell = (box.max - box.min) / float(n);
     for_each_cell(n, grid.scene().max_stack, grid.options().threads, out, progress,
                   [&](uint32_t x, uint32_t y, uint32_t z, float* stack) {
-                      return grid.eval(
-                          box.min + vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * cell,
-                          stack);
+                      return grid.eval(math::cell_centre(box.min, cell, x, y, z), stack);
                   });
 }
 
@@ -240,10 +238,7 @@ void discretize_naive(const Scene& scene, uint32_t n, std::span<float> out, int 
     const std::span<const uint32_t> tape = scene.full_tape;
     for_each_cell(n, scene.max_stack, threads, out, progress,
                   [&](uint32_t x, uint32_t y, uint32_t z, float* stack) {
-                      return eval_tape(
-                          scene, tape,
-                          lo + vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * cell,
-                          stack);
+                      return eval_tape(scene, tape, math::cell_centre(lo, cell, x, y, z), stack);
                   });
 }
 

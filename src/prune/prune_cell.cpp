@@ -108,38 +108,25 @@ struct LaneArrays {
     OperatorMode mode = OperatorMode::kSiblings;
 };
 
-// A primitive's range over each box: the Lipschitz range around its value, tightened by the
-// similarity range where the primitive has one.
-template <uint32_t W>
+// A primitive's range over each box (math::primitive_box_range), `narrow` chosen once for all
+// of them (math::primitive_narrows), so that the loop vectorizes.
+template <uint32_t W, bool kNarrow>
 void primitive_ranges(const PrimitiveBound pb, const BoxLanes& c, vec3 half, float spread,
-                      bool interval, const float* __restrict v, float* __restrict l,
-                      float* __restrict h) {
+                      const float* __restrict v, float* __restrict l, float* __restrict h) {
     const float* __restrict x = c.x;
     const float* __restrict y = c.y;
     const float* __restrict z = c.z;
-    if (interval && pb.scale > 0) {
-        for (uint32_t b = 0; b < lanes_of<W>(c.lanes); ++b) {
-            const vec2 r = math::similarity_range(pb.centre, pb.scale, pb.f0, pb.rho,
-                                                  vec3(x[b], y[b], z[b]), half);
-            l[b] = std::max(v[b] - spread, r.x);
-            h[b] = std::min(v[b] + spread, r.y);
-        }
-    } else {
-        for (uint32_t b = 0; b < lanes_of<W>(c.lanes); ++b) {
-            l[b] = v[b] - spread;
-            h[b] = v[b] + spread;
-        }
+    for (uint32_t b = 0; b < lanes_of<W>(c.lanes); ++b) {
+        const vec2 r = math::primitive_box_range(v[b], spread, kNarrow, pb.centre, pb.scale, pb.f0,
+                                                 pb.rho, vec3(x[b], y[b], z[b]), half);
+        l[b] = r.x;
+        h[b] = r.y;
     }
 }
 
 // One operator over `count` boxes, from its operands' values and ranges: the decision, the
-// value (kValue), and the range (a skipped operator's range is its winner's; else, with
-// kLipschitz, the Lipschitz range around the value, tightened with interval bounds by the
-// operator's range over its operands' ranges; without, that range alone: OperatorMode). The
-// operator's range holds the Lipschitz range: every operator is 1-Lipschitz in the max-norm of
-// its operands and shift-invariant (op(a − t, b − t) = op(a, b) − t), and each operand's range
-// holds its own Lipschitz range, so op(a_lo, b_lo) >= op(a, b) − max(L_a, L_b)·R (the
-// operator's L is that max), and alike above; the two differ by float rounding only.
+// value (kValue), and the range (math::operator_box_range: with kLipschitz around the value,
+// narrowed with kInterval by the operator's range over its operands' ranges; OperatorMode).
 // Computed for every box and then selected, without branches, so the loop vectorizes.
 template <uint32_t W, bool kInterval, bool kValue, bool kLipschitz>
 void decide_boxes(uint32_t lanes, float sgn, float k, float spread, const float* __restrict va,
@@ -147,29 +134,20 @@ void decide_boxes(uint32_t lanes, float sgn, float k, float spread, const float*
                   const float* __restrict vb, const float* __restrict lb,
                   const float* __restrict hb, uint32_t* __restrict d, float* __restrict v,
                   float* __restrict l, float* __restrict h) {
+    static_assert(kInterval || (kValue && kLipschitz), "Lipschitz bounds need the value");
     for (uint32_t b = 0; b < lanes_of<W>(lanes); ++b) {
         const float a_lo = la[b], a_hi = ha[b], b_lo = lb[b], b_hi = hb[b];
         const uint32_t dec = math::prune_decision(sgn, k, a_lo, a_hi, b_lo, b_hi);
-        static_assert(kInterval || (kValue && kLipschitz), "Lipschitz bounds need the value");
-        float val = 0, lo = 0, hi = 0;
+        float val = 0;
         if constexpr (kValue) {
             val = math::apply_operator(sgn, k, va[b], vb[b]);
             v[b] = val;
         }
-        if constexpr (kLipschitz) {
-            lo = val - spread;
-            hi = val + spread;
-        }
-        if constexpr (kInterval) {
-            const vec2 r2 = math::operator_range(sgn, k, a_lo, a_hi, b_lo, b_hi);
-            lo = kLipschitz ? std::max(lo, r2.x) : r2.x;
-            hi = kLipschitz ? std::min(hi, r2.y) : r2.y;
-        }
-        const bool left_wins = dec == math::kLeftWins;
-        const bool right_wins = dec == math::kRightWins;
+        const vec2 r = math::operator_box_range(dec, sgn, k, val, spread, kInterval, kLipschitz,
+                                                a_lo, a_hi, b_lo, b_hi);
         d[b] = dec;
-        l[b] = left_wins ? a_lo : right_wins ? b_lo : lo;
-        h[b] = left_wins ? a_hi : right_wins ? b_hi : hi;
+        l[b] = r.x;
+        h[b] = r.y;
     }
 }
 
@@ -197,7 +175,10 @@ void evaluate_lanes(const Scene& sc, std::span<const uint32_t> tape, const BoxLa
         if (kind < math::kPrimitiveKindCount) {
             const uint32_t p = sc.primitive[node];
             lanes::primitive_values_any<W>(kind, sc.params[p], c.x, c.y, c.z, c.lanes, v);
-            primitive_ranges<W>(sc.bound[p], c, half, spread, interval, v, l, h);
+            if (math::primitive_narrows(interval, sc.bound[p].scale))
+                primitive_ranges<W, true>(sc.bound[p], c, half, spread, v, l, h);
+            else
+                primitive_ranges<W, false>(sc.bound[p], c, half, spread, v, l, h);
         } else {
             const float sgn = math::operator_s(kind), k = sc.blend[node];
             const size_t ia = size_t(left) * out.stride, ib = size_t(right) * out.stride;

@@ -92,8 +92,7 @@ class StepPruner {
 
     CellBox cell_box(uint32_t x, uint32_t y, uint32_t z) const {
         CellBox box = proto_;
-        box.centre =
-            geo_.origin + vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * geo_.cell_size;
+        box.centre = math::cell_centre(geo_.origin, geo_.cell_size, x, y, z);
         return box;
     }
 

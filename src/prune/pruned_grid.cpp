@@ -15,21 +15,13 @@
 namespace sdfprune {
 
 vec3 PrunedGrid::cell_center(uint32_t ix, uint32_t iy, uint32_t iz) const {
-    return scene_->aabb.min +
-           vec3(float(ix) + 0.5f, float(iy) + 0.5f, float(iz) + 0.5f) * cell_size_;
+    return math::cell_centre(scene_->aabb.min, cell_size_, ix, iy, iz);
 }
 
 float far_field_cell_constant(vec3 origin, vec3 cell_size, uint32_t scale, float lipschitz,
                               const PrunedCell& c, uint32_t ix, uint32_t iy, uint32_t iz) {
-    // The Lipschitz bound from the coarse centre over the distance to this finest cell's far
-    // corner; tighter than the coarse cell's own constant for cells near its centre.
-    const vec3 coarse = origin + vec3(float(ix / scale) + 0.5f, float(iy / scale) + 0.5f,
-                                      float(iz / scale) + 0.5f) *
-                                     (cell_size * float(scale));
-    const vec3 centre =
-        origin + vec3(float(ix) + 0.5f, float(iy) + 0.5f, float(iz) + 0.5f) * cell_size;
-    const vec3 d = math::abs(centre - coarse) + cell_size * 0.5f;
-    return far_field_combine(c.value, c.bound, far_field_reach(lipschitz, math::length(d)));
+    return math::far_field_cell_constant(origin, cell_size, scale, lipschitz, c.value, c.bound, ix,
+                                         iy, iz);
 }
 
 float PrunedGrid::far_field_constant(uint32_t level, const PrunedCell& c, uint32_t ix, uint32_t iy,
