@@ -15,16 +15,20 @@
 //     a lone primitive that cannot turn far-field copied (0); apart: the cells with nothing to
 //     try (refine_need) copied apart; ordered: the others sorted by walk class.
 // For each, the sum over the groups of the group's longest tape, and the ideal (the words over
-// the group's lanes). The tapes are the CPU's, which the GPU's equal: the octants' pruned from
-// their blocks' tapes (the coarse level's, kept), the cells' as the grid without refinement
-// has them. The orders are the level's storage order, about the order the device lists the
-// blocks and cells in (its atomics spread the cells further).
+// the group's lanes); and the critical path (critical_path): the longest a workgroup walks
+// when the jobs are dealt out to an H100's resident teams as the kernels deal them, in rounds
+// (stops 39-44) or in a snake (stop 45, the order sorted whole), or taken as workgroups come
+// free, against its floor (the longest tape, or the words over the teams). The tapes are the CPU's,
+// which the GPU's equal: the octants' pruned from their blocks' tapes (the coarse level's, kept),
+// the cells' as the grid without refinement has them. The orders are the level's storage order,
+// about the order the device lists the blocks and cells in (its atomics spread the cells further).
 // Usage: sdfprune_order_model SCENE [GRID]
 #include <algorithm>
 #include <bit>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
+#include <functional>
 #include <utility>
 #include <vector>
 
@@ -66,6 +70,45 @@ std::vector<uint32_t> ordered(std::vector<uint32_t> lengths, Class cls, size_t w
                          lengths.begin() + std::min(lengths.size(), i + window),
                          [&](uint32_t a, uint32_t b) { return cls(a) > cls(b); });
     return lengths;
+}
+
+// The step's critical path when its jobs are dealt out as the kernels deal them: `teams`
+// teams (a team or subgroup per job; resident threads / lanes per job), job j to team j mod
+// teams in round j / teams, and `per_group` teams a workgroup (or 1), which walk a round as long
+// as their longest tape. Returned: the largest sum over a workgroup's rounds. `snake`: odd
+// rounds deal the jobs out from the last team to the first.
+uint64_t critical_path(const std::vector<uint32_t>& ranked, uint32_t teams, uint32_t per_group,
+                       bool snake) {
+    const uint32_t groups = teams / per_group;
+    std::vector<uint64_t> load(groups, 0);
+    for (size_t r0 = 0, round = 0; r0 < ranked.size(); r0 += teams, ++round)
+        for (uint32_t g = 0; g < groups; ++g) {
+            uint32_t longest = 0;
+            for (uint32_t k = 0; k < per_group; ++k) {
+                const uint32_t team = g * per_group + k;
+                const size_t j = r0 + (snake && round % 2 == 1 ? teams - 1 - team : team);
+                if (j < ranked.size()) longest = std::max(longest, ranked[j]);
+            }
+            load[g] += longest;
+        }
+    return *std::max_element(load.begin(), load.end());
+}
+
+// The same with the jobs taken as workgroups come free (a counter each takes its next
+// per_group jobs from), the workgroups all resident.
+uint64_t critical_path_taken(const std::vector<uint32_t>& ranked, uint32_t teams,
+                             uint32_t per_group) {
+    const uint32_t groups = teams / per_group;
+    std::vector<uint64_t> heap(groups, 0);  // the workgroups' loads, a min-heap
+    for (size_t j = 0; j < ranked.size(); j += per_group) {
+        std::pop_heap(heap.begin(), heap.end(), std::greater<>());
+        uint32_t longest = 0;
+        for (size_t k = j; k < std::min(ranked.size(), j + per_group); ++k)
+            longest = std::max(longest, ranked[k]);
+        heap.back() += longest;
+        std::push_heap(heap.begin(), heap.end(), std::greater<>());
+    }
+    return *std::max_element(heap.begin(), heap.end());
 }
 
 uint64_t ideal(const std::vector<uint32_t>& lengths, uint32_t group) {
@@ -188,6 +231,34 @@ int main(int argc, char** argv) {
             (unsigned long long)group_steps(apart, kSubgroup),
             (unsigned long long)group_steps(ordered(apart, walk_class), kSubgroup),
             (unsigned long long)ideal(apart, kSubgroup));
+        // The critical path (critical_path) with the H100's and H200's 270,336 resident threads
+        // (132 SMs of 2,048): the teams steps' 33,792 teams, 8 a workgroup; the lane pass's
+        // 270,336 lanes in subgroups of 32. Its floor: the longest tape, or the words over the
+        // teams.
+        constexpr uint32_t kResident = 270336;
+        const auto paths = [&](const char* what, const std::vector<uint32_t>& lengths,
+                               const std::vector<uint32_t>& windows, uint32_t teams,
+                               uint32_t per_group) {
+            const uint64_t longest =
+                lengths.empty() ? 0 : *std::max_element(lengths.begin(), lengths.end());
+            const std::vector<uint32_t> sorted = ordered(lengths, parent_class);
+            std::printf(
+                "  %s, critical path (words, %u teams): in storage order %llu, in windows %llu, "
+                "in windows dealt in a snake %llu, sorted whole in a snake %llu, taken as free: "
+                "in windows %llu, sorted whole %llu; floor %llu\n",
+                what, teams, (unsigned long long)critical_path(lengths, teams, per_group, false),
+                (unsigned long long)critical_path(windows, teams, per_group, false),
+                (unsigned long long)critical_path(windows, teams, per_group, true),
+                (unsigned long long)critical_path(sorted, teams, per_group, true),
+                (unsigned long long)critical_path_taken(windows, teams, per_group),
+                (unsigned long long)critical_path_taken(sorted, teams, per_group),
+                (unsigned long long)std::max(longest, ideal(lengths, teams)));
+        };
+        paths("octants step", block_lengths, ordered(block_lengths, parent_class, kOrderWindow),
+              kResident / kTeams, kTeams);
+        paths("cells step", octants, ordered(octants, parent_class, kOrderWindow),
+              kResident / kTeams, kTeams);
+        paths("lane pass", apart, ordered(apart, walk_class), kResident, kSubgroup);
         return 0;
     } catch (const std::exception& e) {
         std::fprintf(stderr, "sdfprune_order_model: %s\n", e.what());

@@ -30,6 +30,9 @@ const uint kFlagNegated = 64u, kFlagPrimitive = 128u;
 
 const uint kTeam = 8u;  // boxes per job: lanes per team (gpu_prune.cpp: kPruneTeam)
 const uint kWalkClasses = 8u;  // refine_walk_class's (device_layout.hpp: kRefineWalkClasses)
+// The team steps' order classes (prune_team.glsl: parent_class; device_layout.hpp:
+// kPruneOrderClasses).
+const uint kOrderClasses = 32u;
 
 layout(std430, binding = 4) readonly buffer Blocks { Block blocks[]; };
 layout(std430, binding = 5) buffer Octants { Cell octants[]; };
@@ -57,6 +60,10 @@ layout(std430, binding = 7) buffer Counters {
     uint walk_cells[kWalkClasses];
     uint walk_placed[kWalkClasses];
     uint scratch_claimed;  // scratch words the jobs of a team step claimed (prune_team.glsl)
+    // The team steps' order passes (prune_team.glsl: order_parents), the octants step's then
+    // the cells step's: per class, the parents counted (mode 4) and the places taken (mode 5).
+    uint order_count[2u * kOrderClasses];
+    uint order_placed[2u * kOrderClasses];
 };
 // The kernel's scratch (its layout is the kernel's own). Coherent: lanes read what other lanes
 // of their workgroup wrote at earlier steps (a barrier between). In refinement, from

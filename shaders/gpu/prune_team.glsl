@@ -154,17 +154,20 @@ void store_slot(uint at, vec3 x, uint entry) {
 // Jobs in order (push flag 512, modes 1 and 2): a workgroup's 8 teams run as long as their
 // longest walk, and in block order they take the 8 octants of one block (mode 2), whose tapes
 // differ widely in length (molecule's finest level: from 1 word to 597, or none where the
-// octant is far-field), or 8 neighbouring blocks (mode 1). A pass before the step (mode 4)
-// sorts each window of kOrderWindow of the step's parents (octants; blocks with flag 1024), 32
-// neighbouring blocks' octants, by class of tape length, the longest first (class 0:
-// far-field, last), into the order list (pc.order_start in scratch, rank 0 the first); the
-// step's jobs then take the parents in that order. A window keeps the parents of a workgroup's
-// teams near each other (the nodes their tapes read alike) and takes most of what a sort of
-// the whole step would (tools/prune_order_model.cpp). Within a class the order is the
-// atomics': the cells do not depend on it. A parent's class: 0 far-field, else 1 + 2k (+ 1 in
-// the upper half of the octave) for a tape of 2^k to 2^(k+1) − 1 words.
-const uint kOrderClasses = 32u;
-const uint kOrderWindow = 256u;  // device_layout.hpp: kPruneOrderWindow
+// octant is far-field), or 8 neighbouring blocks (mode 1). Two passes before the step sort the
+// step's parents (octants; blocks with flag 1024) by class of tape length, the longest first
+// (class 0: far-field, last), into the order list (pc.order_start in scratch, rank 0 the
+// first): mode 4 counts each class (order_count), mode 5 places each parent after the longer
+// classes and the parents of its class placed before it (order_placed). Within a class the
+// order is the atomics': the cells do not depend on it. The step's jobs then take the parents
+// in that order, dealt out in a snake (ordered_job): so a workgroup's 8 teams take parents of
+// about one length, and no team takes the longest parent of every round. Sorted whole and dealt
+// so, molecule's finest cells step at 256³ has a critical path of 183 words on an H100's
+// 33,792 teams (floor: 151, its longest tape), against 578 sorted in windows of 256 parents
+// and dealt in rounds, and 422 in block order (tools/prune_order_model.cpp). A parent's class:
+// 0 far-field, else 1 + 2k (+ 1 in the upper half of the octave) for a tape of 2^k to
+// 2^(k+1) − 1 words.
+const uint kOrderWindow = 256u;  // parents a workgroup takes at a time (device_layout.hpp)
 uint parent_class(uint parent) {
     uint tape = (pc.flags & 1024u) != 0u ? blocks[parent].tape : octants[parent].tape;
     if (tape == kFarField) return 0u;
@@ -174,11 +177,14 @@ uint parent_class(uint parent) {
     return min(1u + 2u * k + upper, kOrderClasses - 1u);
 }
 shared uint s_order_count[kOrderClasses];
-// Mode 4: the parents [pc.order_first, pc.order_first + pc.jobs), a window a workgroup at a
-// time (kOrderWindow / 64 parents a lane): a counting sort in shared memory.
+// Modes 4 and 5: the parents [pc.order_first, pc.order_first + pc.jobs), a window a workgroup
+// at a time (kOrderWindow / 64 parents a lane), counted by class in shared memory.
 void order_parents() {
     const uint kPerLane = kOrderWindow / 64u;
     uint lane = gl_LocalInvocationID.x;
+    // The octants step's order (flag 1024) and the cells step's count apart: both may run in
+    // one submission.
+    uint which = (pc.flags & 1024u) != 0u ? 0u : kOrderClasses;
     for (uint w0 = pc.first_job + gl_WorkGroupID.x * kOrderWindow; w0 < pc.jobs;
          w0 += gl_NumWorkGroups.x * kOrderWindow) {
         if (lane < kOrderClasses) s_order_count[lane] = 0u;
@@ -192,29 +198,46 @@ void order_parents() {
         }
         memoryBarrierShared();
         barrier();
-        if (lane == 0u) {  // each class's first place in the window, the longest first
-            uint at = 0u;
-            for (uint c = kOrderClasses; c > 0u; --c) {
-                uint count = s_order_count[c - 1u];
-                s_order_count[c - 1u] = at;
-                at += count;
+        // Each class's first place: in windows (flag 2048, SDFPRUNE_VULKAN_TEAM_ORDER=1), past
+        // the window's longer classes in the window's places; else past every longer class's
+        // parents of the step and this class's placed so far.
+        uint first_place = 0u;
+        if (lane < kOrderClasses) {
+            uint count = s_order_count[lane];
+            if (pc.mode == 4u) {
+                if (count != 0u) atomicAdd(order_count[which + lane], count);
+            } else if ((pc.flags & 2048u) != 0u) {
+                first_place = w0;
+                for (uint c = lane + 1u; c < kOrderClasses; ++c) first_place += s_order_count[c];
+            } else {
+                for (uint c = lane + 1u; c < kOrderClasses; ++c)
+                    first_place += order_count[which + c];
+                if (count != 0u) first_place += atomicAdd(order_placed[which + lane], count);
             }
         }
         memoryBarrierShared();
+        barrier();  // every lane's counts read before they are replaced
+        if (lane < kOrderClasses) s_order_count[lane] = first_place;
+        memoryBarrierShared();
         barrier();
-        for (uint k = 0u; k < kPerLane; ++k) {
-            uint i = w0 + k * 64u + lane;
-            if (i < pc.jobs)
-                lane_scratch[pc.order_start + w0 + s_order_count[cls[k]] + rank[k]] =
-                    pc.order_first + i;
-        }
+        if (pc.mode == 5u)
+            for (uint k = 0u; k < kPerLane; ++k) {
+                uint i = w0 + k * 64u + lane;
+                if (i < pc.jobs)
+                    lane_scratch[pc.order_start + s_order_count[cls[k]] + rank[k]] =
+                        pc.order_first + i;
+            }
         barrier();  // the places read before the next window resets them
     }
 }
-// Team job j under flag 512: the job at the same place of its parent (in mode 2 a team takes
-// kTeam of an octant's cells; in mode 1 a block is one job) of the parent of rank j / per_team
-// in the order list.
-uint ordered_job(uint j) {
+// Team job j under flag 512: dealt in a snake, the teams take this dispatch's jobs [first_job,
+// jobs) in rounds of `teams` (a team's jobs are first_job + its index + k · teams), the odd
+// rounds from the last team to the first (a round short of teams: from its last job); then
+// the job at the same place of its parent (in mode 2 a team takes kTeam of an octant's cells;
+// in mode 1 a block is one job) of the parent of that rank / per_team in the order list.
+uint ordered_job(uint j, uint teams) {
+    uint r = (j - pc.first_job) / teams, r0 = pc.first_job + r * teams;
+    if ((r & 1u) != 0u) j = r0 + (min(teams, pc.jobs - r0) - 1u) - (j - r0);
     uint hf = pc.factor / 2u;
     uint per_team = pc.mode == 2u ? (hf * hf * hf + kTeam - 1u) / kTeam : 1u;
     uint parent = lane_scratch[pc.order_start + j / per_team - pc.order_first];
@@ -245,7 +268,7 @@ void main() {
     for (uint first = pc.first_job; first < pc.jobs; first += teams) {
         uint job = first + team;
         bool has_job = team < teams && job < pc.jobs;
-        if (has_job && (pc.flags & 512u) != 0u) job = ordered_job(job);
+        if (has_job && (pc.flags & 512u) != 0u) job = ordered_job(job, teams);
         // This lane's box and the team's parent tape; `valid`: the lane stores a result.
         bool valid = has_job, walk = has_job;
         uint parent = 0u, dest = 0u;

@@ -45,13 +45,17 @@ struct GpuGridParams {  // GridParams
 // copy_cells: the entries at the back of refinement's list, the cells it only copies.
 // walk_cells: the cells listed to decide again, per walk class; walk_placed: the order pass's
 // places taken per class (prune_refine_lanes.comp).
-inline constexpr uint32_t kRefineWalkClasses = 8;  // prune_common.glsl: kWalkClasses
+inline constexpr uint32_t kRefineWalkClasses = 8;   // prune_common.glsl: kWalkClasses
+inline constexpr uint32_t kPruneOrderClasses = 32;  // prune_common.glsl: kOrderClasses
 struct GpuCounters {
     uint32_t pool_used, pool_capacity, overflow, max_len, near_jobs, next_blocks, max_depth;
     uint32_t octant_used, octant_capacity, near_words, refine_cells;
     uint32_t near_lo[3], near_hi[3], long_jobs, more_jobs, copy_cells;
     uint32_t walk_cells[kRefineWalkClasses], walk_placed[kRefineWalkClasses];
     uint32_t scratch_claimed;
+    // The team steps' order passes (prune_team.glsl: order_parents), the octants step's then the
+    // cells step's: per class, the parents counted and the places taken.
+    uint32_t order_count[2 * kPruneOrderClasses], order_placed[2 * kPruneOrderClasses];
 };
 // prune.comp: kStateWords, the words of a lane's job state in its team's scratch; kTeam, the
 // lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step
@@ -62,7 +66,8 @@ struct GpuCounters {
 inline constexpr uint64_t kPruneStateWords = 16;
 inline constexpr uint64_t kPruneTeam = 8;
 inline constexpr uint64_t kPruneWindow = 64;
-// prune.comp, mode 4: the parents a workgroup sorts together (prune_team.glsl: kOrderWindow).
+// prune.comp, modes 4 and 5: the parents a workgroup counts together (prune_team.glsl:
+// kOrderWindow).
 inline constexpr uint64_t kPruneOrderWindow = 256;
 inline constexpr uint64_t kRefineSquad = 32;
 inline constexpr uint32_t kLaneTapeMax = 32;
@@ -123,10 +128,12 @@ static_assert(sizeof(GpuNode) == 16 && sizeof(GpuPrimitiveExtra) == 48);
 static_assert(sizeof(math::PrimitiveParams) == 96 && offsetof(math::PrimitiveParams, a) == 48);
 static_assert(sizeof(PrunedCell) == 16 && offsetof(PrunedCell, value) == 8);
 static_assert(sizeof(GpuBlock) == 16 && sizeof(GpuLevel) == 16 && sizeof(GpuGridParams) == 64);
-static_assert(sizeof(GpuCounters) == 148 && offsetof(GpuCounters, near_lo) == 44 &&
-              offsetof(GpuCounters, long_jobs) == 68 && offsetof(GpuCounters, copy_cells) == 76 &&
+static_assert(sizeof(GpuCounters) == 148 + 4 * 4 * kPruneOrderClasses &&
+              offsetof(GpuCounters, near_lo) == 44 && offsetof(GpuCounters, long_jobs) == 68 &&
+              offsetof(GpuCounters, copy_cells) == 76 &&
               offsetof(GpuCounters, walk_placed) == 112 &&
-              offsetof(GpuCounters, scratch_claimed) == 144);
+              offsetof(GpuCounters, scratch_claimed) == 144 &&
+              offsetof(GpuCounters, order_placed) == 148 + 4 * 2 * kPruneOrderClasses);
 static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) <= 128);
 static_assert(sizeof(TraceParams) == 192 && sizeof(DiscretizeParams) == 96);
 static_assert(sizeof(GpuPixel) == 32 && sizeof(SlicePush) == 32);

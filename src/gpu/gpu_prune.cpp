@@ -148,7 +148,8 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
     if (!ctx.can_run(KernelId::kPruneRefineLanes)) refine_lane_tape = 0;
     refine_second_pass = env_flag("SDFPRUNE_VULKAN_REFINE_SECOND_PASS", refine_second_pass);
     refine_order = env_flag("SDFPRUNE_VULKAN_REFINE_ORDER", refine_order);
-    team_order = env_flag("SDFPRUNE_VULKAN_TEAM_ORDER", team_order);
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_TEAM_ORDER"); env && *env)
+        team_order = std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), 2);
     claims = env_flag("SDFPRUNE_VULKAN_CLAIMS", claims);
     byte_flags =
         env_flag("SDFPRUNE_VULKAN_BYTE_FLAGS", byte_flags) && ctx.can_run(KernelId::kPruneBytes);

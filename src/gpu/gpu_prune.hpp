@@ -95,7 +95,7 @@ class Pruner {
     Step plan_refine_more(const Step& lanes) const;
     Step plan_order_pass(const Step& step, uint64_t items, uint64_t per_group) const;
     Step plan_refine_order(const Step& lanes, uint64_t listed) const;
-    Step plan_job_order(const Step& step, uint64_t parents) const;
+    Step plan_job_order(const Step& step, uint64_t parents, uint32_t mode) const;
     void plan_squads(const Level& lv, Step& s);
     PrunePush push_for(const Level& lv, uint32_t mode, uint32_t threads, uint32_t step_flags,
                        uint32_t budget) const;
@@ -179,9 +179,10 @@ class Pruner {
     // 8-bit storage; SDFPRUNE_VULKAN_BYTE_FLAGS=0: a word a lane (prune.comp), to compare.
     bool byte_flags = true;
     // The octants' and cells' team jobs take their parents (blocks, octants) longest tapes
-    // first, after an order pass; SDFPRUNE_VULKAN_TEAM_ORDER=0: block by block (not measured
-    // on a GPU yet: BENCHMARKS.md, stop 39).
-    bool team_order = true;
+    // first, after order passes that sort the whole step (2), dealt out in a snake;
+    // SDFPRUNE_VULKAN_TEAM_ORDER=1: sorted in windows of 256 parents (stop 39's order), 0:
+    // block by block (neither measured on a GPU yet: BENCHMARKS.md, stops 39 and 45).
+    uint32_t team_order = 2;
     vec3 origin, extent;
     float L = 1;
     uint32_t flags = 0;  // the push constants' (prune_common.glsl)

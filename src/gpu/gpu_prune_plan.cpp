@@ -49,7 +49,12 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
             teams.push.flags |= 512u;
             teams.push.order_start = uint32_t(at);
             teams.push.order_first = uint32_t(mode == 1 ? first_block : first_block * 8);
-            return {plan_job_order(teams, parents), teams};
+            if (team_order == 1) {  // in windows: the places alone
+                Step place = plan_job_order(teams, parents, 5);
+                place.push.flags |= 2048u;
+                return {place, teams};
+            }
+            return {plan_job_order(teams, parents, 4), plan_job_order(teams, parents, 5), teams};
         }
     }
     if (mode != 3 || refine_lane_tape == 0 || 4 * teams.team_jobs > ctx.max_buffer_bytes())
@@ -220,12 +225,13 @@ Step Pruner::plan_order_pass(const Step& step, uint64_t items, uint64_t per_grou
     return s;
 }
 
-// The order pass of a step in teams (prune_team.glsl: order_parents, mode 4; flag 1024 for the
-// octants step's blocks): its `parents`, a window of kPruneOrderWindow a workgroup at a time.
-Step Pruner::plan_job_order(const Step& step, uint64_t parents) const {
+// An order pass of a step in teams (prune_team.glsl: order_parents; `mode` 4 counts the
+// parents by class, 5 places them; flag 1024 for the octants step's blocks): its `parents`, a
+// window of kPruneOrderWindow a workgroup at a time.
+Step Pruner::plan_job_order(const Step& step, uint64_t parents, uint32_t mode) const {
     Step s = plan_order_pass(step, parents, kPruneOrderWindow);
     if (step.push.mode == 1) s.push.flags |= 1024u;
-    s.push.mode = 4;
+    s.push.mode = mode;
     return s;
 }
 
