@@ -621,52 +621,55 @@ TEST(Gpu, RefinementOrderChangesNoCell) {
 }
 
 // The octants' and cells' steps in teams take their parents (blocks, octants) longest tapes
-// first, after two order passes (two dispatches more in each such step), dealt out to the
-// teams in a snake, or sorted in windows of 256 (SDFPRUNE_VULKAN_TEAM_ORDER=1, one pass); the
-// cells are the same as block by block (SDFPRUNE_VULKAN_TEAM_ORDER=0),
-// and the CPU's. In teams (the order is theirs), by default (the top levels wide), and with
-// 56 teams (448 resident threads), which take the jobs in many rounds, odd, even and short.
+// first within windows of 256, after an order pass (a dispatch more in each such step), or
+// sorted whole (SDFPRUNE_VULKAN_TEAM_ORDER=2: two passes, the count by class and the places),
+// dealt out to the teams in a snake; the cells are the same as block by block
+// (SDFPRUNE_VULKAN_TEAM_ORDER=0), and the CPU's. In teams (the order is theirs), by default
+// (the top levels wide), and with 56 teams (448 resident threads), which take the jobs in many
+// rounds, odd, even and short.
 TEST(Gpu, TeamJobOrderChangesNoCell) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = builtin_scene("demo");
     PruneOptions o;
     o.resolution = 64;
-    for (const bool teams_only : {true, false}) {
-        SCOPED_TRACE(teams_only ? "teams" : "default");
-        if (teams_only) ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
-        const gpu::Grid ordered = gpu::prune(*dev, sc, o);
-        const gpu::Grid blocks = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_TEAM_ORDER", "0");
-        ::unsetenv("SDFPRUNE_VULKAN_WIDE");
-        const std::vector<gpu::GpuStepShape>&a = ordered.stats().steps, &b = blocks.stats().steps;
-        ASSERT_EQ(a.size(), b.size());
-        uint32_t ordered_steps = 0;
-        for (size_t i = 0; i < a.size(); ++i) {
-            EXPECT_EQ(a[i].jobs, b[i].jobs) << "step " << i;
-            const bool in_order = (a[i].mode == 1 || a[i].mode == 2) && !a[i].wide;
-            // (the order's two passes: the count by class and the places)
-            EXPECT_EQ(a[i].dispatches, b[i].dispatches + (in_order ? 2 : 0)) << "step " << i;
-            ordered_steps += in_order ? 1 : 0;
+    const auto in_order = [](const gpu::GpuStepShape& st) {
+        return (st.mode == 1 || st.mode == 2) && !st.wide;
+    };
+    for (const bool teams_only : {true, false})
+        for (const char* order : {"1", "2"}) {
+            SCOPED_TRACE(std::string(teams_only ? "teams" : "default") + ", order " + order);
+            if (teams_only) ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
+            const gpu::Grid ordered =
+                prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_TEAM_ORDER", order);
+            const gpu::Grid blocks = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_TEAM_ORDER", "0");
+            ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+            const std::vector<gpu::GpuStepShape>&a = ordered.stats().steps,
+                  &b = blocks.stats().steps;
+            ASSERT_EQ(a.size(), b.size());
+            uint32_t ordered_steps = 0;
+            const uint32_t passes = order[0] == '2' ? 2 : 1;
+            for (size_t i = 0; i < a.size(); ++i) {
+                EXPECT_EQ(a[i].jobs, b[i].jobs) << "step " << i;
+                EXPECT_EQ(a[i].dispatches, b[i].dispatches + (in_order(a[i]) ? passes : 0))
+                    << "step " << i;
+                ordered_steps += in_order(a[i]) ? 1 : 0;
+            }
+            EXPECT_GT(ordered_steps, 0u);
+            expect_same_device_cells(ordered, blocks, "ordered against block by block");
+            expect_matches_cpu(sc, prune(sc, o), ordered, *dev, "demo 64³, teams in order");
         }
-        EXPECT_GT(ordered_steps, 0u);
-        expect_same_device_cells(ordered, blocks, "ordered against block by block");
-        expect_matches_cpu(sc, prune(sc, o), ordered, *dev, "demo 64³, teams in order");
+    for (const char* order : {"1", "2"}) {
+        ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", order, 1);
+        const gpu::Grid few =
+            prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_RESIDENT_THREADS", "448");
+        ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
+        uint64_t rounds = 0;
+        for (const gpu::GpuStepShape& st : few.stats().steps)
+            if (in_order(st)) rounds = std::max(rounds, st.jobs / 56);
+        EXPECT_GE(rounds, 3u) << "the teams' jobs in a few rounds only";
+        expect_matches_cpu(sc, prune(sc, o), few, *dev,
+                           std::string("demo 64³, 56 teams, order ") + order);
     }
-    // Sorted in windows of 256 parents (one order pass, the places), as before stop 45.
-    const gpu::Grid windows = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_TEAM_ORDER", "1");
-    const gpu::Grid blocks = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_TEAM_ORDER", "0");
-    const std::vector<gpu::GpuStepShape>&w = windows.stats().steps, &b = blocks.stats().steps;
-    ASSERT_EQ(w.size(), b.size());
-    for (size_t i = 0; i < w.size(); ++i) {
-        const bool in_order = (w[i].mode == 1 || w[i].mode == 2) && !w[i].wide;
-        EXPECT_EQ(w[i].dispatches, b[i].dispatches + (in_order ? 1 : 0)) << "step " << i;
-    }
-    expect_same_device_cells(windows, blocks, "in windows against block by block");
-    const gpu::Grid few = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_RESIDENT_THREADS", "448");
-    uint64_t rounds = 0;
-    for (const gpu::GpuStepShape& st : few.stats().steps)
-        if ((st.mode == 1 || st.mode == 2) && !st.wide) rounds = std::max(rounds, st.jobs / 56);
-    EXPECT_GE(rounds, 3u) << "the teams' jobs in a few rounds only";
-    expect_matches_cpu(sc, prune(sc, o), few, *dev, "demo 64³, 56 teams in order");
 }
 
 // The steps' counters live in device memory, set at each submission's start and copied to a

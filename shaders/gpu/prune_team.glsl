@@ -154,19 +154,19 @@ void store_slot(uint at, vec3 x, uint entry) {
 // Jobs in order (push flag 512, modes 1 and 2): a workgroup's 8 teams run as long as their
 // longest walk, and in block order they take the 8 octants of one block (mode 2), whose tapes
 // differ widely in length (molecule's finest level: from 1 word to 597, or none where the
-// octant is far-field), or 8 neighbouring blocks (mode 1). Two passes before the step sort the
+// octant is far-field), or 8 neighbouring blocks (mode 1). A pass before the step sorts the
 // step's parents (octants; blocks with flag 1024) by class of tape length, the longest first
 // (class 0: far-field, last), into the order list (pc.order_start in scratch, rank 0 the
-// first): mode 4 counts each class (order_count), mode 5 places each parent after the longer
-// classes and the parents of its class placed before it (order_placed). Within a class the
-// order is the atomics': the cells do not depend on it. The step's jobs then take the parents
-// in that order, dealt out in a snake (ordered_job): so a workgroup's 8 teams take parents of
-// about one length, and no team takes the longest parent of every round. Sorted whole and dealt
-// so, molecule's finest cells step at 256³ has a critical path of 183 words on an H100's
-// 33,792 teams (floor: 151, its longest tape), against 578 sorted in windows of 256 parents
-// and dealt in rounds, and 422 in block order (tools/prune_order_model.cpp). A parent's class:
-// 0 far-field, else 1 + 2k (+ 1 in the upper half of the octave) for a tape of 2^k to
-// 2^(k+1) − 1 words.
+// first): by default (flag 2048) each window of kOrderWindow parents (32 neighbouring blocks'
+// octants: a workgroup's teams read nearby nodes) apart, in mode 5; else the whole step, mode 4
+// counting each class (order_count) and mode 5 placing each parent after the longer classes
+// and the parents of its class placed before it (order_placed). Within a class the order is
+// the atomics': the cells do not depend on it. The step's jobs then take the parents in that
+// order, dealt out in a snake (ordered_job), so that no team takes the longest parent of every
+// round: on an H100's 33,792 teams, molecule's finest cells step at 256³ has a critical path
+// of 376 words in windows (578 dealt in rounds), 183 sorted whole (floor: 151, its longest
+// tape; tools/prune_order_model.cpp). A parent's class: 0 far-field, else 1 + 2k (+ 1 in the
+// upper half of the octave) for a tape of 2^k to 2^(k+1) − 1 words.
 const uint kOrderWindow = 256u;  // parents a workgroup takes at a time (device_layout.hpp)
 uint parent_class(uint parent) {
     uint tape = (pc.flags & 1024u) != 0u ? blocks[parent].tape : octants[parent].tape;

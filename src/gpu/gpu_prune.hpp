@@ -179,10 +179,11 @@ class Pruner {
     // 8-bit storage; SDFPRUNE_VULKAN_BYTE_FLAGS=0: a word a lane (prune.comp), to compare.
     bool byte_flags = true;
     // The octants' and cells' team jobs take their parents (blocks, octants) longest tapes
-    // first, after order passes that sort the whole step (2), dealt out in a snake;
-    // SDFPRUNE_VULKAN_TEAM_ORDER=1: sorted in windows of 256 parents (stop 39's order), 0:
-    // block by block (neither measured on a GPU yet: BENCHMARKS.md, stops 39 and 45).
-    uint32_t team_order = 2;
+    // first, after an order pass that sorts each window of 256 parents (1), dealt out in a
+    // snake; SDFPRUNE_VULKAN_TEAM_ORDER=2: two passes that sort the whole step (a shorter
+    // critical path on a GPU, by tools/prune_order_model.cpp, but 9 % slower on lavapipe),
+    // 0: block by block (none measured on a GPU yet: BENCHMARKS.md, stops 39 and 45).
+    uint32_t team_order = 1;
     vec3 origin, extent;
     float L = 1;
     uint32_t flags = 0;  // the push constants' (prune_common.glsl)

@@ -49,11 +49,12 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
             teams.push.flags |= 512u;
             teams.push.order_start = uint32_t(at);
             teams.push.order_first = uint32_t(mode == 1 ? first_block : first_block * 8);
-            if (team_order == 1) {  // in windows: the places alone
+            if (team_order == 1) {  // each window of parents apart: the places alone
                 Step place = plan_job_order(teams, parents, 5);
                 place.push.flags |= 2048u;
                 return {place, teams};
             }
+            // The whole step: the classes counted, then the places.
             return {plan_job_order(teams, parents, 4), plan_job_order(teams, parents, 5), teams};
         }
     }
