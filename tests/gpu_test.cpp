@@ -600,8 +600,9 @@ TEST(Gpu, RefinementOnlyCopiesTheCellsItHasNothingToTry) {
 }
 
 // Refinement's lane pass takes its cells to decide again sorted by walk class, longest tapes
-// first, after an order pass (one dispatch more); the cells are the same as in the order they
-// were listed (SDFPRUNE_VULKAN_REFINE_ORDER=0), bit for bit on every device, and the CPU's.
+// first, after an order pass (one dispatch more), dealt out to its lanes in a snake; the cells
+// are the same as in the order they were listed (SDFPRUNE_VULKAN_REFINE_ORDER=0), bit for bit
+// on every device, and the CPU's; also with 448 lanes, which take the cells in many rounds.
 TEST(Gpu, RefinementOrderChangesNoCell) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = builtin_scene("demo");
@@ -618,6 +619,9 @@ TEST(Gpu, RefinementOrderChangesNoCell) {
     EXPECT_EQ(a.more_jobs, b.more_jobs);
     expect_same_device_cells(ordered, listed, "ordered against listed");
     expect_matches_cpu(sc, prune(sc, o), ordered, *dev, "demo 64³, ordered");
+    const gpu::Grid few = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_RESIDENT_THREADS", "448");
+    EXPECT_GE(few.stats().steps.back().jobs, 3u * 448) << "the lanes' cells in a few rounds only";
+    expect_same_device_cells(few, listed, "448 lanes against listed");
 }
 
 // The octants' and cells' steps in teams take their parents (blocks, octants) longest tapes

@@ -319,6 +319,15 @@ void list_near_cell(uint dest, uint tape, uint len, float value, bool may_decide
     }
 }
 
+// Jobs dealt out in a snake: takers (teams, lanes) 0 .. width − 1 take the jobs [first, end) in
+// rounds of `width` (taker t's are first + t + k · width), the odd rounds from the last taker to
+// the first (a round short of takers: from its last job). Job j of that deal is the one this
+// gives. With the jobs in order, longest first, no taker takes the longest of every round.
+uint snake_deal(uint j, uint first, uint width, uint end) {
+    uint r = (j - first) / width, r0 = first + r * width;
+    return (r & 1u) != 0u ? r0 + (min(width, end - r0) - 1u) - (j - r0) : j;
+}
+
 // Refinement's job k, below refine_cells + copy_cells: its list entry (the cell in kCellBits),
 // with kCopyOnly set where the cell is only copied (list_near_cell). The cells to decide again
 // come first, in the order pass's order where it ran (flag 256), longest walks first.

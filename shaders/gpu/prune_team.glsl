@@ -230,14 +230,12 @@ void order_parents() {
         barrier();  // the places read before the next window resets them
     }
 }
-// Team job j under flag 512: dealt in a snake, the teams take this dispatch's jobs [first_job,
-// jobs) in rounds of `teams` (a team's jobs are first_job + its index + k · teams), the odd
-// rounds from the last team to the first (a round short of teams: from its last job); then
-// the job at the same place of its parent (in mode 2 a team takes kTeam of an octant's cells;
-// in mode 1 a block is one job) of the parent of that rank / per_team in the order list.
+// Team job j under flag 512: dealt in a snake to the teams (snake_deal over this dispatch's
+// jobs [first_job, jobs)), then the job at the same place of its parent (in mode 2 a team takes
+// kTeam of an octant's cells; in mode 1 a block is one job) of the parent of that rank /
+// per_team in the order list.
 uint ordered_job(uint j, uint teams) {
-    uint r = (j - pc.first_job) / teams, r0 = pc.first_job + r * teams;
-    if ((r & 1u) != 0u) j = r0 + (min(teams, pc.jobs - r0) - 1u) - (j - r0);
+    j = snake_deal(j, pc.first_job, teams, pc.jobs);
     uint hf = pc.factor / 2u;
     uint per_team = pc.mode == 2u ? (hf * hf * hf + kTeam - 1u) / kTeam : 1u;
     uint parent = lane_scratch[pc.order_start + j / per_team - pc.order_first];
