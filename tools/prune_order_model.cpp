@@ -237,28 +237,29 @@ int main(int argc, char** argv) {
         // teams.
         constexpr uint32_t kResident = 270336;
         const auto paths = [&](const char* what, const std::vector<uint32_t>& lengths,
-                               const std::vector<uint32_t>& windows, uint32_t teams,
-                               uint32_t per_group) {
+                               const char* order_name, const std::vector<uint32_t>& order,
+                               uint32_t teams, uint32_t per_group) {
             const uint64_t longest =
                 lengths.empty() ? 0 : *std::max_element(lengths.begin(), lengths.end());
             const std::vector<uint32_t> sorted = ordered(lengths, parent_class);
             std::printf(
-                "  %s, critical path (words, %u teams): in storage order %llu, in windows %llu, "
-                "in windows dealt in a snake %llu, sorted whole in a snake %llu, taken as free: "
-                "in windows %llu, sorted whole %llu; floor %llu\n",
+                "  %s, critical path (words, %u teams): in storage order %llu, %s %llu, the same "
+                "dealt in a snake %llu, sorted whole in a snake %llu, taken as workgroups come "
+                "free: %s %llu, sorted whole %llu; floor %llu\n",
                 what, teams, (unsigned long long)critical_path(lengths, teams, per_group, false),
-                (unsigned long long)critical_path(windows, teams, per_group, false),
-                (unsigned long long)critical_path(windows, teams, per_group, true),
-                (unsigned long long)critical_path(sorted, teams, per_group, true),
-                (unsigned long long)critical_path_taken(windows, teams, per_group),
+                order_name, (unsigned long long)critical_path(order, teams, per_group, false),
+                (unsigned long long)critical_path(order, teams, per_group, true),
+                (unsigned long long)critical_path(sorted, teams, per_group, true), order_name,
+                (unsigned long long)critical_path_taken(order, teams, per_group),
                 (unsigned long long)critical_path_taken(sorted, teams, per_group),
                 (unsigned long long)std::max(longest, ideal(lengths, teams)));
         };
-        paths("octants step", block_lengths, ordered(block_lengths, parent_class, kOrderWindow),
+        paths("octants step", block_lengths, "in windows",
+              ordered(block_lengths, parent_class, kOrderWindow), kResident / kTeams, kTeams);
+        paths("cells step", octants, "in windows", ordered(octants, parent_class, kOrderWindow),
               kResident / kTeams, kTeams);
-        paths("cells step", octants, ordered(octants, parent_class, kOrderWindow),
-              kResident / kTeams, kTeams);
-        paths("lane pass", apart, ordered(apart, walk_class), kResident, kSubgroup);
+        paths("lane pass", apart, "by walk class", ordered(apart, walk_class), kResident,
+              kSubgroup);
         return 0;
     } catch (const std::exception& e) {
         std::fprintf(stderr, "sdfprune_order_model: %s\n", e.what());
