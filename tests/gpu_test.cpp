@@ -662,11 +662,14 @@ TEST(Gpu, TeamJobOrderChangesNoCell) {
             expect_same_device_cells(ordered, blocks, "ordered against block by block");
             expect_matches_cpu(sc, prune(sc, o), ordered, *dev, "demo 64³, teams in order");
         }
-    for (const char* order : {"1", "2"}) {
-        ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", order, 1);
+    // (order 3 here: in windows, dealt in rounds, SDFPRUNE_VULKAN_SNAKE=0)
+    for (const char* order : {"1", "2", "3"}) {
+        ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", order[0] == '3' ? "1" : order, 1);
+        if (order[0] == '3') ::setenv("SDFPRUNE_VULKAN_SNAKE", "0", 1);
         const gpu::Grid few =
             prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_RESIDENT_THREADS", "448");
         ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
+        ::unsetenv("SDFPRUNE_VULKAN_SNAKE");
         uint64_t rounds = 0;
         for (const gpu::GpuStepShape& st : few.stats().steps)
             if (in_order(st)) rounds = std::max(rounds, st.jobs / 56);

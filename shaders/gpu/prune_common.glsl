@@ -103,8 +103,9 @@ layout(push_constant) uniform Push {
                      // 64: prune_refine_lanes.comp in one pass (every sub-box);
                      // 128: prune_refine_lanes.comp's order pass; 256: refinement's walks
                      // taken from the order list (refine_job); 512: modes 1 and 2's team jobs
-                     // taken from the order list (prune_team.glsl: ordered_job); 1024: mode 4
-                     // orders blocks (else octants)
+                     // taken from the order list (prune_team.glsl: ordered_job); 1024: modes
+                     // 4 and 5 order blocks (else octants); 2048: mode 5 sorts each window
+                     // apart; 4096: ordered jobs dealt in rounds, not in a snake (snake_deal)
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's team jobs: [first_job, jobs)
     uint round;       // 0: start the jobs; later rounds resume them (prune.comp)
@@ -323,7 +324,9 @@ void list_near_cell(uint dest, uint tape, uint len, float value, bool may_decide
 // rounds of `width` (taker t's are first + t + k · width), the odd rounds from the last taker to
 // the first (a round short of takers: from its last job). Job j of that deal is the one this
 // gives. With the jobs in order, longest first, no taker takes the longest of every round.
+// Push flag 4096 (SDFPRUNE_VULKAN_SNAKE=0): every round from the first taker, to compare.
 uint snake_deal(uint j, uint first, uint width, uint end) {
+    if ((pc.flags & 4096u) != 0u) return j;
     uint r = (j - first) / width, r0 = first + r * width;
     return (r & 1u) != 0u ? r0 + (min(width, end - r0) - 1u) - (j - r0) : j;
 }

@@ -150,6 +150,7 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
     refine_order = env_flag("SDFPRUNE_VULKAN_REFINE_ORDER", refine_order);
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_TEAM_ORDER"); env && *env)
         team_order = std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), 2);
+    snake = env_flag("SDFPRUNE_VULKAN_SNAKE", snake);
     claims = env_flag("SDFPRUNE_VULKAN_CLAIMS", claims);
     byte_flags =
         env_flag("SDFPRUNE_VULKAN_BYTE_FLAGS", byte_flags) && ctx.can_run(KernelId::kPruneBytes);

@@ -184,6 +184,10 @@ class Pruner {
     // critical path on a GPU, by tools/prune_order_model.cpp, but 9 % slower on lavapipe),
     // 0: block by block (none measured on a GPU yet: BENCHMARKS.md, stops 39 and 45).
     uint32_t team_order = 1;
+    // The ordered jobs of the team steps and of refinement's lane pass are dealt out in a snake
+    // (prune_common.glsl: snake_deal); SDFPRUNE_VULKAN_SNAKE=0: in rounds (push flag 4096), as
+    // before stop 45, to compare.
+    bool snake = true;
     vec3 origin, extent;
     float L = 1;
     uint32_t flags = 0;  // the push constants' (prune_common.glsl)

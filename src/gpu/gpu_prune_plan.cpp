@@ -46,7 +46,7 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
         const uint64_t parents = mode == 1 ? blocks : blocks * 8, at = teams.scratch_words;
         if (parents > 0 && 4 * (at + parents) <= ctx.max_buffer_bytes()) {
             hold(scratch, 4 * (at + parents));
-            teams.push.flags |= 512u;
+            teams.push.flags |= 512u | (snake ? 0u : 4096u);
             teams.push.order_start = uint32_t(at);
             teams.push.order_first = uint32_t(mode == 1 ? first_block : first_block * 8);
             if (team_order == 1) {  // each window of parents apart: the places alone
@@ -76,7 +76,7 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
     std::vector<Step> steps;
     if (order) {
         lanes.push.order_start = uint32_t(order_at);
-        lanes.push.flags |= 256u;
+        lanes.push.flags |= 256u | (snake ? 0u : 4096u);
         steps.push_back(plan_refine_order(lanes, lv.listed_cells));
     }
     steps.push_back(lanes);
