@@ -117,8 +117,8 @@ layout(push_constant) uniform Push {
     uint wide_split;    // prune_wide.comp: workgroups per job (a share of its kTeam boxes each)
     uint more_start;    // prune_refine_lanes.comp: where its more list starts in scratch
     uint group_base;    // prune_wide.comp: the dispatch's first workgroup among the step's
-    uint order_start;   // where the order list starts in scratch (flags 128, 256, 512; mode 4)
-    uint order_first;   // modes 1, 2 (flag 512) and 4: the step's first parent (block, octant)
+    uint order_start;   // where the order list starts in scratch (flags 128, 256, 512; mode 5)
+    uint order_first;   // modes 1, 2 (flag 512), 4, 5: the step's first parent (block, octant)
     uint claim_words;   // modes 0-2 in teams: the words its jobs may claim (0: no claims)
 } pc;
 
