@@ -168,8 +168,8 @@ void main() {
     for (uint j = pc.first_job + gl_GlobalInvocationID.x; j < jobs; j += pc.threads) {
         // In order (flag 256), the jobs dealt in a snake: on an H100's lanes molecule's critical
         // path goes from 38 to 31 words (tools/prune_order_model.cpp).
-        uint job = !second && (pc.flags & 256u) != 0u ? snake_deal(j, pc.first_job, pc.threads, jobs)
-                                                      : j;
+        bool in_order = !second && (pc.flags & 256u) != 0u;
+        uint job = in_order ? snake_deal(j, pc.first_job, pc.threads, jobs) : j;
         uint cell;
         bool copy = false;
         uint far_flags = far_field ? 3u : 0u;

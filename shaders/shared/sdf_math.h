@@ -311,7 +311,7 @@ SDFPRUNE_FN vec2 similarity_range(vec3 centre, float scale, float f0, float rho,
     return vec2(scale * near_dist - rho, scale * (1.0f + 6e-6f) * far_dist + f0);
 }
 
-// ---- a node's range over a box (the pruning steps of both backends) -------------------------------
+// ---- a node's range over a box (the pruning steps of both backends) --------------------------
 // A primitive's range over a box (centre p, half sizes h) from its value v at the centre: v ±
 // spread (spread: its Lipschitz bound times the box's radius), narrowed by its similarity range
 // where `narrow` (similarity_range's arguments): with interval bounds, for a primitive that has
