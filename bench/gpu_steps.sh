@@ -13,7 +13,9 @@
 # (the host's wait for them, the GPU's time in it), the device's making and its
 # reserve (its size and its thread's time: the first call did not wait for it, so where it
 # allocated much, the reserve came too late) and each step's
-# GPU time (L level, o octants, c cells, x refinement, W wide; [lane pass's part]).
+# GPU time (L level, o octants, c cells, x refinement, W wide; [lane pass's part]; {the team
+# steps' longest walk of a workgroup, in tape entries, measured on the device: builds from
+# stop 46 on}).
 # SDFPRUNE_GPU_SCENES names the scenes (default: molecule, trees and five generated kinds);
 # molecule and trees are read from SDFPRUNE_SCENES (default ../shared/scenes), the others
 # generated. GRID sets `--grid` (default stats' 256; a small one checks the script on lavapipe).
@@ -67,7 +69,8 @@ if d is None:
 else:
     steps = " ".join("L%d%s%s:%.2f" % (s["level"], "bocx"[s["mode"]], "W" if s["wide"] else "",
                                        s["gpu_ms"]) +
-                     ("[%.2f]" % s["lanes_ms"] if s.get("lanes_ms") else "")
+                     ("[%.2f]" % s["lanes_ms"] if s.get("lanes_ms") else "") +
+                     ("{%d}" % s["walked_words"] if s.get("walked_words") else "")
                      for s in d["gpu_steps"])
     first = ""
     if "first_wall_ms" in d:  # the first call of the process: wall time, buffer time, peak

@@ -268,7 +268,9 @@ const std::vector<Mirror>& mirrors() {
                              SDFPRUNE_MEMBER(GpuCounters, walk_placed),
                              SDFPRUNE_MEMBER(GpuCounters, scratch_claimed),
                              SDFPRUNE_MEMBER(GpuCounters, order_count),
-                             SDFPRUNE_MEMBER(GpuCounters, order_placed)},
+                             SDFPRUNE_MEMBER(GpuCounters, order_placed),
+                             SDFPRUNE_MEMBER(GpuCounters, jobs_taken),
+                             SDFPRUNE_MEMBER(GpuCounters, walk_words)},
                             Scope::kKernel),
         mirror<TraceParams>(
             "TraceParams", {"trace"},
@@ -303,7 +305,7 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(PrunePush, lane_tape),    SDFPRUNE_MEMBER(PrunePush, wide_split),
              SDFPRUNE_MEMBER(PrunePush, more_start),   SDFPRUNE_MEMBER(PrunePush, group_base),
              SDFPRUNE_MEMBER(PrunePush, order_start),  SDFPRUNE_MEMBER(PrunePush, order_first),
-             SDFPRUNE_MEMBER(PrunePush, claim_words)},
+             SDFPRUNE_MEMBER(PrunePush, claim_words),  SDFPRUNE_MEMBER(PrunePush, walk_slot)},
             Scope::kPush),
         mirror<ExpandPush>(
             "Push", {"expand"},

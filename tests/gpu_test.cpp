@@ -390,6 +390,14 @@ TEST(Gpu, StepShapesFollowTheLevels) {
         // One lane per cell or octant; refinement has a squad per cell.
         EXPECT_LE(st.lanes, st.mode == 3 ? st.lanes_per_tape * st.jobs : st.jobs);
         EXPECT_GT(st.longest_walk_words, 0u);
+        // The team steps' walks measured (the most a workgroup walked), about within the bound
+        // (a lane may pass from one phase to the next within a step); refinement's not.
+        if (st.mode == 3) {
+            EXPECT_EQ(st.walked_words, 0u);
+        } else {
+            EXPECT_GT(st.walked_words, 0u);
+            EXPECT_LE(st.walked_words, 2 * st.longest_walk_words);
+        }
         EXPECT_EQ(st.lanes_ms, 0.0);
         EXPECT_EQ(st.long_jobs, 0u);
         if (st.mode == 0 || st.mode == 2) jobs += st.jobs;
@@ -410,8 +418,13 @@ TEST(Gpu, StepShapesFollowTheLevels) {
     const PrunedGrid before = prune(sc, unrefined);
     EXPECT_EQ(steps[4].jobs, before.stats().near_field_cells);
     EXPECT_LT(steps[4].jobs, steps[3].jobs);
-    // The root's cells walk the full tape: evaluation and compaction, and one more pass.
+    // The root's cells walk the full tape: evaluation and compaction, and one more pass. Its 64
+    // cells are 8 jobs, one workgroup's: it walks as long as a near cell's lane, the tape
+    // three times, with at most a window (64 entries) more in each of two steps where other
+    // lanes are in the next phase.
     EXPECT_GE(steps[0].longest_walk_words, 3ull * sc.size());
+    EXPECT_GE(steps[0].walked_words, 3ull * sc.size());
+    EXPECT_LE(steps[0].walked_words, 3ull * sc.size() + 2 * 64);
     // The steps' GPU times are parts of the pruning's GPU time; with timestamps (every device
     // prune_ms comes from), each step takes some.
     double sum = 0;
@@ -676,6 +689,61 @@ TEST(Gpu, TeamJobOrderChangesNoCell) {
         EXPECT_GE(rounds, 3u) << "the teams' jobs in a few rounds only";
         expect_matches_cpu(sc, prune(sc, o), few, *dev,
                            std::string("demo 64³, 56 teams, order ") + order);
+    }
+}
+
+// The team steps' workgroups take their jobs as they come free, from a counter zeroed before
+// each dispatch (prune_team.glsl: take_jobs), instead of having them dealt out in advance
+// (SDFPRUNE_VULKAN_TAKE=0): the same cells, statistics and dispatches, and the CPU's. In teams
+// throughout and by default (the top levels wide, which take no jobs so), in order and block
+// by block, and with 56 teams (448 resident threads), which take many jobs each, each
+// workgroup at most as many as dealt out (lavapipe's loop limit).
+TEST(Gpu, TakenJobsChangeNoCell) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Scene sc = builtin_scene("demo");
+    PruneOptions o;
+    o.resolution = 64;
+    const PrunedGrid cpu = prune(sc, o);
+    struct Case {
+        const char* what;
+        const char* wide;     // SDFPRUNE_VULKAN_WIDE, or none
+        const char* order;    // SDFPRUNE_VULKAN_TEAM_ORDER
+        const char* threads;  // SDFPRUNE_VULKAN_RESIDENT_THREADS, or none
+    } cases[] = {{"teams, in order", "0", "1", nullptr},
+                 {"default", nullptr, "1", nullptr},
+                 {"teams, block by block", "0", "0", nullptr},
+                 {"56 teams, in order", "0", "1", "448"}};
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.what);
+        if (c.wide) ::setenv("SDFPRUNE_VULKAN_WIDE", c.wide, 1);
+        if (c.threads) ::setenv("SDFPRUNE_VULKAN_RESIDENT_THREADS", c.threads, 1);
+        ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", c.order, 1);
+        const gpu::Grid taken = gpu::prune(*dev, sc, o);
+        const gpu::Grid dealt = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_TAKE", "0");
+        ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+        ::unsetenv("SDFPRUNE_VULKAN_RESIDENT_THREADS");
+        ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
+        const std::vector<gpu::GpuStepShape>&a = taken.stats().steps, &b = dealt.stats().steps;
+        ASSERT_EQ(a.size(), b.size());
+        uint32_t taking_steps = 0;
+        uint64_t most_jobs_a_team = 0;
+        for (size_t i = 0; i < a.size(); ++i) {
+            EXPECT_EQ(a[i].jobs, b[i].jobs) << "step " << i;
+            EXPECT_EQ(a[i].dispatches, b[i].dispatches) << "step " << i;
+            EXPECT_EQ(a[i].taken, a[i].mode <= 2 && !a[i].wide) << "step " << i;
+            EXPECT_FALSE(b[i].taken) << "step " << i;
+            if (a[i].taken && a[i].lanes >= 8) {
+                ++taking_steps;
+                most_jobs_a_team = std::max(most_jobs_a_team, a[i].jobs / (a[i].lanes / 8));
+            }
+        }
+        EXPECT_GT(taking_steps, 0u);
+        if (c.threads) {
+            EXPECT_GE(most_jobs_a_team, 3u) << "the teams' jobs in a few rounds only";
+        }
+        expect_same_stats(taken.stats(), dealt.stats(), "taken against dealt");
+        expect_same_device_cells(taken, dealt, "taken against dealt");
+        expect_matches_cpu(sc, cpu, taken, *dev, std::string("demo 64³, ") + c.what);
     }
 }
 

@@ -18,10 +18,12 @@
 // the group's lanes); and the critical path (critical_path): the longest a workgroup walks
 // when the jobs are dealt out to an H100's resident teams as the kernels deal them, in rounds
 // (stops 39-44) or in a snake (stop 45, the order sorted whole), or taken as workgroups come
-// free, against its floor (the longest tape, or the words over the teams). The tapes are the CPU's,
-// which the GPU's equal: the octants' pruned from their blocks' tapes (the coarse level's, kept),
-// the cells' as the grid without refinement has them. The orders are the level's storage order,
-// about the order the device lists the blocks and cells in (its atomics spread the cells further).
+// free (the team steps since stop 46: prune_team.glsl, take_jobs), against its floor (the
+// longest tape, or the words over the teams). The tapes are the CPU's, which the GPU's equal:
+// the octants' pruned from their blocks' tapes (the coarse level's, kept), the cells' as the
+// grid without refinement has them. The orders are the level's storage order, about the order
+// the device lists the blocks and cells in (its atomics spread the cells further).
+//
 // Usage: sdfprune_order_model SCENE [GRID]
 #include <algorithm>
 #include <bit>

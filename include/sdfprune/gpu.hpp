@@ -92,6 +92,9 @@ struct GpuStepShape {
     // takes one parent tape and its kPruneTeam boxes, the tape's nodes spread over its lanes
     // and combined height by height.
     bool wide = false;
+    // In teams: whether its workgroups took their jobs as they came free (from a counter,
+    // SDFPRUNE_VULKAN_TAKE), not dealt out to the teams in advance.
+    bool taken = false;
     // Lanes that take one parent tape together: the team (8), the workgroup (256) when wide, in
     // refinement a squad (32), or 1 where its lane pass took every cell (see long_jobs).
     uint32_t lanes_per_tape = 1;
@@ -102,6 +105,12 @@ struct GpuStepShape {
     // after another; heights of one operator each, a chain's, without a barrier between). A
     // bound, not a count.
     uint64_t longest_walk_words = 0;
+    // In teams (modes 0-2, not wide), the same measured on the device: the most tape entries
+    // a workgroup walked in one dispatch, summed over its steps of each step's busiest lane
+    // (evaluated, swept and written); the walks of a level's slices summed. Not a bound: a
+    // lane may finish one phase and start the next within a step. 0 where not measured (wide,
+    // refinement, the order passes, past a submission's first 8 steps).
+    uint64_t walked_words = 0;
     // The step's GPU time (timestamps around its dispatches; 0 where the device has none), in
     // its level's last run.
     double gpu_ms = 0;

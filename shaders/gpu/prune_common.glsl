@@ -33,6 +33,9 @@ const uint kWalkClasses = 8u;  // refine_walk_class's (device_layout.hpp: kRefin
 // The team steps' order classes (prune_team.glsl: parent_class; device_layout.hpp:
 // kPruneOrderClasses).
 const uint kOrderClasses = 32u;
+// The steps of a submission whose team walks are measured (walk_words; device_layout.hpp:
+// kPruneWalkSlots).
+const uint kWalkSlots = 8u;
 
 layout(std430, binding = 4) readonly buffer Blocks { Block blocks[]; };
 layout(std430, binding = 5) buffer Octants { Cell octants[]; };
@@ -64,6 +67,10 @@ layout(std430, binding = 7) buffer Counters {
     // the cells step's: per class, the parents counted (mode 4) and the places taken (mode 5).
     uint order_count[2u * kOrderClasses];
     uint order_placed[2u * kOrderClasses];
+    uint jobs_taken;  // a team step's jobs taken so far (prune_team.glsl: take_jobs, flag 8192)
+    // Per step of a submission (pc.walk_slot), the longest walk of a workgroup of the team
+    // kernel in one dispatch, in tape entries (prune_team.glsl: s_walked).
+    uint walk_words[kWalkSlots];
 };
 // The kernel's scratch (its layout is the kernel's own). Coherent: lanes read what other lanes
 // of their workgroup wrote at earlier steps (a barrier between). In refinement, from
@@ -105,7 +112,8 @@ layout(push_constant) uniform Push {
                      // taken from the order list (refine_job); 512: modes 1 and 2's team jobs
                      // taken from the order list (prune_team.glsl: ordered_job); 1024: modes
                      // 4 and 5 order blocks (else octants); 2048: mode 5 sorts each window
-                     // apart; 4096: ordered jobs dealt in rounds, not in a snake (snake_deal)
+                     // apart; 4096: ordered jobs dealt in rounds, not in a snake (snake_deal);
+                     // 8192: modes 0-2's team jobs taken as workgroups come free (take_jobs)
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's team jobs: [first_job, jobs)
     uint round;       // 0: start the jobs; later rounds resume them (prune.comp)
@@ -120,6 +128,7 @@ layout(push_constant) uniform Push {
     uint order_start;   // where the order list starts in scratch (flags 128, 256, 512; mode 5)
     uint order_first;   // modes 1, 2 (flag 512), 4, 5: the step's first parent (block, octant)
     uint claim_words;   // modes 0-2 in teams: the words its jobs may claim (0: no claims)
+    uint walk_slot;     // modes 0-2 in teams: the step's walk_words (kWalkSlots or more: none)
 } pc;
 
 // A job's claim of `words` of its step's claim area (pc.claim_words of them, past the teams'

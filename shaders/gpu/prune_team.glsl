@@ -64,6 +64,10 @@ const uint kStagedPrimitive = 1u << 30;  // device_layout.hpp: kStagedPrimitiveB
 uint staged_node(uint w) { return w & (kStagedPrimitive - 1u); }
 // Lanes still busy after a step, counted in one word while the other is reset.
 shared uint s_busy[2];
+// Per step (two, alternately), the most entries any lane of the workgroup took in it (in every
+// phase: evaluated, swept, written): the workgroup walks as long as that lane, and their sum
+// over the steps is how long it walked, in words (walk_words).
+shared uint s_walked[2];
 
 const uint kStateWords = 16u;
 const uint kPhaseEvaluate = 0u, kPhaseSweep = 1u, kPhaseWrite = 2u, kPhaseDone = 3u;
@@ -234,12 +238,39 @@ void order_parents() {
 // jobs [first_job, jobs)), then the job at the same place of its parent (in mode 2 a team takes
 // kTeam of an octant's cells; in mode 1 a block is one job) of the parent of that rank /
 // per_team in the order list.
+// Jobs taken as workgroups come free (flag 8192, take_jobs) take the order list as it is.
 uint ordered_job(uint j, uint teams) {
-    j = snake_deal(j, pc.first_job, teams, pc.jobs);
+    if ((pc.flags & 8192u) == 0u) j = snake_deal(j, pc.first_job, teams, pc.jobs);
     uint hf = pc.factor / 2u;
     uint per_team = pc.mode == 2u ? (hf * hf * hf + kTeam - 1u) / kTeam : 1u;
     uint parent = lane_scratch[pc.order_start + j / per_team - pc.order_first];
     return parent * per_team + j % per_team;
+}
+
+// Jobs taken as workgroups come free (push flag 8192): a workgroup that is done with its jobs
+// takes the next one for each of its teams (`group_teams`) from the step's counter
+// (jobs_taken, zeroed before each dispatch), instead of the jobs dealt out in advance (team t's
+// are first_job + t + k · teams). With the jobs in order, longest first, no workgroup waits
+// for one that drew long jobs round after round: on an H100's 33,792 teams molecule's finest
+// cells step has a critical path of 197 words in windows (376 dealt in a snake;
+// tools/prune_order_model.cpp). Gives the first of the workgroup's jobs, the same for all its
+// lanes, or pc.jobs where none is left or the workgroup has taken `cap` times (under a loop
+// limit: the jobs a team takes at most when dealt, so that every job is taken and none passes
+// the limit). Called by every lane of the workgroup.
+shared uint s_taken;
+uint take_jobs(uint group_teams, uint taken, uint cap) {
+    barrier();  // every lane has read the workgroup's last take
+    if (gl_LocalInvocationID.x == 0u) {
+        uint first = pc.jobs;
+        if (taken < cap) {
+            uint k = atomicAdd(jobs_taken, group_teams);
+            if (k < pc.jobs - pc.first_job) first = pc.first_job + k;
+        }
+        s_taken = first;
+    }
+    memoryBarrierShared();
+    barrier();
+    return s_taken;
 }
 
 void main() {
@@ -262,10 +293,20 @@ void main() {
     const Cell kNoCell = Cell(kFarField, 0u, 0.0, 0.0);  // store()'s, for refinement only
 
     // Every lane of a workgroup sees the same trip count (barriers inside); teams past
-    // pc.threads / kTeam hold no scratch and take no jobs.
-    for (uint first = pc.first_job; first < pc.jobs; first += teams) {
-        uint job = first + team;
-        bool has_job = team < teams && job < pc.jobs;
+    // pc.threads / kTeam hold no scratch and take no jobs. Jobs dealt out in advance (team t's
+    // are first + t, first = first_job + k · teams) or taken (take_jobs: the workgroup's teams
+    // take first + tl).
+    bool taking = (pc.flags & 8192u) != 0u;
+    uint group_teams = min(kTeams, teams - min(teams, gl_WorkGroupID.x * kTeams));
+    uint cap = pc.budget == 0xffffffffu ? 0xffffffffu
+                                        : (pc.jobs - pc.first_job + teams - 1u) / teams;
+    uint taken = 0u;
+    uint group_walked = 0u;  // the workgroup's walk in this dispatch (s_walked), every lane's
+    for (uint first = pc.first_job;; first += teams) {
+        if (taking) first = take_jobs(group_teams, taken++, cap);
+        if (first >= pc.jobs) break;
+        uint job = first + (taking ? tl : team);
+        bool has_job = (taking ? tl < group_teams : team < teams) && job < pc.jobs;
         if (has_job && (pc.flags & 512u) != 0u) job = ordered_job(job, teams);
         // This lane's box and the team's parent tape; `valid`: the lane stores a result.
         bool valid = has_job, walk = has_job;
@@ -315,15 +356,16 @@ void main() {
             may_decide = lane_scratch[st + 11u * kTeam] != 0u;
         }
 
-        barrier();  // the previous job's last reads of s_busy are done
+        barrier();  // the previous job's last reads of s_busy and s_walked are done
         if (gl_LocalInvocationID.x == 0u) {
-            s_busy[0] = 0u;
-            s_busy[1] = 0u;
+            s_busy[0] = s_busy[1] = 0u;
+            s_walked[0] = s_walked[1] = 0u;
         }
         for (uint s = 0u; s < pc.budget; ++s) {
             // The team's window, staged by its lanes together (every lane of a team evaluates
             // the same entries).
             uint w0 = i;
+            uint walked = 0u;  // the entries this lane takes in this step, in every phase
             if (phase == kPhaseEvaluate) {
                 uint we = min(i + kWindow, len);
                 for (uint k = i + lane; k < we; k += kTeam) {
@@ -378,6 +420,7 @@ void main() {
                     t_entry = i;
                     pdepth = max(pdepth, top);
                 }
+                walked = i - w0;
                 // The top back to scratch for the next step; after the last entry it is the
                 // root, which stage 2 reads from the registers.
                 if (i < len && top > 0u)
@@ -409,6 +452,7 @@ void main() {
                 // flags are final when the reverse sweep reaches it (parents come later), so
                 // the sweep also counts the kept entries.
                 uint stop = i > kWindow ? i - kWindow : 0u;
+                walked += i - stop;
                 for (; i > stop; --i) {
                     uint e = i - 1u;
                     uint fl = entry_flags(dbase, e, lane);
@@ -455,6 +499,7 @@ void main() {
             }
             if (phase == kPhaseWrite) {
                 uint we = min(i + kWindow, len);
+                walked += we - i;
                 for (; i < we; ++i) {
                     uint fl = entry_flags(dbase, i, lane);
                     if (((fl >> 2) & 3u) != 1u) continue;
@@ -473,11 +518,16 @@ void main() {
                 }
             }
             if (phase != kPhaseDone) atomicAdd(s_busy[s & 1u], 1u);
+            if (walked != 0u) atomicMax(s_walked[s & 1u], walked);
             memoryBarrierBuffer();
             memoryBarrierShared();
             barrier();
             bool busy = s_busy[s & 1u] != 0u;
-            if (gl_LocalInvocationID.x == 0u) s_busy[(s + 1u) & 1u] = 0u;
+            group_walked += s_walked[s & 1u];
+            if (gl_LocalInvocationID.x == 0u) {
+                s_busy[(s + 1u) & 1u] = 0u;
+                s_walked[(s + 1u) & 1u] = 0u;
+            }
             if (!busy) break;
         }
         if (walk) lane_scratch[st] = phase;
@@ -496,5 +546,8 @@ void main() {
             lane_scratch[st + 12u * kTeam] = lbase;
         }
     }
+    // The step's longest walk, measured: the most any workgroup walked in one dispatch.
+    if (gl_LocalInvocationID.x == 0u && pc.walk_slot < kWalkSlots && group_walked != 0u)
+        atomicMax(walk_words[pc.walk_slot], group_walked);
     counts_end();
 }

@@ -47,6 +47,7 @@ struct GpuGridParams {  // GridParams
 // places taken per class (prune_refine_lanes.comp).
 inline constexpr uint32_t kRefineWalkClasses = 8;   // prune_common.glsl: kWalkClasses
 inline constexpr uint32_t kPruneOrderClasses = 32;  // prune_common.glsl: kOrderClasses
+inline constexpr uint32_t kPruneWalkSlots = 8;      // prune_common.glsl: kWalkSlots
 struct GpuCounters {
     uint32_t pool_used, pool_capacity, overflow, max_len, near_jobs, next_blocks, max_depth;
     uint32_t octant_used, octant_capacity, near_words, refine_cells;
@@ -56,6 +57,12 @@ struct GpuCounters {
     // The team steps' order passes (prune_team.glsl: order_parents), the octants step's then the
     // cells step's: per class, the parents counted and the places taken.
     uint32_t order_count[2 * kPruneOrderClasses], order_placed[2 * kPruneOrderClasses];
+    // A team step's jobs taken so far by its workgroups (prune_team.glsl: take_jobs), zeroed
+    // before each of its dispatches.
+    uint32_t jobs_taken;
+    // Per step of a submission (PrunePush::walk_slot), the longest a workgroup of the team
+    // kernel walked in one dispatch, in tape entries (prune_team.glsl: s_walked).
+    uint32_t walk_words[kPruneWalkSlots];
 };
 // prune.comp: kStateWords, the words of a lane's job state in its team's scratch; kTeam, the
 // lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step
@@ -90,7 +97,7 @@ struct PrunePush {                                  // prune.comp and prune_wide
     vec4 origin, csize;
     uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
     uint32_t round, budget, refine, octant_start, list_start, lane_tape, wide_split;
-    uint32_t more_start, group_base, order_start, order_first, claim_words;
+    uint32_t more_start, group_base, order_start, order_first, claim_words, walk_slot;
 };
 struct ExpandPush {  // expand.comp: Push
     uint32_t factor, cells_count, next_factor, bound_only;
@@ -128,13 +135,14 @@ static_assert(sizeof(GpuNode) == 16 && sizeof(GpuPrimitiveExtra) == 48);
 static_assert(sizeof(math::PrimitiveParams) == 96 && offsetof(math::PrimitiveParams, a) == 48);
 static_assert(sizeof(PrunedCell) == 16 && offsetof(PrunedCell, value) == 8);
 static_assert(sizeof(GpuBlock) == 16 && sizeof(GpuLevel) == 16 && sizeof(GpuGridParams) == 64);
-static_assert(sizeof(GpuCounters) == 148 + 4 * 4 * kPruneOrderClasses &&
+static_assert(sizeof(GpuCounters) == 152 + 4 * 4 * kPruneOrderClasses + 4 * kPruneWalkSlots &&
               offsetof(GpuCounters, near_lo) == 44 && offsetof(GpuCounters, long_jobs) == 68 &&
               offsetof(GpuCounters, copy_cells) == 76 &&
               offsetof(GpuCounters, walk_placed) == 112 &&
               offsetof(GpuCounters, scratch_claimed) == 144 &&
-              offsetof(GpuCounters, order_placed) == 148 + 4 * 2 * kPruneOrderClasses);
-static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) <= 128);
+              offsetof(GpuCounters, order_placed) == 148 + 4 * 2 * kPruneOrderClasses &&
+              offsetof(GpuCounters, jobs_taken) == 148 + 4 * 4 * kPruneOrderClasses);
+static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) == 128);
 static_assert(sizeof(TraceParams) == 192 && sizeof(DiscretizeParams) == 96);
 static_assert(sizeof(GpuPixel) == 32 && sizeof(SlicePush) == 32);
 

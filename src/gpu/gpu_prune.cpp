@@ -151,6 +151,7 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_TEAM_ORDER"); env && *env)
         team_order = std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), 2);
     snake = env_flag("SDFPRUNE_VULKAN_SNAKE", snake);
+    take_jobs = env_flag("SDFPRUNE_VULKAN_TAKE", take_jobs);
     claims = env_flag("SDFPRUNE_VULKAN_CLAIMS", claims);
     byte_flags =
         env_flag("SDFPRUNE_VULKAN_BYTE_FLAGS", byte_flags) && ctx.can_run(KernelId::kPruneBytes);
@@ -395,7 +396,12 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
             *counter = start;
         else
             ctx.update(counters, &start, sizeof(start));
-        for (Step& s : steps) {
+        for (size_t k = 0; k < steps.size(); ++k) {
+            Step& s = steps[k];
+            // The team steps' walks measured, in a slot each (the first kPruneWalkSlots).
+            if ((s.kernel == KernelId::kPrune || s.kernel == KernelId::kPruneBytes) &&
+                s.push.mode <= 2 && k < kPruneWalkSlots)
+                s.push.walk_slot = uint32_t(k);
             // The longest tape and deepest stack read back: the cells' (the next parents'),
             // not the octants'; and after refinement, the refined cells' deepest stack (what
             // the tracing kernels' stacks are sized by; every near-field cell's refinement adds
@@ -479,6 +485,8 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
             s.shape.longest_walk_words = ceil_div(walked, s.teams) * s.job_walk;
         }
         s.shape.gpu_ms = ctx.stamp_ms(s.last_stamp) - ctx.stamp_ms(s.first_stamp);
+        if (s.push.walk_slot < kPruneWalkSlots)
+            s.shape.walked_words = counter->walk_words[s.push.walk_slot];
         if (s.kernel == KernelId::kPruneRefineLanes) {
             // Both passes' time; the first counts the lists.
             s.shape.lanes_ms = s.shape.gpu_ms;
@@ -502,12 +510,14 @@ void Pruner::add_shape(const Level& lv, const GpuStepShape& shape) {
         return;
     }
     same->wide = same->wide || shape.wide;
+    same->taken = same->taken || shape.taken;
     same->dispatches += shape.dispatches;
     same->workgroups += shape.workgroups;
     same->jobs += shape.jobs;
     same->lanes = std::max(same->lanes, shape.lanes);
     same->lanes_per_tape = std::max(same->lanes_per_tape, shape.lanes_per_tape);
     same->longest_walk_words += shape.longest_walk_words;  // one slice or pass after another
+    same->walked_words += shape.walked_words;
     same->gpu_ms += shape.gpu_ms;
     same->lanes_ms += shape.lanes_ms;
     same->long_jobs += shape.long_jobs;
@@ -530,6 +540,8 @@ void Pruner::record_step(Step& s) {
             push.round = round;
             // Binding 12: the wide kernels' node spans, the others' second view of scratch. A
             // wide step spread over several scratch buffers: a dispatch a buffer, side by side.
+            // Jobs taken as workgroups come free: from a counter of their own each dispatch.
+            if (s.shape.taken) ctx.fill(counters, 0, offsetof(GpuCounters, jobs_taken), 4);
             for (uint32_t b = 0; b < s.scratch_buffers; ++b) {
                 const Buffer* scratch_b = b == 0 ? &scratch : more_scratch[b - 1];
                 push.group_base = b * s.groups;

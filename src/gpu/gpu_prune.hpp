@@ -188,6 +188,11 @@ class Pruner {
     // (prune_common.glsl: snake_deal); SDFPRUNE_VULKAN_SNAKE=0: in rounds (push flag 4096), as
     // before stop 45, to compare.
     bool snake = true;
+    // The team steps' workgroups take their jobs as they come free, from a counter
+    // (prune_team.glsl: take_jobs; push flag 8192), the order list's longest first: a shorter
+    // critical path on an H100 than the snake's, by tools/prune_order_model.cpp (not measured
+    // on a GPU yet); SDFPRUNE_VULKAN_TAKE=0: dealt out in advance, as before stop 46.
+    bool take_jobs = true;
     vec3 origin, extent;
     float L = 1;
     uint32_t flags = 0;  // the push constants' (prune_common.glsl)

@@ -39,6 +39,12 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
                                     uint64_t blocks, uint64_t jobs, const Buffer& octants,
                                     const Buffer& cells, bool transient) {
     Step teams = plan_teams(lv, mode, first_block, blocks, jobs, octants, cells, transient);
+    // Workgroups take the jobs as they come free (prune_team.glsl: take_jobs), where a job is
+    // done in one round (under a loop limit a job resumed over rounds keeps its team).
+    if (take_jobs && mode <= 2 && !teams.wide && teams.rounds == 1) {
+        teams.push.flags |= 8192u;
+        teams.shape.taken = true;
+    }
     if ((mode == 1 || mode == 2) && !teams.wide && team_order) {
         // The jobs in order of their parents' tape lengths (the blocks', the octants'), listed
         // past the teams' scratch by a pass before them (prune_team.glsl: order_parents), where
@@ -211,6 +217,8 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
 // dispatches are the step's (one shape).
 Step Pruner::plan_order_pass(const Step& step, uint64_t items, uint64_t per_group) const {
     Step s = step;
+    s.push.flags &= ~8192u;
+    s.shape.taken = false;
     s.first_team_job = 0;
     s.team_jobs = items;
     s.groups = uint32_t(std::min<uint64_t>(ceil_div(items, per_group), ctx.max_workgroups()));
@@ -262,7 +270,8 @@ PrunePush Pruner::push_for(const Level& lv, uint32_t mode, uint32_t threads, uin
                      0,
                      0,
                      0,
-                     0};
+                     0,
+                     kPruneWalkSlots};
 }
 
 // Refinement's lane pass (prune_refine_lanes.comp): a lane per listed cell, as many lanes as

@@ -224,12 +224,14 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                                              .add("level", st.level)
                                              .add("mode", st.mode)
                                              .add("wide", st.wide)
+                                             .add("taken", st.taken)
                                              .add("dispatches", st.dispatches)
                                              .add("workgroups", st.workgroups)
                                              .add("jobs", st.jobs)
                                              .add("lanes", st.lanes)
                                              .add("lanes_per_tape", st.lanes_per_tape)
                                              .add("longest_walk_words", st.longest_walk_words)
+                                             .add("walked_words", st.walked_words)
                                              .add("gpu_ms", st.gpu_ms)
                                              .add("lanes_ms", st.lanes_ms)
                                              .add("long_jobs", st.long_jobs)
@@ -322,6 +324,9 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          st.dispatches, (unsigned long long)st.workgroups,
                          (unsigned long long)st.jobs, (unsigned long long)st.lanes,
                          st.lanes_per_tape, (unsigned long long)st.longest_walk_words, st.gpu_ms);
+                     if (st.walked_words > 0)
+                         std::printf(" (walked %llu)", (unsigned long long)st.walked_words);
+                     if (st.taken) std::printf(", jobs taken as workgroups come free");
                      if (st.scratch_bytes > 0)
                          std::printf(", scratch %.1f MB", double(st.scratch_bytes) / 1e6);
                      if (st.mode == 3)  // refinement: its lane pass
