@@ -31,8 +31,8 @@ struct Served {
 
     explicit Served(const Scene& scene, uint32_t grid = 32) {
         static std::atomic<int> counter{0};
-        dir = fs::temp_directory_path() /
-              ("sdfprune_view_test_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
+        dir = fs::temp_directory_path() / ("sdfprune_view_test_" + std::to_string(::getpid()) +
+                                           "_" + std::to_string(counter++));
         fs::create_directories(dir);
         file = dir / "scene.json";
         save_scene(scene, file.string());
@@ -114,7 +114,8 @@ TEST(ViewServer, FramesAreTheRendersOfThePrunedGrid) {
     ASSERT_EQ(r->status, 200) << r->body;
     EXPECT_EQ(r->get_header_value("Content-Type"), "image/png");
     EXPECT_EQ(r->get_header_value("X-Sdfprune-Version"), "1");
-    EXPECT_EQ(r->body, expected_frame(sc, 32, frame_options(sc, 64, 40, 10, 20, Shading::kNormals)));
+    EXPECT_EQ(r->body,
+              expected_frame(sc, 32, frame_options(sc, 64, 40, 10, 20, Shading::kNormals)));
     // Another camera, another picture; the naive method draws the same surface.
     const auto other = s.client->Get("/api/frame?w=64&h=40&yaw=100&pitch=20&shading=normals");
     ASSERT_TRUE(other);
@@ -145,9 +146,9 @@ TEST(ViewServer, PickEditUndoRedoSave) {
     std::string picked;
     for (int r = 0; r < 20 && picked.find("\"hit\":true") == std::string::npos; ++r) {
         const int x = 32 + (r % 2 ? r : -r), y = 20 + (r / 2 % 2 ? r / 2 : -r / 2);
-        const auto res = s.client->Post(
-            "/api/pick?" + q + "&x=" + std::to_string(x) + "&y=" + std::to_string(y), "",
-            "text/plain");
+        const auto res =
+            s.client->Post("/api/pick?" + q + "&x=" + std::to_string(x) + "&y=" + std::to_string(y),
+                           "", "text/plain");
         ASSERT_TRUE(res);
         ASSERT_EQ(res->status, 200) << res->body;
         picked = res->body;
@@ -159,8 +160,8 @@ TEST(ViewServer, PickEditUndoRedoSave) {
     const auto before = s.client->Get("/api/frame?" + q);
     ASSERT_TRUE(before);
 
-    const std::string body =
-        "{\"primitive\":" + std::to_string(prim) + ",\"set\":{\"translate.x\":0.3,\"color.g\":0.5}}";
+    const std::string body = "{\"primitive\":" + std::to_string(prim) +
+                             ",\"set\":{\"translate.x\":0.3,\"color.g\":0.5}}";
     const auto edited = s.client->Post("/api/edit", body, "application/json");
     ASSERT_TRUE(edited);
     ASSERT_EQ(edited->status, 200) << edited->body;
@@ -242,12 +243,13 @@ TEST(ViewServer, BadRequestsGetFourHundredAndTheServerGoesOn) {
         EXPECT_EQ(r->status, 400) << q << ": " << r->body;
         EXPECT_NE(r->body.find("\"error\""), std::string::npos) << q;
     }
-    for (const char* body : {"", "not json", "[]", "{\"primitive\":0}", "{\"primitive\":-1,\"set\":{}}",
-                             "{\"primitive\":0,\"set\":{\"radius\":\"big\"}}",
-                             "{\"primitive\":0,\"set\":{\"no_such_field\":1}}",
-                             "{\"primitive\":0,\"set\":{\"translate.q\":1}}",
-                             "{\"primitive\":0,\"set\":{\"color.r\":7}}",
-                             "{\"primitive\":99999,\"set\":{\"radius\":1}}"}) {
+    for (const char* body :
+         {"", "not json", "[]", "{\"primitive\":0}", "{\"primitive\":-1,\"set\":{}}",
+          "{\"primitive\":0,\"set\":{\"radius\":\"big\"}}",
+          "{\"primitive\":0,\"set\":{\"no_such_field\":1}}",
+          "{\"primitive\":0,\"set\":{\"translate.q\":1}}",
+          "{\"primitive\":0,\"set\":{\"color.r\":7}}",
+          "{\"primitive\":99999,\"set\":{\"radius\":1}}"}) {
         const auto r = s.client->Post("/api/edit", body, "application/json");
         ASSERT_TRUE(r) << body;
         EXPECT_EQ(r->status, 400) << body << ": " << r->body;

@@ -19,7 +19,7 @@ namespace sdfprune {
 class SceneBuilder;
 
 class Shape {
-public:
+  public:
     Shape() = default;
     Shape translated(vec3 t) const;
     Shape rotated(vec3 axis, float radians) const;
@@ -33,7 +33,7 @@ public:
     uint32_t id() const { return id_; }
     SceneBuilder* builder() const { return builder_; }
 
-private:
+  private:
     friend class SceneBuilder;
     Shape(SceneBuilder* b, uint32_t id) : builder_(b), id_(id) {}
     SceneBuilder* builder_ = nullptr;
@@ -41,14 +41,14 @@ private:
 };
 
 class SceneBuilder {
-public:
+  public:
     Shape sphere(float radius);
     // Full side lengths; optional xz corner radii (+x+z, +x-z, -x+z, -x-z) and edge rounding
     // of the top (+y) and bottom (-y) rims.
     Shape box(vec3 sides, vec4 bevel = {}, float round_top = 0, float round_bottom = 0);
     Shape cylinder(float radius, float height);  // along y, centred
-    Shape cone(float radius, float height);      // base (radius) at y = -height/2, apex at +height/2
-    Shape capsule(float radius, float height);   // inner segment of length `height` along y
+    Shape cone(float radius, float height);     // base (radius) at y = -height/2, apex at +height/2
+    Shape capsule(float radius, float height);  // inner segment of length `height` along y
     Shape torus(float major_radius, float minor_radius);  // in the xz plane
     // Cylinder along y, centred, both rims rounded by `rounding` <= min(radius, height / 2).
     Shape rounded_cylinder(float radius, float height, float rounding);
@@ -83,12 +83,12 @@ public:
     // operators with identity matrices), with the root last.
     std::vector<SceneNodeDesc> describe(Shape root) const;
 
-private:
+  private:
     friend class Shape;
     struct Node {
-        SceneNodeDesc desc;          // desc.matrix unused here
-        Affine placement;            // local -> parent frame
-        bool color_override = false; // desc.color applies to every primitive below
+        SceneNodeDesc desc;           // desc.matrix unused here
+        Affine placement;             // local -> parent frame
+        bool color_override = false;  // desc.color applies to every primitive below
     };
     Shape add(Node n);
     std::vector<Node> nodes_;

@@ -19,7 +19,7 @@ Scene builtin_scene(const std::string& name);
 
 // A deterministic stream of uniform floats in [0, 1) for generators (same on every platform).
 class Rng {
-public:
+  public:
     explicit Rng(uint64_t seed) : state_(seed * 0x9E3779B97F4A7C15ull + 0x632BE59BD9B4E019ull) {}
     uint64_t next_u64() {
         uint64_t z = (state_ += 0x9E3779B97F4A7C15ull);
@@ -30,7 +30,7 @@ public:
     float uniform() { return float(next_u64() >> 40) * (1.0f / 16777216.0f); }
     float uniform(float lo, float hi) { return lo + (hi - lo) * uniform(); }
 
-private:
+  private:
     uint64_t state_;
 };
 

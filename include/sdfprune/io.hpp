@@ -41,7 +41,8 @@ std::string read_file(const std::string& path);
 // For writers that need a path (libraries that open files themselves): calls write(tmp) with a
 // temporary path beside `path`, then renames it over `path`; on any exception removes the
 // temporary file and rethrows. Checks that `path` is writable first.
-void write_atomic_with(const std::string& path, const std::function<void(const std::string&)>& write);
+void write_atomic_with(const std::string& path,
+                       const std::function<void(const std::string&)>& write);
 // The lower-case extension of a path including the dot (".png"), or "" if none.
 std::string extension_of(const std::string& path);
 

@@ -64,13 +64,13 @@ float spectral_norm(const Affine& a);
 
 // The kind-specific parameters of a primitive, in the scene format's own terms.
 struct PrimitiveShape {
-    float radius = 0;  // sphere, cylinder, cone (base), capsule, rounded_cylinder, capped_cone,
-                       // hex_prism (circumradius), octahedron
-    float height = 0;        // cylinder, cone, rounded_cylinder (full, along y); capsule (segment)
-    vec3 sides;              // box: full lengths
-    vec4 bevel;              // box: xz corner radii, quadrants (+x+z, +x-z, -x+z, -x-z)
-    float round_x = 0;       // box: rounding of the top (+y) edges
-    float round_y = 0;       // box: rounding of the bottom (-y) edges
+    float radius = 0;   // sphere, cylinder, cone (base), capsule, rounded_cylinder, capped_cone,
+                        // hex_prism (circumradius), octahedron
+    float height = 0;   // cylinder, cone, rounded_cylinder (full, along y); capsule (segment)
+    vec3 sides;         // box: full lengths
+    vec4 bevel;         // box: xz corner radii, quadrants (+x+z, +x-z, -x+z, -x-z)
+    float round_x = 0;  // box: rounding of the top (+y) edges
+    float round_y = 0;  // box: rounding of the bottom (-y) edges
     float major_radius = 0;  // torus, in the xz plane
     float minor_radius = 0;  // torus
     float rounding = 0;      // rounded_cylinder: rim radius
@@ -85,10 +85,10 @@ struct SceneNodeDesc {
     uint32_t kind = math::kPrimSphere;  // math::kPrim* or math::kOp*
     uint32_t left = kNone;              // operators: indices into the description array
     uint32_t right = kNone;
-    float blend = 0;                    // operators: blend radius k >= 0
-    Affine matrix;                      // this node's step of the world->local map
-    PrimitiveShape shape;               // primitives
-    vec3 color{0.8f, 0.8f, 0.8f};       // primitives, in [0, 1]
+    float blend = 0;               // operators: blend radius k >= 0
+    Affine matrix;                 // this node's step of the world->local map
+    PrimitiveShape shape;          // primitives
+    vec3 color{0.8f, 0.8f, 0.8f};  // primitives, in [0, 1]
 };
 
 // A per-primitive bound used by pruning: if the primitive's world->local map is a similarity of
@@ -106,8 +106,8 @@ struct Scene {
     Aabb aabb;
 
     // Per node, post-order; root = size() - 1.
-    std::vector<uint32_t> kind;       // math::kPrim* or math::kOp*
-    std::vector<uint32_t> left;       // operators: child node; primitives: kNone
+    std::vector<uint32_t> kind;  // math::kPrim* or math::kOp*
+    std::vector<uint32_t> left;  // operators: child node; primitives: kNone
     std::vector<uint32_t> right;
     std::vector<uint32_t> parent;     // kNone at the root
     std::vector<uint8_t> negated;     // 1 if the node is the right operand of a difference
@@ -117,7 +117,7 @@ struct Scene {
     std::vector<Affine> local;        // the node's own matrix, as loaded (for saving)
 
     // Per primitive, in node order.
-    std::vector<uint32_t> primitive_node;  // node of each primitive
+    std::vector<uint32_t> primitive_node;       // node of each primitive
     std::vector<math::PrimitiveParams> params;  // baked world->local map + parameters
     std::vector<PrimitiveShape> shape;
     std::vector<vec3> color;

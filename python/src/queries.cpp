@@ -127,8 +127,7 @@ struct Points {
 Points points_of(const py::array& a) {
     Points p;
     p.array = a;
-    if (a.ndim() != 2 || a.shape(1) != 3)
-        throw py::value_error("points must be an (N, 3) array");
+    if (a.ndim() != 2 || a.shape(1) != 3) throw py::value_error("points must be an (N, 3) array");
     p.n = size_t(a.shape(0));
     const bool f32 = py::isinstance<py::array_t<float>>(a);  // equivalent dtype, native order
     const bool f64 = py::isinstance<py::array_t<double>>(a);
@@ -178,9 +177,10 @@ py::array_t<float> eval_sliced(const py::array& points, const py::object& out_ob
         if (!py::isinstance<py::array_t<float>>(out_obj))
             throw py::value_error("out must be a float32 array");
         out = py::reinterpret_borrow<py::array_t<float>>(out_obj);
-        if (out.ndim() != 1 || size_t(out.shape(0)) != p.n ||
-            !(out.flags() & py::array::c_style) || !out.writeable())
-            throw py::value_error("out must be a writable C-contiguous float32 array of shape (N,)");
+        if (out.ndim() != 1 || size_t(out.shape(0)) != p.n || !(out.flags() & py::array::c_style) ||
+            !out.writeable())
+            throw py::value_error(
+                "out must be a writable C-contiguous float32 array of shape (N,)");
     }
     if (threads < 0) throw py::value_error("threads must be >= 0");
     float* dst = out.mutable_data();
@@ -283,7 +283,8 @@ std::shared_ptr<SharedDevice> shared_device() {
 void bind_queries(py::module_& m) {
     py::class_<PrunedGrid, GridPtr>(m, "Grid", "A pruned grid (CPU); keeps its scene alive.")
         .def_property_readonly("resolution", &PrunedGrid::resolution)
-        .def("stats", [](const PrunedGrid& g) { return stats_dict(g.stats(), g.options(), g.scene()); });
+        .def("stats",
+             [](const PrunedGrid& g) { return stats_dict(g.stats(), g.options(), g.scene()); });
 
     py::class_<GpuGrid, GpuGridPtr>(m, "GpuGrid", "A grid pruned on the Vulkan device.")
         .def_property_readonly("resolution", [](const GpuGrid& g) { return g.grid->stats().grid; })
@@ -308,8 +309,7 @@ void bind_queries(py::module_& m) {
             o.progress = hook.fn();
             o.cancel = hook.cancel();
             auto g = run_hooked(hook, [&] {
-                return std::make_shared<PrunedGrid>(
-                    prune(std::shared_ptr<const Scene>(scene), o));
+                return std::make_shared<PrunedGrid>(prune(std::shared_ptr<const Scene>(scene), o));
             });
             hook.rethrow();
             return g;
@@ -344,10 +344,9 @@ void bind_queries(py::module_& m) {
         "eval_grid",
         [](const GridPtr& g, const py::array& points, const py::object& out, int threads,
            const py::object& progress) {
-            return eval_sliced(points, out, threads, progress,
-                               [&](std::span<const vec3> p, std::span<float> o) {
-                                   g->eval_points(p, o);
-                               });
+            return eval_sliced(
+                points, out, threads, progress,
+                [&](std::span<const vec3> p, std::span<float> o) { g->eval_points(p, o); });
         },
         py::arg("grid"), py::arg("points"), py::arg("out") = py::none(), py::arg("threads") = 0,
         py::arg("progress") = py::none());
@@ -425,13 +424,17 @@ void bind_queries(py::module_& m) {
     m.def(
         "mesh_grid",
         [mesh_with](const GridPtr& g, uint32_t res, int threads, const py::object& progress,
-                    const std::string& path) { return mesh_with(*g, res, threads, progress, path); },
+                    const std::string& path) {
+            return mesh_with(*g, res, threads, progress, path);
+        },
         py::arg("grid"), py::arg("res"), py::arg("threads") = 0, py::arg("progress") = py::none(),
         py::arg("path") = "");
     m.def(
         "mesh_scene",
         [mesh_with](const ScenePtr& s, uint32_t res, int threads, const py::object& progress,
-                    const std::string& path) { return mesh_with(*s, res, threads, progress, path); },
+                    const std::string& path) {
+            return mesh_with(*s, res, threads, progress, path);
+        },
         py::arg("scene"), py::arg("res"), py::arg("threads") = 0, py::arg("progress") = py::none(),
         py::arg("path") = "");
 
@@ -444,16 +447,15 @@ void bind_queries(py::module_& m) {
             Image img;
             if (py::isinstance<GpuGrid>(source)) {
                 const auto g = py::cast<GpuGridPtr>(source);
-                RenderOptions ro = render_options(*g->scene, width, height, yaw, pitch,
-                                                  distance, fov, target, shading, shadows, 0);
+                RenderOptions ro = render_options(*g->scene, width, height, yaw, pitch, distance,
+                                                  fov, target, shading, shadows, 0);
                 py::gil_scoped_release nogil;
                 const std::lock_guard<std::mutex> hold(g->device->lock);
                 img = gpu::render(g->device->device, *g->grid, ro);
             } else if (py::isinstance<PrunedGrid>(source)) {
                 const auto g = py::cast<GridPtr>(source);
-                RenderOptions ro = render_options(g->scene(), width, height, yaw, pitch,
-                                                  distance, fov, target, shading, shadows,
-                                                  threads);
+                RenderOptions ro = render_options(g->scene(), width, height, yaw, pitch, distance,
+                                                  fov, target, shading, shadows, threads);
                 ro.progress = hook.fn();
                 img = run_hooked(hook, [&] { return render(*g, ro); });
             } else {

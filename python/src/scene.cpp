@@ -126,8 +126,8 @@ ScenePtr build(const py::list& steps, const py::object& bounds) {
         if (tag == "prim") {
             const auto kind = py::cast<uint32_t>(t[1]);
             if (kind >= math::kPrimitiveKindCount) throw py::value_error("unknown primitive");
-            Shape s = b.primitive(kind, shape_from_fields(primitive_info(kind),
-                                                          py::cast<py::dict>(t[2])));
+            Shape s = b.primitive(
+                kind, shape_from_fields(primitive_info(kind), py::cast<py::dict>(t[2])));
             if (!t[3].is_none()) s = s.colored(to_vec3(t[3], "color"));
             made.push_back(s);
         } else if (tag == "op") {
@@ -207,10 +207,9 @@ void bind_scene(py::module_& m) {
                 py::list out;
                 for (uint32_t p = 0; p < s.primitive_count(); ++p) {
                     const uint32_t node = s.primitive_node[p];
-                    out.append(py::make_tuple(primitive_kind_name(s.kind[node]),
-                                              fields_of(s.kind[node], s.shape[p]),
-                                              py::make_tuple(s.color[p].x, s.color[p].y,
-                                                             s.color[p].z)));
+                    out.append(py::make_tuple(
+                        primitive_kind_name(s.kind[node]), fields_of(s.kind[node], s.shape[p]),
+                        py::make_tuple(s.color[p].x, s.color[p].y, s.color[p].z)));
                 }
                 return out;
             },
@@ -238,8 +237,8 @@ void bind_scene(py::module_& m) {
         for (const PrimitiveKindInfo& k : kPrimitiveTable) {
             py::list fields;
             for (uint32_t i = 0; i < k.field_count; ++i)
-                fields.append(py::make_tuple(k.fields[i].name, k.fields[i].count,
-                                             k.fields[i].required));
+                fields.append(
+                    py::make_tuple(k.fields[i].name, k.fields[i].count, k.fields[i].required));
             out.append(py::make_tuple(k.kind, k.name, k.summary, fields, k.bounded));
         }
         return out;

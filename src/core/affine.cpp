@@ -25,8 +25,8 @@ Affine Affine::scaling(vec3 s) {
 }
 
 Affine Affine::rotation(vec3 axis, float radians) {
-    double len = std::sqrt(double(axis.x) * axis.x + double(axis.y) * axis.y +
-                           double(axis.z) * axis.z);
+    double len =
+        std::sqrt(double(axis.x) * axis.x + double(axis.y) * axis.y + double(axis.z) * axis.z);
     if (!(len > 0)) throw SceneError("rotation axis must be non-zero");
     double x = axis.x / len, y = axis.y / len, z = axis.z / len;
     double c = std::cos(radians), s = std::sin(radians), t = 1 - c;
@@ -59,8 +59,8 @@ Affine Affine::compose(const Affine& b) const {
 }
 
 Affine Affine::inverse() const {
-    const double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8],
-                 h = m[9], i = m[10];
+    const double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8], h = m[9],
+                 i = m[10];
     const double det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g);
     double scale = 0;
     for (int k : {0, 1, 2, 4, 5, 6, 8, 9, 10}) scale = std::max(scale, std::fabs(double(m[k])));

@@ -206,12 +206,18 @@ Shape Shape::transformed(const Affine& placement) const {
     return builder_->add(n);
 }
 
-Shape Shape::translated(vec3 t) const { return transformed(Affine::translation(t)); }
+Shape Shape::translated(vec3 t) const {
+    return transformed(Affine::translation(t));
+}
 Shape Shape::rotated(vec3 axis, float radians) const {
     return transformed(Affine::rotation(axis, radians));
 }
-Shape Shape::scaled(float s) const { return transformed(Affine::scaling(vec3(s))); }
-Shape Shape::scaled(vec3 s) const { return transformed(Affine::scaling(s)); }
+Shape Shape::scaled(float s) const {
+    return transformed(Affine::scaling(vec3(s)));
+}
+Shape Shape::scaled(vec3 s) const {
+    return transformed(Affine::scaling(s));
+}
 
 Shape Shape::colored(vec3 rgb) const {
     SceneBuilder::Node n = builder_->nodes_.at(id_);
@@ -220,9 +226,15 @@ Shape Shape::colored(vec3 rgb) const {
     return builder_->add(n);
 }
 
-Shape operator|(Shape a, Shape b) { return a.builder()->combine(math::kOpUnion, a, b, 0); }
-Shape operator&(Shape a, Shape b) { return a.builder()->combine(math::kOpIntersection, a, b, 0); }
-Shape operator-(Shape a, Shape b) { return a.builder()->combine(math::kOpDifference, a, b, 0); }
+Shape operator|(Shape a, Shape b) {
+    return a.builder()->combine(math::kOpUnion, a, b, 0);
+}
+Shape operator&(Shape a, Shape b) {
+    return a.builder()->combine(math::kOpIntersection, a, b, 0);
+}
+Shape operator-(Shape a, Shape b) {
+    return a.builder()->combine(math::kOpDifference, a, b, 0);
+}
 Shape smooth_union(Shape a, Shape b, float k) {
     return a.builder()->combine(math::kOpUnion, a, b, k);
 }

@@ -11,8 +11,12 @@
 namespace sdfprune {
 namespace {
 
-bool finite(float x) { return std::isfinite(x); }
-bool finite(vec3 v) { return finite(v.x) && finite(v.y) && finite(v.z); }
+bool finite(float x) {
+    return std::isfinite(x);
+}
+bool finite(vec3 v) {
+    return finite(v.x) && finite(v.y) && finite(v.z);
+}
 
 std::string non_negative_error(const char* field, float v) {
     if (!finite(v)) return std::string(field) + " must be finite";
@@ -36,7 +40,9 @@ PrimitiveBound primitive_bound(uint32_t kind, const PrimitiveShape& shape,
     double c[3][3];
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) c[j][i] = world.m[4 * i + j];
-    auto dotc = [&](int i, int j) { return c[i][0] * c[j][0] + c[i][1] * c[j][1] + c[i][2] * c[j][2]; };
+    auto dotc = [&](int i, int j) {
+        return c[i][0] * c[j][0] + c[i][1] * c[j][1] + c[i][2] * c[j][2];
+    };
     const double s2 = (dotc(0, 0) + dotc(1, 1) + dotc(2, 2)) / 3;
     const double tol = 1e-5 * s2;
     const bool similarity = s2 > 0 && std::fabs(dotc(0, 0) - s2) < tol &&
@@ -73,8 +79,7 @@ std::string validate_node(const SceneNodeDesc& n) {
 Scene build_scene(std::span<const SceneNodeDesc> nodes, uint32_t root, const Aabb& aabb) {
     if (root >= nodes.size()) throw SceneError("scene has no root node");
     for (int i = 0; i < 3; ++i) {
-        if (!finite(aabb.min[i]) || !finite(aabb.max[i]))
-            throw SceneError("aabb must be finite");
+        if (!finite(aabb.min[i]) || !finite(aabb.max[i])) throw SceneError("aabb must be finite");
         if (!(aabb.max[i] > aabb.min[i]))
             throw SceneError("aabb_max must be greater than aabb_min on every axis");
     }
@@ -104,8 +109,7 @@ Scene build_scene(std::span<const SceneNodeDesc> nodes, uint32_t root, const Aab
             stack.push_back({d.left, false, false, v.world.compose(nodes[d.left].matrix)});
             continue;
         }
-        if (std::string e = validate_node(d); !e.empty())
-            throw SceneNodeError(v.desc, e);
+        if (std::string e = validate_node(d); !e.empty()) throw SceneNodeError(v.desc, e);
         if (sc.kind.size() >= kMaxNodes) throw SceneError("scene has too many nodes");
         const uint32_t out = uint32_t(sc.kind.size());
         sc.kind.push_back(d.kind);

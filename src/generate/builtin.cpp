@@ -9,7 +9,9 @@
 
 namespace sdfprune {
 
-std::vector<std::string> builtin_scene_names() { return {"demo", "sphere"}; }
+std::vector<std::string> builtin_scene_names() {
+    return {"demo", "sphere"};
+}
 
 namespace {
 
@@ -62,7 +64,8 @@ Scene builtin_scene(const std::string& name) {
         SceneBuilder b;
         return b.build(b.sphere(1.0f), {vec3(-2.0f), vec3(2.0f)});
     }
-    for (const std::string& k : generator_kinds()) if (name == k) return generate_scene(k, 1, 0);
+    for (const std::string& k : generator_kinds())
+        if (name == k) return generate_scene(k, 1, 0);
     std::string known;
     for (const std::string& n : builtin_scene_names()) known += (known.empty() ? "" : ", ") + n;
     throw SceneError("unknown built-in scene \"" + name + "\" (known: " + known + ")");

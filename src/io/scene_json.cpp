@@ -95,10 +95,14 @@ std::string primitive_names() {
 
 const char* type_name(char t) {
     switch (t) {
-        case 's': return "a string";
-        case 'n': return "a number";
-        case 'a': return "an array of numbers";
-        default: return "an object";
+        case 's':
+            return "a string";
+        case 'n':
+            return "a number";
+        case 'a':
+            return "an array of numbers";
+        default:
+            return "an object";
     }
 }
 
@@ -129,16 +133,24 @@ struct ParseFailure {
 };
 
 class SceneHandler {
-public:
+  public:
     std::vector<RawNode> nodes;
     Aabb aabb;
     std::string error;  // set when a handler call returned false
     size_t depth = 0;
 
-    bool StartObject() { return guard([&] { start_object(); }); }
-    bool EndObject(rapidjson::SizeType) { return guard([&] { end_object(); }); }
-    bool StartArray() { return guard([&] { start_array(); }); }
-    bool EndArray(rapidjson::SizeType) { return guard([&] { end_array(); }); }
+    bool StartObject() {
+        return guard([&] { start_object(); });
+    }
+    bool EndObject(rapidjson::SizeType) {
+        return guard([&] { end_object(); });
+    }
+    bool StartArray() {
+        return guard([&] { start_array(); });
+    }
+    bool EndArray(rapidjson::SizeType) {
+        return guard([&] { end_array(); });
+    }
     bool Key(const char* s, rapidjson::SizeType n, bool) {
         return guard([&] { key(std::string_view(s, n)); });
     }
@@ -146,19 +158,33 @@ public:
         return guard([&] { string(std::string_view(s, n)); });
     }
     // Never called with kParseNumbersAsStringsFlag, but the reader's interface needs them.
-    bool Int(int v) { return guard([&] { number(v); }); }
-    bool Uint(unsigned v) { return guard([&] { number(v); }); }
-    bool Int64(int64_t v) { return guard([&] { number(double(v)); }); }
-    bool Uint64(uint64_t v) { return guard([&] { number(double(v)); }); }
-    bool Double(double v) { return guard([&] { number(v); }); }
+    bool Int(int v) {
+        return guard([&] { number(v); });
+    }
+    bool Uint(unsigned v) {
+        return guard([&] { number(v); });
+    }
+    bool Int64(int64_t v) {
+        return guard([&] { number(double(v)); });
+    }
+    bool Uint64(uint64_t v) {
+        return guard([&] { number(double(v)); });
+    }
+    bool Double(double v) {
+        return guard([&] { number(v); });
+    }
     // Numbers arrive as text (kParseNumbersAsStringsFlag) and are converted by from_chars:
     // correctly rounded like RapidJSON's full-precision path, whose DiyFp code in Debian's
     // RapidJSON 1.1.0 calls clz(0) (undefined) on some inputs (fuzz/regressions/scene_loader).
     bool RawNumber(const char* s, rapidjson::SizeType n, bool) {
         return guard([&] { number(to_double(std::string_view(s, n))); });
     }
-    bool Null() { return guard([&] { scalar("null"); }); }
-    bool Bool(bool) { return guard([&] { scalar("a boolean"); }); }
+    bool Null() {
+        return guard([&] { scalar("null"); });
+    }
+    bool Bool(bool) {
+        return guard([&] { scalar("a boolean"); });
+    }
 
     // The JSON pointer of a node, with long runs elided so messages stay one short line.
     std::string node_path(uint32_t node) const {
@@ -178,7 +204,7 @@ public:
         return path.empty() ? "/" : path;
     }
 
-private:
+  private:
     std::vector<Frame> frames_;
 
     template <class F>
@@ -334,12 +360,16 @@ private:
             std::string quoted(1, '"');
             quoted.append(s.substr(0, 64)).push_back('"');
             if (fi->field == Field::NodeType) {
-                if (s == "primitive") n.node_type = 1;
-                else if (s == "binaryOperator") n.node_type = 2;
-                else fail("unknown node type " + quoted + " (primitive, binaryOperator)");
+                if (s == "primitive")
+                    n.node_type = 1;
+                else if (s == "binaryOperator")
+                    n.node_type = 2;
+                else
+                    fail("unknown node type " + quoted + " (primitive, binaryOperator)");
             } else if (fi->field == Field::BlendMode) {
                 n.op_kind = operator_kind_from_name(s);
-                if (n.op_kind == kNone) fail("unknown blend mode " + quoted + " (union, inter, sub)");
+                if (n.op_kind == kNone)
+                    fail("unknown blend mode " + quoted + " (union, inter, sub)");
             } else {
                 n.prim_kind = primitive_kind_from_name(s);
                 if (n.prim_kind == kNone)
@@ -391,9 +421,15 @@ private:
             case Field::Matrix:
                 n.desc.matrix.m[i] = x;
                 break;
-            case Field::Color: n.desc.color[int(i)] = x; break;
-            case Field::AabbMin: aabb.min[int(i)] = x; break;
-            default: aabb.max[int(i)] = x; break;
+            case Field::Color:
+                n.desc.color[int(i)] = x;
+                break;
+            case Field::AabbMin:
+                aabb.min[int(i)] = x;
+                break;
+            default:
+                aabb.max[int(i)] = x;
+                break;
         }
     }
 
@@ -413,8 +449,8 @@ private:
         require(n, Field::NodeType);
         require(n, Field::Matrix);
         if (n.node_type == 2) {
-            for (Field f : {Field::BlendMode, Field::BlendRadius, Field::LeftChild,
-                            Field::RightChild})
+            for (Field f :
+                 {Field::BlendMode, Field::BlendRadius, Field::LeftChild, Field::RightChild})
                 require(n, f);
             n.desc.kind = n.op_kind;
         } else {
@@ -444,7 +480,8 @@ Scene parse_scene(std::string_view json, const std::string& name) {
         throw SceneError(name + ": invalid JSON at byte " + std::to_string(r.Offset()) + ": " +
                          rapidjson::GetParseError_En(r.Code()));
     }
-    if (h.nodes.empty()) throw SceneError(name + ": the top-level value must be an object (a node)");
+    if (h.nodes.empty())
+        throw SceneError(name + ": the top-level value must be an object (a node)");
     std::vector<SceneNodeDesc> descs;
     descs.reserve(h.nodes.size());
     for (const RawNode& n : h.nodes) descs.push_back(n.desc);

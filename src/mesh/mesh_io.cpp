@@ -16,7 +16,9 @@ void put_u32(std::string& out, uint32_t v) {
                        char((v >> 24) & 0xff)};
     out.append(b, 4);
 }
-void put_f32(std::string& out, float v) { put_u32(out, std::bit_cast<uint32_t>(v)); }
+void put_f32(std::string& out, float v) {
+    put_u32(out, std::bit_cast<uint32_t>(v));
+}
 void put_vec3(std::string& out, vec3 v) {
     put_f32(out, v.x);
     put_f32(out, v.y);
@@ -122,9 +124,12 @@ MeshFormat mesh_format_of(const std::string& path) {
 
 std::string encode_mesh(const Mesh& mesh, MeshFormat format) {
     switch (format) {
-        case MeshFormat::kStl: return encode_stl(mesh);
-        case MeshFormat::kPly: return encode_ply(mesh);
-        case MeshFormat::kObj: return encode_obj(mesh);
+        case MeshFormat::kStl:
+            return encode_stl(mesh);
+        case MeshFormat::kPly:
+            return encode_ply(mesh);
+        case MeshFormat::kObj:
+            return encode_obj(mesh);
     }
     throw std::invalid_argument("unknown mesh format");
 }

@@ -70,10 +70,9 @@ void add_eval(CLI::App& app, std::vector<Command>& commands) {
              write_npy(args->output, shape, values);
 
              if (!o.quiet)
-                 std::printf(
-                              "wrote %s: %llu float32 SDF values (%s) at the points of %s\n",
-                              args->output.c_str(), (unsigned long long)m,
-                              p.grid ? "pruned" : "naive", args->points.c_str());
+                 std::printf("wrote %s: %llu float32 SDF values (%s) at the points of %s\n",
+                             args->output.c_str(), (unsigned long long)m,
+                             p.grid ? "pruned" : "naive", args->points.c_str());
              if (o.json) {
                  JsonLine j;
                  j.add("scene", args->scene)

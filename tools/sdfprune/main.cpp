@@ -16,7 +16,9 @@ std::vector<std::pair<int, AddCommand>>& registry() {
 }
 }  // namespace
 
-CommandRegistrar::CommandRegistrar(int order, AddCommand add) { registry().push_back({order, add}); }
+CommandRegistrar::CommandRegistrar(int order, AddCommand add) {
+    registry().push_back({order, add});
+}
 
 std::vector<AddCommand> registered_commands() {
     auto r = registry();
