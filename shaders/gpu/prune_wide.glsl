@@ -1,6 +1,7 @@
-// prune_wide.glsl — prune_wide.comp and prune_wide_subgroups.comp: one pruning step (modes 0–2 of prune.comp) where a whole workgroup takes
-// one team job: the kTeam boxes of one parent tape, its nodes spread over kWide lanes. For the
-// top levels, where a few parents have long tapes: a team would walk every node of them in turn.
+// prune_wide.glsl — prune_wide.comp and prune_wide_subgroups.comp: one pruning step (modes 0–2
+// of prune.comp) where a whole workgroup takes one team job: the kTeam boxes of one parent tape,
+// its nodes spread over kWide lanes. For the top levels, where a few parents have long tapes: a
+// team would walk every node of them in turn.
 // The same stages as src/prune/prune_cell.cpp (evaluate_cell, is_near_field, compact_tape), the
 // same float operations per node and box, in another order:
 //   1. the tape's entries sorted by their node's height in the scene (a counting sort: the
@@ -17,9 +18,9 @@
 // a lane is at least twice the tape's number of distinct heights. But a run of rounds of one
 // operator each (a chain's: for the reference molecule, a left-deep chain of 1,000 smooth
 // unions, every round above the primitives') needs no barrier between its rounds: lane b
-// walks box b of all of them alone (evaluate_run, sweep_run), then one barrier. gpu_prune.cpp picks this kernel by tape length and scene height, and sizes its
-// dispatches under lavapipe's loop limit (a job is never resumed: it ends in the dispatch
-// that starts it).
+// walks box b of all of them alone (evaluate_run, sweep_run), then one barrier. gpu_prune.cpp
+// picks this kernel by tape length and scene height, and sizes its dispatches under lavapipe's
+// loop limit (a job is never resumed: it ends in the dispatch that starts it).
 // PRUNE_WIDE_SUBGROUPS (prune_wide_subgroups.comp, for devices with subgroup arithmetic and
 // ballot in compute shaders): the prefix sums and the pool appends on subgroup operations,
 // else on shared memory and an atomic per box. PRUNE_WIDE_RUNS (prune_wide_runs.comp): long
@@ -488,7 +489,8 @@ void main() {
             uint w = tape_read(parent, 2u + e);
             uint n = tape_node(w);
             uint h = node_span[n].y;
-            scratch[obase + scratch[hbase + 3u * h + 2u] + atomicAdd(scratch[hbase + 3u * h + 1u], 1u)] = e;
+            uint place = scratch[hbase + 3u * h + 2u] + atomicAdd(scratch[hbase + 3u * h + 1u], 1u);
+            scratch[obase + place] = e;
             if (h == 0u) continue;
             // The left operand ends just before the right operand's subtree: the entries of
             // a subtree are those of its scene subtree's nodes, in the same order.
