@@ -164,6 +164,47 @@ struct DevicePruneStats : PruneStats {
     std::vector<GpuStepShape> steps;  // in the order they ran
 };
 
+// A step's figures and a device pruning's own (not its steps', not PruneStats'), by the names
+// `sdfprune stats --json` and the Python package's GpuGrid.stats give them: add(name, value)
+// for each, the value a bool, uint32_t, uint64_t or double.
+template <class Add>
+void for_each_figure(const GpuStepShape& st, Add&& add) {
+    add("level", st.level);
+    add("mode", st.mode);
+    add("wide", st.wide);
+    add("taken", st.taken);
+    add("dispatches", st.dispatches);
+    add("workgroups", st.workgroups);
+    add("jobs", st.jobs);
+    add("lanes", st.lanes);
+    add("lanes_per_tape", st.lanes_per_tape);
+    add("longest_walk_words", st.longest_walk_words);
+    add("walked_words", st.walked_words);
+    add("gpu_ms", st.gpu_ms);
+    add("lanes_ms", st.lanes_ms);
+    add("long_jobs", st.long_jobs);
+    add("more_jobs", st.more_jobs);
+    add("copy_jobs", st.copy_jobs);
+    add("scratch_bytes", st.scratch_bytes);
+}
+template <class Add>
+void for_each_figure(const DevicePruneStats& s, Add&& add) {
+    add("wall_ms", s.wall_ms);
+    add("submissions", s.submissions);
+    add("subgroups", s.subgroups);
+    add("subgroup_size", s.subgroup_size);
+    add("byte_flags", s.byte_flags);
+    add("pool_grows", s.pool_grows);
+    add("slices", s.slices);
+    add("host_buffers", s.host_buffers);
+    add("host_buffers_reused", s.host_buffers_reused);
+    add("host_allocations", s.host_allocations);
+    add("host_allocated_bytes", s.host_allocated_bytes);
+    add("host_buffer_ms", s.host_buffer_ms);
+    add("host_submissions", s.host_submissions);
+    add("host_submit_ms", s.host_submit_ms);
+}
+
 // A pruned grid living in device memory; refers to its Scene and Device, which must outlive it.
 class Grid {
   public:

@@ -16,7 +16,8 @@ class PrunedGrid:
     matter there, or a far-field constant. Immutable and thread-safe; it keeps its scene alive.
 
     Queries: grid(points), grid.discretize(), grid.mesh(), grid.render(), grid.save(path).
-    grid.stats holds the figures of `sdfprune stats --json`. A grid made with backend="vulkan"
+    grid.stats holds the figures of `sdfprune stats --json` (on a GPU grid, with the device's
+    and each step's, gpu_steps). A grid made with backend="vulkan"
     lives on the GPU and answers discretize, render and save(.npy/.vdb/.png) only.
     """
 

@@ -291,8 +291,15 @@ void bind_queries(py::module_& m) {
         .def_property_readonly("device", [](const GpuGrid& g) { return g.device->device.name(); })
         .def("stats", [](const GpuGrid& g) {
             py::dict d = stats_dict(g.grid->stats(), {}, *g.scene);
-            d["wall_ms"] = g.grid->stats().wall_ms;
             d["device"] = g.device->device.name();
+            gpu::for_each_figure(g.grid->stats(), [&](const char* k, auto v) { d[k] = v; });
+            py::list steps;
+            for (const gpu::GpuStepShape& st : g.grid->stats().steps) {
+                py::dict step;
+                gpu::for_each_figure(st, [&](const char* k, auto v) { step[k] = v; });
+                steps.append(step);
+            }
+            d["gpu_steps"] = steps;
             return d;
         });
 

@@ -66,6 +66,36 @@ def test_stats_match_cli(tmp_path, cli, example):
         assert got[key] == pytest.approx(want[key], rel=1e-6), key
 
 
+def test_gpu_stats_match_cli(tmp_path, cli, example):
+    # A Vulkan grid's stats hold the device's figures and each step's work shape under the
+    # keys of `stats --backend vulkan --json`, with the same values where the device's
+    # scheduling cannot change them (times and measured walks may).
+    try:
+        got = example.prune(64, backend="vulkan").stats
+    except sp.GpuError:
+        pytest.skip("this sdfprune has no Vulkan backend or device")
+    example.save_scene(tmp_path / "s.json")
+    out = cli("stats", tmp_path / "s.json", "--grid", 64, "--backend", "vulkan", "--json")
+    want = json.loads(out.splitlines()[-1])
+    cli_only = {"scene", "nodes", "bounds", "backend", "far_field", "hierarchy", "farfield_c",
+                "refine", "clearance", "peak_rss_bytes", "device_ms", "device_reserve_bytes",
+                "device_reserve_ms", "idle_cache_bytes"}
+    assert set(want) - cli_only <= set(got), set(want) - cli_only - set(got)
+    for key in ("device", "submissions", "subgroups", "subgroup_size", "byte_flags",
+                "pool_grows", "slices", "near_field_cells", "tape_max"):
+        assert got[key] == want[key], key
+    assert got["active_avg"] == pytest.approx(want["active_avg"], rel=1e-6)
+    assert got["wall_ms"] >= got["prune_ms"] >= 0
+    assert len(got["gpu_steps"]) == len(want["gpu_steps"]) > 0
+    for mine, theirs in zip(got["gpu_steps"], want["gpu_steps"]):
+        assert set(mine) == set(theirs)
+        for key in ("level", "mode", "wide", "taken", "dispatches", "workgroups", "jobs", "lanes",
+                    "lanes_per_tape", "longest_walk_words", "copy_jobs", "scratch_bytes"):
+            assert mine[key] == theirs[key], (mine["level"], mine["mode"], key)
+        team_step = not mine["wide"] and mine["mode"] < 3 and mine["jobs"] > 0
+        assert (mine["walked_words"] > 0) == team_step
+
+
 def test_discretize_matches_cli(tmp_path, cli, example):
     example.save_scene(tmp_path / "s.json")
     cli("discretize", tmp_path / "s.json", "-o", tmp_path / "d.npy", "--res", 48, "--quiet")

@@ -219,40 +219,15 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                      .add("peak_rss_bytes", peak_rss_bytes());
                  if (device) {
                      std::vector<JsonLine> steps;
-                     for (const gpu::GpuStepShape& st : device_grid->stats().steps)
-                         steps.push_back(JsonLine()
-                                             .add("level", st.level)
-                                             .add("mode", st.mode)
-                                             .add("wide", st.wide)
-                                             .add("taken", st.taken)
-                                             .add("dispatches", st.dispatches)
-                                             .add("workgroups", st.workgroups)
-                                             .add("jobs", st.jobs)
-                                             .add("lanes", st.lanes)
-                                             .add("lanes_per_tape", st.lanes_per_tape)
-                                             .add("longest_walk_words", st.longest_walk_words)
-                                             .add("walked_words", st.walked_words)
-                                             .add("gpu_ms", st.gpu_ms)
-                                             .add("lanes_ms", st.lanes_ms)
-                                             .add("long_jobs", st.long_jobs)
-                                             .add("more_jobs", st.more_jobs)
-                                             .add("copy_jobs", st.copy_jobs)
-                                             .add("scratch_bytes", st.scratch_bytes));
-                     j.add("device", device->name())
-                         .add("wall_ms", device_grid->stats().wall_ms)
-                         .add("submissions", device_grid->stats().submissions)
-                         .add("subgroups", device_grid->stats().subgroups)
-                         .add("subgroup_size", device_grid->stats().subgroup_size)
-                         .add("pool_grows", device_grid->stats().pool_grows)
-                         .add("slices", device_grid->stats().slices)
-                         .add("host_buffers", device_grid->stats().host_buffers)
-                         .add("host_buffers_reused", device_grid->stats().host_buffers_reused)
-                         .add("host_allocations", device_grid->stats().host_allocations)
-                         .add("host_allocated_bytes", device_grid->stats().host_allocated_bytes)
-                         .add("host_buffer_ms", device_grid->stats().host_buffer_ms)
-                         .add("host_submissions", device_grid->stats().host_submissions)
-                         .add("host_submit_ms", device_grid->stats().host_submit_ms)
-                         .add("device_ms", device_ms)
+                     for (const gpu::GpuStepShape& st : device_grid->stats().steps) {
+                         JsonLine step;
+                         gpu::for_each_figure(st, [&](const char* k, auto v) { step.add(k, v); });
+                         steps.push_back(step);
+                     }
+                     j.add("device", device->name());
+                     gpu::for_each_figure(device_grid->stats(),
+                                          [&](const char* k, auto v) { j.add(k, v); });
+                     j.add("device_ms", device_ms)
                          .add("device_reserve_bytes", device->memory_reserved())
                          .add("device_reserve_ms", device->reserve_ms());
                      // The device's idle buffers, kept for the next call (the grid held).
