@@ -16,8 +16,8 @@ struct GridParams {
     vec4 inv_cell;   // 1 / cell_size (computed on the host, as the CPU does); w: levels
 };
 
-layout(std430, binding = 4) readonly buffer Cells { Cell cells[]; };
-layout(std430, binding = 5) readonly buffer Levels { Level levels[]; };
+layout(std430, binding = 4) restrict readonly buffer Cells { Cell cells[]; };
+layout(std430, binding = 5) restrict readonly buffer Levels { Level levels[]; };
 
 struct Located {
     uint level;

@@ -37,7 +37,7 @@ const uint kOrderClasses = 32u;
 // kPruneWalkSlots).
 const uint kWalkSlots = 8u;
 
-layout(std430, binding = 4) readonly buffer Blocks { Block blocks[]; };
+layout(std430, binding = 4) restrict readonly buffer Blocks { Block blocks[]; };
 layout(std430, binding = 5) buffer Octants { Cell octants[]; };
 layout(std430, binding = 6) buffer Cells { Cell cells[]; };
 layout(std430, binding = 7) buffer Counters {

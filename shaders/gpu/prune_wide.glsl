@@ -42,7 +42,7 @@ layout(local_size_x = kWide) in;
 
 // Per node: the first node of its subtree (post-order: a subtree is the nodes from it to the
 // node) and its height (0 for primitives).
-layout(std430, binding = 12) readonly buffer NodeSpans { uvec2 node_span[]; };
+layout(std430, binding = 12) restrict readonly buffer NodeSpans { uvec2 node_span[]; };
 
 // A workgroup's scratch (wide_words): per parent-tape entry its left operand and its place in
 // the height order, per height its count, its entries placed so far and its first place, per

@@ -18,10 +18,13 @@ struct PrimitiveExtra {
 
 // Node n's parameters and extras are params[n] and extras[n] (gpu_prune.cpp uploads them in
 // node order; operators' records are unused), so that a kernel that knows an entry is a
-// primitive may read them beside its node.
-layout(std430, binding = 0) readonly buffer Nodes { Node nodes[]; };
-layout(std430, binding = 1) readonly buffer Params { PrimitiveParams params[]; };
-layout(std430, binding = 2) readonly buffer Extras { PrimitiveExtra extras[]; };
+// primitive may read them beside its node. `restrict` (as on the other read-only buffers a
+// kernel is never given writable beside: the grid's cells and levels, the blocks, the wide
+// kernels' node spans): the compiler may move their loads past the kernel's stores, to have
+// them in flight sooner.
+layout(std430, binding = 0) restrict readonly buffer Nodes { Node nodes[]; };
+layout(std430, binding = 1) restrict readonly buffer Params { PrimitiveParams params[]; };
+layout(std430, binding = 2) restrict readonly buffer Extras { PrimitiveExtra extras[]; };
 // Tapes as [length, primitives, words...]; the full tree's tape is at offset 0.
 layout(std430, binding = 3) buffer Pool { uint pool[]; };
 const uint kFullTreeTape = 0u;
