@@ -640,7 +640,7 @@ TEST(Gpu, RefinementOrderChangesNoCell) {
 // The octants' and cells' steps in teams take their parents (blocks, octants) longest tapes
 // first within windows of 256, after an order pass (a dispatch more in each such step), or
 // sorted whole (SDFPRUNE_VULKAN_TEAM_ORDER=2: two passes, the count by class and the places),
-// dealt out to the teams in a snake; the cells are the same as block by block
+// taken by the workgroups as they come free; the cells are the same as block by block
 // (SDFPRUNE_VULKAN_TEAM_ORDER=0), and the CPU's. In teams (the order is theirs), by default
 // (the top levels wide), and with 56 teams (448 resident threads), which take the jobs in many
 // rounds, odd, even and short.
@@ -675,13 +675,18 @@ TEST(Gpu, TeamJobOrderChangesNoCell) {
             expect_same_device_cells(ordered, blocks, "ordered against block by block");
             expect_matches_cpu(sc, prune(sc, o), ordered, *dev, "demo 64³, teams in order");
         }
-    // (order 3 here: in windows, dealt in rounds, SDFPRUNE_VULKAN_SNAKE=0)
+    // (order 3 here: in windows, dealt in advance in rounds, SDFPRUNE_VULKAN_TAKE=0 and
+    // SDFPRUNE_VULKAN_SNAKE=0; Gpu.TakenJobsChangeNoCell deals them in a snake)
     for (const char* order : {"1", "2", "3"}) {
         ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", order[0] == '3' ? "1" : order, 1);
-        if (order[0] == '3') ::setenv("SDFPRUNE_VULKAN_SNAKE", "0", 1);
+        if (order[0] == '3') {
+            ::setenv("SDFPRUNE_VULKAN_TAKE", "0", 1);
+            ::setenv("SDFPRUNE_VULKAN_SNAKE", "0", 1);
+        }
         const gpu::Grid few =
             prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_RESIDENT_THREADS", "448");
         ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
+        ::unsetenv("SDFPRUNE_VULKAN_TAKE");
         ::unsetenv("SDFPRUNE_VULKAN_SNAKE");
         uint64_t rounds = 0;
         for (const gpu::GpuStepShape& st : few.stats().steps)
