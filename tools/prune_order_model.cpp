@@ -19,7 +19,8 @@
 // when the jobs are dealt out to an H100's resident teams as the kernels deal them, in rounds
 // (stops 39-44) or in a snake (stop 45, the order sorted whole), or taken as workgroups come
 // free (the team steps since stop 46: prune_team.glsl, take_jobs), against its floor (the
-// longest tape, or the words over the teams). The tapes are the CPU's, which the GPU's equal:
+// longest tape, or the words over the teams); and the same where fewer workgroups fit the
+// device at once than the plan's (critical_path_in_waves). The tapes are the CPU's, which the GPU's equal:
 // the octants' pruned from their blocks' tapes (the coarse level's, kept), the cells' as the
 // grid without refinement has them. The orders are the level's storage order, about the order
 // the device lists the blocks and cells in (its atomics spread the cells further).
@@ -79,8 +80,8 @@ std::vector<uint32_t> ordered(std::vector<uint32_t> lengths, Class cls, size_t w
 // teams in round j / teams, and `per_group` teams a workgroup (or 1), which walk a round as long
 // as their longest tape. Returned: the largest sum over a workgroup's rounds. `snake`: odd
 // rounds deal the jobs out from the last team to the first.
-uint64_t critical_path(const std::vector<uint32_t>& ranked, uint32_t teams, uint32_t per_group,
-                       bool snake) {
+std::vector<uint64_t> dealt_loads(const std::vector<uint32_t>& ranked, uint32_t teams,
+                                  uint32_t per_group, bool snake) {
     const uint32_t groups = teams / per_group;
     std::vector<uint64_t> load(groups, 0);
     for (size_t r0 = 0, round = 0; r0 < ranked.size(); r0 += teams, ++round)
@@ -93,7 +94,28 @@ uint64_t critical_path(const std::vector<uint32_t>& ranked, uint32_t teams, uint
             }
             load[g] += longest;
         }
+    return load;
+}
+uint64_t critical_path(const std::vector<uint32_t>& ranked, uint32_t teams, uint32_t per_group,
+                       bool snake) {
+    const std::vector<uint64_t> load = dealt_loads(ranked, teams, per_group, snake);
     return *std::max_element(load.begin(), load.end());
+}
+
+// The same where only `resident` of the workgroups fit the device at once (their registers):
+// the others start in order as resident ones end, each with the jobs dealt to it.
+uint64_t critical_path_in_waves(const std::vector<uint32_t>& ranked, uint32_t teams,
+                                uint32_t per_group, bool snake, uint32_t resident) {
+    const std::vector<uint64_t> load = dealt_loads(ranked, teams, per_group, snake);
+    std::vector<uint64_t> free_at(std::min<size_t>(resident, load.size()), 0);  // a min-heap
+    uint64_t end = 0;
+    for (const uint64_t l : load) {
+        std::pop_heap(free_at.begin(), free_at.end(), std::greater<>());
+        free_at.back() += l;
+        end = std::max(end, free_at.back());
+        std::push_heap(free_at.begin(), free_at.end(), std::greater<>());
+    }
+    return end;
 }
 
 // The same with the jobs taken as workgroups come free (a counter each takes its next
@@ -260,6 +282,22 @@ int main(int argc, char** argv) {
               ordered(block_lengths, parent_class, kOrderWindow), kResident / kTeams, kTeams);
         paths("cells step", octants, "in windows", ordered(octants, parent_class, kOrderWindow),
               kResident / kTeams, kTeams);
+        // The team kernel's workgroups that fit an SM at once, by its registers: 56 a lane
+        // (BENCHMARKS.md, stop 36) leave room for 18 workgroups of 64 lanes of the 32 planned
+        // for, 2,376 of the 4,224 on an H100's 132 SMs. Dealt jobs then wait for the
+        // workgroups that start late; taken ones go to the workgroups that run.
+        constexpr uint32_t kResidentGroups = 132 * 18;
+        const auto waves = [&](const char* what, const std::vector<uint32_t>& order) {
+            std::printf(
+                "  %s, critical path with %u workgroups resident (words): in windows dealt in a "
+                "snake %llu, taken as workgroups come free %llu\n",
+                what, kResidentGroups,
+                (unsigned long long)critical_path_in_waves(order, kResident / kTeams, kTeams, true,
+                                                           kResidentGroups),
+                (unsigned long long)critical_path_taken(order, kResidentGroups * kTeams, kTeams));
+        };
+        waves("octants step", ordered(block_lengths, parent_class, kOrderWindow));
+        waves("cells step", ordered(octants, parent_class, kOrderWindow));
         paths("lane pass", apart, "by walk class", ordered(apart, walk_class), kResident,
               kSubgroup);
         return 0;
