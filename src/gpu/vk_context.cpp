@@ -3,12 +3,17 @@
 #include "vk_context.hpp"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <numeric>
 #include <thread>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include "../core/clock.hpp"
 #include "device_layout.hpp"
@@ -395,15 +400,24 @@ Context::Context() {
     // The reserve's allocation runs beside the kernels' building (the driver's compiles).
     start_reserve(props.deviceType);
 
-    for (const KernelCode& code : kKernels) {
-        Kernel k;
+    // The kernels, built side by side, the largest first: the driver's compiles take most of a
+    // device's making (lavapipe's eleven: about 300 ms one after another on this project's
+    // 2-core host; BENCHMARKS.md, stop 46). Vulkan lets threads create objects of one device
+    // at once.
+    kernels_.assign(std::size(kKernels), Kernel{});
+    std::array<size_t, std::size(kKernels)> largest_first;
+    std::iota(largest_first.begin(), largest_first.end(), size_t(0));
+    std::stable_sort(largest_first.begin(), largest_first.end(),
+                     [](size_t a, size_t b) { return kKernels[a].bytes > kKernels[b].bytes; });
+    const auto build = [&](size_t index) {
+        const KernelCode& code = kKernels[index];
+        Kernel& k = kernels_[index];
         k.bindings = code.bindings;
         // (Vulkan guarantees workgroups of 128 invocations only.)
         if ((code.subgroups && !subgroups_) || (code.byte_storage && !byte_storage_) ||
             code.local_size > props.limits.maxComputeWorkGroupInvocations ||
             code.local_size > props.limits.maxComputeWorkGroupSize[0]) {
-            kernels_.push_back(k);  // no pipeline: never dispatched (can_run)
-            continue;
+            return;  // no pipeline: never dispatched (can_run)
         }
         VkDescriptorSetLayoutBinding b[kMaxBindings];
         for (uint32_t i = 0; i < code.bindings; ++i)
@@ -440,9 +454,17 @@ Context::Context() {
             vkCreateComputePipelines(device_, VK_NULL_HANDLE, 1, &cpci, nullptr, &k.pipeline);
         vkDestroyShaderModule(device_, module, nullptr);
         check(r, "vkCreateComputePipelines");
-        if (kernel_stats) report_kernel_statistics(code.name, k.pipeline);
-        kernels_.push_back(k);
-    }
+    };
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, largest_first.size(), 1),
+        [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t i = r.begin(); i != r.end(); ++i) build(largest_first[i]);
+        },
+        tbb::simple_partitioner());
+    if (kernel_stats)
+        for (size_t i = 0; i < kernels_.size(); ++i)
+            if (kernels_[i].pipeline)
+                report_kernel_statistics(kKernels[i].name, kernels_[i].pipeline);
 }
 
 Context::~Context() {
