@@ -1762,6 +1762,17 @@ TEST(GpuCli, StatsOnVulkanEqualCpu) {
     }
     EXPECT_NE(gpu.out.find("\"backend\":\"vulkan\""), std::string::npos);
     EXPECT_NE(gpu.out.find("\"device\":"), std::string::npos);
+    // With --repeat, the first call's figures beside the last's (bench/gpu_steps.sh reads
+    // them), and each step's shape.
+    const CliResult repeated =
+        run_cli("stats builtin:demo --grid 32 --json --backend vulkan --repeat 2");
+    ASSERT_EQ(repeated.status, 0) << repeated.err;
+    for (const char* key :
+         {"wall_ms", "submissions", "host_buffer_ms", "host_allocated_bytes", "host_submit_ms",
+          "first_prune_ms", "first_wall_ms", "first_prune_peak_bytes", "first_submissions",
+          "first_host_buffer_ms", "first_host_allocated_bytes", "first_host_submit_ms", "gpu_steps",
+          "walked_words", "taken"})
+        EXPECT_NE(field(repeated.out, key), "missing") << key;
 }
 
 TEST(GpuCli, RenderAndDiscretizeOnVulkan) {

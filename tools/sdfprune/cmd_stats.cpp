@@ -232,18 +232,15 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          .add("device_reserve_ms", device->reserve_ms());
                      // The device's idle buffers, kept for the next call (the grid held).
                      j.add("idle_cache_bytes", device->memory_cached());
-                     if (args->repeat > 1)
+                     if (args->repeat > 1) {
+                         // The first call's figures, each as first_NAME.
                          j.add("repeat", args->repeat)
                              .add("first_prune_ms", first.prune_ms)
-                             .add("first_wall_ms", first.wall_ms)
-                             .add("first_prune_peak_bytes", first.prune_peak_bytes)
-                             .add("first_host_buffers", first.host_buffers)
-                             .add("first_host_buffers_reused", first.host_buffers_reused)
-                             .add("first_host_allocations", first.host_allocations)
-                             .add("first_host_allocated_bytes", first.host_allocated_bytes)
-                             .add("first_host_buffer_ms", first.host_buffer_ms)
-                             .add("first_host_submissions", first.host_submissions)
-                             .add("first_host_submit_ms", first.host_submit_ms);
+                             .add("first_prune_peak_bytes", first.prune_peak_bytes);
+                         gpu::for_each_figure(first, [&](const char* k, auto v) {
+                             j.add(std::string("first_") + k, v);
+                         });
+                     }
                      j.add("gpu_steps", steps);
                  }
                  if (args->edit_bench > 0)
