@@ -20,10 +20,10 @@
 // (stops 39-44) or in a snake (stop 45, the order sorted whole), or taken as workgroups come
 // free (the team steps since stop 46: prune_team.glsl, take_jobs), against its floor (the
 // longest tape, or the words over the teams); and the same where fewer workgroups fit the
-// device at once than the plan's (critical_path_in_waves). The tapes are the CPU's, which the GPU's equal:
-// the octants' pruned from their blocks' tapes (the coarse level's, kept), the cells' as the
-// grid without refinement has them. The orders are the level's storage order, about the order
-// the device lists the blocks and cells in (its atomics spread the cells further).
+// device at once than the plan's (critical_path_in_waves). The tapes are the CPU's, which the
+// GPU's equal: the octants' pruned from their blocks' tapes (the coarse level's, kept), the
+// cells' as the grid without refinement has them. The orders are the level's storage order, about
+// the order the device lists the blocks and cells in (its atomics spread the cells further).
 //
 // Usage: sdfprune_order_model SCENE [GRID]
 #include <algorithm>
@@ -102,37 +102,36 @@ uint64_t critical_path(const std::vector<uint32_t>& ranked, uint32_t teams, uint
     return *std::max_element(load.begin(), load.end());
 }
 
-// The same where only `resident` of the workgroups fit the device at once (their registers):
-// the others start in order as resident ones end, each with the jobs dealt to it.
-uint64_t critical_path_in_waves(const std::vector<uint32_t>& ranked, uint32_t teams,
-                                uint32_t per_group, bool snake, uint32_t resident) {
-    const std::vector<uint64_t> load = dealt_loads(ranked, teams, per_group, snake);
-    std::vector<uint64_t> free_at(std::min<size_t>(resident, load.size()), 0);  // a min-heap
-    uint64_t end = 0;
-    for (const uint64_t l : load) {
+// When the last of `works` ends, each started in order on whichever of `slots` comes free
+// first (the device's workgroup slots).
+uint64_t end_on_slots(const std::vector<uint64_t>& works, size_t slots) {
+    std::vector<uint64_t> free_at(std::max<size_t>(std::min(slots, works.size()), 1), 0);
+    uint64_t end = 0;  // free_at: a min-heap
+    for (const uint64_t w : works) {
         std::pop_heap(free_at.begin(), free_at.end(), std::greater<>());
-        free_at.back() += l;
+        free_at.back() += w;
         end = std::max(end, free_at.back());
         std::push_heap(free_at.begin(), free_at.end(), std::greater<>());
     }
     return end;
 }
 
+// The same where only `resident` of the workgroups fit the device at once (their registers):
+// the others start in order as resident ones end, each with the jobs dealt to it.
+uint64_t critical_path_in_waves(const std::vector<uint32_t>& ranked, uint32_t teams,
+                                uint32_t per_group, bool snake, uint32_t resident) {
+    return end_on_slots(dealt_loads(ranked, teams, per_group, snake), resident);
+}
+
 // The same with the jobs taken as workgroups come free (a counter each takes its next
 // per_group jobs from), the workgroups all resident.
 uint64_t critical_path_taken(const std::vector<uint32_t>& ranked, uint32_t teams,
                              uint32_t per_group) {
-    const uint32_t groups = teams / per_group;
-    std::vector<uint64_t> heap(groups, 0);  // the workgroups' loads, a min-heap
-    for (size_t j = 0; j < ranked.size(); j += per_group) {
-        std::pop_heap(heap.begin(), heap.end(), std::greater<>());
-        uint32_t longest = 0;
-        for (size_t k = j; k < std::min(ranked.size(), j + per_group); ++k)
-            longest = std::max(longest, ranked[k]);
-        heap.back() += longest;
-        std::push_heap(heap.begin(), heap.end(), std::greater<>());
-    }
-    return *std::max_element(heap.begin(), heap.end());
+    std::vector<uint64_t> takes;  // each take's walk: its per_group jobs' longest
+    for (size_t j = 0; j < ranked.size(); j += per_group)
+        takes.push_back(*std::max_element(ranked.begin() + j,
+                                          ranked.begin() + std::min(ranked.size(), j + per_group)));
+    return end_on_slots(takes, teams / per_group);
 }
 
 uint64_t ideal(const std::vector<uint32_t>& lengths, uint32_t group) {
