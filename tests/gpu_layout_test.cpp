@@ -270,7 +270,8 @@ const std::vector<Mirror>& mirrors() {
                              SDFPRUNE_MEMBER(GpuCounters, order_count),
                              SDFPRUNE_MEMBER(GpuCounters, order_placed),
                              SDFPRUNE_MEMBER(GpuCounters, jobs_taken),
-                             SDFPRUNE_MEMBER(GpuCounters, walk_words)},
+                             SDFPRUNE_MEMBER(GpuCounters, walk_words),
+                             SDFPRUNE_MEMBER(GpuCounters, walk_sum)},
                             Scope::kKernel),
         mirror<TraceParams>(
             "TraceParams", {"trace"},

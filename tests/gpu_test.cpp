@@ -390,14 +390,13 @@ TEST(Gpu, StepShapesFollowTheLevels) {
         // One lane per cell or octant; refinement has a squad per cell.
         EXPECT_LE(st.lanes, st.mode == 3 ? st.lanes_per_tape * st.jobs : st.jobs);
         EXPECT_GT(st.longest_walk_words, 0u);
-        // The team steps' walks measured (the most a workgroup walked), about within the bound
-        // (a lane may pass from one phase to the next within a step); refinement's not.
-        if (st.mode == 3) {
-            EXPECT_EQ(st.walked_words, 0u);
-        } else {
-            EXPECT_GT(st.walked_words, 0u);
-            EXPECT_LE(st.walked_words, 2 * st.longest_walk_words);
-        }
+        // The walks measured (the most a workgroup walked), about within the bound (a team's
+        // lane may pass from one phase to the next within a step), refinement's squads' too;
+        // all workgroups' at least the longest, at most as if each walked as long.
+        EXPECT_GT(st.walked_words, 0u);
+        EXPECT_LE(st.walked_words, 2 * st.longest_walk_words);
+        EXPECT_GE(st.walked_sum_words, st.walked_words);
+        EXPECT_LE(st.walked_sum_words, st.workgroups * st.walked_words);
         EXPECT_EQ(st.lanes_ms, 0.0);
         EXPECT_EQ(st.long_jobs, 0u);
         if (st.mode == 0 || st.mode == 2) jobs += st.jobs;
@@ -453,6 +452,9 @@ TEST(Gpu, StepShapesFollowTheLevels) {
         } else if (passes.stats().prune_ms > 0) {
             EXPECT_GT(with[i].lanes_ms, 0.0);
         }
+        // The lanes' walks measured with the squads'.
+        EXPECT_GT(with[i].walked_words, 0u);
+        EXPECT_GE(with[i].walked_sum_words, with[i].walked_words);
     }
     uint64_t long_cells = 0;
     for (const PrunedCell& c : before.level_cells(2))
@@ -1771,7 +1773,7 @@ TEST(GpuCli, StatsOnVulkanEqualCpu) {
          {"wall_ms", "submissions", "host_buffer_ms", "host_allocated_bytes", "host_submit_ms",
           "first_prune_ms", "first_wall_ms", "first_prune_peak_bytes", "first_submissions",
           "first_host_buffer_ms", "first_host_allocated_bytes", "first_host_submit_ms", "gpu_steps",
-          "walked_words", "taken"})
+          "walked_words", "walked_sum_words", "taken"})
         EXPECT_NE(field(repeated.out, key), "missing") << key;
 }
 

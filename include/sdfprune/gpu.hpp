@@ -105,12 +105,18 @@ struct GpuStepShape {
     // after another; heights of one operator each, a chain's, without a barrier between). A
     // bound, not a count.
     uint64_t longest_walk_words = 0;
-    // In teams (modes 0-2, not wide), the same measured on the device: the most tape entries
-    // a workgroup walked in one dispatch, summed over its steps of each step's busiest lane
-    // (evaluated, swept and written); the walks of a level's slices summed. Not a bound: a
-    // lane may finish one phase and start the next within a step. 0 where not measured (wide,
-    // refinement, the order passes, past a submission's first 8 steps).
+    // The same measured on the device: the most tape entries a workgroup walked in one
+    // dispatch. In teams (modes 0-2, not wide), a workgroup's lockstep walk: over its steps,
+    // each step's busiest lane (evaluated, swept and written), summed. Not a bound: a lane may
+    // finish one phase and start the next within a step. In refinement, its lanes' and squads'
+    // longest lane over its jobs (each cell's tape staged, each walk over it, the sweep and the
+    // write), its passes summed. The walks of a level's slices summed. 0 where not measured
+    // (wide, the order passes, past a submission's first 8 measured steps).
     uint64_t walked_words = 0;
+    // The walks of all the step's workgroups (64 lanes each), summed likewise: the step's work
+    // in workgroup-words, against which walked_words is its critical path. A 32-bit count on
+    // the device: it wraps past 2^32 words a submission.
+    uint64_t walked_sum_words = 0;
     // The step's GPU time (timestamps around its dispatches; 0 where the device has none), in
     // its level's last run.
     double gpu_ms = 0;
@@ -180,6 +186,7 @@ void for_each_figure(const GpuStepShape& st, Add&& add) {
     add("lanes_per_tape", st.lanes_per_tape);
     add("longest_walk_words", st.longest_walk_words);
     add("walked_words", st.walked_words);
+    add("walked_sum_words", st.walked_sum_words);
     add("gpu_ms", st.gpu_ms);
     add("lanes_ms", st.lanes_ms);
     add("long_jobs", st.long_jobs);

@@ -33,7 +33,7 @@ const uint kWalkClasses = 8u;  // refine_walk_class's (device_layout.hpp: kRefin
 // The team steps' order classes (prune_team.glsl: parent_class; device_layout.hpp:
 // kPruneOrderClasses).
 const uint kOrderClasses = 32u;
-// The steps of a submission whose team walks are measured (walk_words; device_layout.hpp:
+// The steps of a submission whose walks are measured (walk_words, walk_sum; device_layout.hpp:
 // kPruneWalkSlots).
 const uint kWalkSlots = 8u;
 
@@ -68,9 +68,10 @@ layout(std430, binding = 7) buffer Counters {
     uint order_count[2u * kOrderClasses];
     uint order_placed[2u * kOrderClasses];
     uint jobs_taken;  // a team step's jobs taken so far (prune_team.glsl: take_jobs, flag 8192)
-    // Per step of a submission (pc.walk_slot), the longest walk of a workgroup of the team
-    // kernel in one dispatch, in tape entries (prune_team.glsl: s_walked).
+    // Per step of a submission (pc.walk_slot), the longest walk of a workgroup in one dispatch,
+    // in tape entries (note_walk), and the walks of all its workgroups summed.
     uint walk_words[kWalkSlots];
+    uint walk_sum[kWalkSlots];
 };
 // The kernel's scratch (its layout is the kernel's own). Coherent: lanes read what other lanes
 // of their workgroup wrote at earlier steps (a barrier between). In refinement, from
@@ -128,7 +129,7 @@ layout(push_constant) uniform Push {
     uint order_start;   // where the order list starts in scratch (flags 128, 256, 512; mode 5)
     uint order_first;   // modes 1, 2 (flag 512), 4, 5: the step's first parent (block, octant)
     uint claim_words;   // modes 0-2 in teams: the words its jobs may claim (0: no claims)
-    uint walk_slot;     // modes 0-2 in teams: the step's walk_words (kWalkSlots or more: none)
+    uint walk_slot;     // the step's walk_words and walk_sum (kWalkSlots or more: none)
 } pc;
 
 // A job's claim of `words` of its step's claim area (pc.claim_words of them, past the teams'
@@ -146,12 +147,13 @@ uint claim_scratch(uint words) {
     return first;
 }
 
-// The step's counters (near_jobs, near_words, max_len, max_depth, then walk_cells), summed and
-// maxed first in shared memory by the workgroup's lanes, then added to the device's once per
-// workgroup at its end: one atomic per workgroup instead of one per cell, on words that every
-// workgroup of the device would otherwise queue on. Every lane calls counts_begin() first and
-// counts_end() last, in uniform control flow.
-const uint kCountWords = 4u + kWalkClasses;
+// The step's counters (near_jobs, near_words, max_len, max_depth, then walk_cells, then the
+// workgroup's walk), summed and maxed first in shared memory by the workgroup's lanes, then
+// added to the device's once per workgroup at its end: one atomic per workgroup instead of one
+// per cell, on words that every workgroup of the device would otherwise queue on. Every lane
+// calls counts_begin() first and counts_end() last, in uniform control flow.
+const uint kWalkCount = 4u + kWalkClasses;  // s_counts' word of the workgroup's walk
+const uint kCountWords = kWalkCount + 1u;
 shared uint s_counts[kCountWords];
 void counts_begin() {
     if (gl_LocalInvocationIndex < kCountWords) s_counts[gl_LocalInvocationIndex] = 0u;
@@ -167,11 +169,22 @@ void counts_end() {
         if (k == 1u) atomicAdd(near_words, s_counts[1]);
         if (k == 2u) atomicMax(max_len, s_counts[2]);
         if (k == 3u) atomicMax(max_depth, s_counts[3]);
-        if (k >= 4u) atomicAdd(walk_cells[k - 4u], s_counts[k]);
+        if (k >= 4u && k < kWalkCount) atomicAdd(walk_cells[k - 4u], s_counts[k]);
+        if (k == kWalkCount && pc.walk_slot < kWalkSlots) {
+            atomicMax(walk_words[pc.walk_slot], s_counts[k]);
+            atomicAdd(walk_sum[pc.walk_slot], s_counts[k]);
+        }
     }
 }
 void note_len(uint len) { atomicMax(s_counts[2], len); }
 void note_depth(uint depth) { atomicMax(s_counts[3], depth); }
+// The workgroup's walk in this dispatch, in tape entries, where the step measures it
+// (pc.walk_slot): the most any lane notes. The team kernel notes its workgroup's lockstep walk
+// (the busiest lane of each of its steps, summed); refinement's lanes and squads each lane's
+// own walk over its jobs (the tape staged, each walk over it, the sweep and the write).
+void note_walk(uint words) {
+    if (words != 0u) atomicMax(s_counts[kWalkCount], words);
+}
 
 uint tape_read(uint ref, uint k) {
     return (ref & kInOctantPool) != 0u ? octant_pool[(ref & ~kInOctantPool) + k] : pool[ref + k];

@@ -72,6 +72,7 @@ void main() {
     // count (barriers inside).
     bool listed = (pc.flags & 8u) != 0u;
     uint jobs = min(pc.jobs, listed ? long_jobs : refine_cells + copy_cells);
+    uint walked = 0u;  // tape entries this lane walked (note_walk)
     for (uint first = pc.first_job; first < jobs; first += squads) {
         uint job = first + squad;
         bool has_job = squad < squads && job < jobs;
@@ -94,6 +95,8 @@ void main() {
         }
 
         barrier();  // the squads' last reads of the previous job's shared words are done
+        if (evaluate)
+            walked += (len + kSquad - 1u - lane) / kSquad + nbatch * len;  // staged, walks
         if (evaluate)
             for (uint k = lane; k < len; k += kSquad) {
                 s_word[q][k] = tape_read(parent, 2u + k);
@@ -150,6 +153,7 @@ void main() {
             uint chunk = (len + kSquad - 1u) / kSquad;
             uint k0 = min(lane * chunk, len), k1 = min(k0 + chunk, len);
             int depth = 0, peak = 0;
+            walked += k1 - k0;
             for (uint k = k0; k < k1; ++k) {
                 uint w = tape_read(parent, 2u + k);
                 tape_write(at + 2u + k, w);
@@ -180,12 +184,15 @@ void main() {
                 lowest = min(lowest, s_lowest[q][m]);
                 highest = max(highest, s_highest[q][m]);
             }
-            if (far_flags != 0u)
+            if (far_flags != 0u) {
                 store(cell, false, c0.value, (far_flags & 1u) != 0u ? lowest : highest,
                       kFarField, 0u, c0);
-            else
+            } else {
                 refine_write(cell, len, c0);
+                walked += 2u * len;  // the sweep and the write
+            }
         }
     }
+    note_walk(walked);
     counts_end();
 }

@@ -165,6 +165,7 @@ void main() {
     // The host records the dispatches for every finest cell; the jobs are the listed ones only
     // (the second pass's: the more list's).
     uint jobs = min(pc.jobs, second ? more_jobs : refine_cells + copy_cells);
+    uint walked = 0u;  // tape entries this lane walked (note_walk)
     for (uint j = pc.first_job + gl_GlobalInvocationID.x; j < jobs; j += pc.threads) {
         // In order (flag 256), the jobs dealt in a snake: on an H100's lanes molecule's critical
         // path goes from 38 to 31 words (tools/prune_order_model.cpp).
@@ -202,6 +203,7 @@ void main() {
         }
         if (copy) {
             refine_copy(cell, parent, len, c0);
+            walked += len;
             continue;
         }
         for (uint k = 0u; k < len; ++k) {
@@ -217,6 +219,7 @@ void main() {
         float clearance = far_field_clearance(pc.csize.w, L, radius);
         uint b = 0u;  // the next sub-box of all, past the first ones
         uvec3 sc = uvec3(0u);
+        walked += len * (1u + (k1 - k0 + REFINE_BATCH - 1u) / REFINE_BATCH);  // staged, walks
         for (uint k = k0; k < k1; k += REFINE_BATCH) {
             // A batch past the last sub-box repeats it.
             vec3 p[REFINE_BATCH];
@@ -262,6 +265,8 @@ void main() {
                   c0);
         else
             refine_write(cell, len, c0);
+        walked += far_flags != 0u ? 0u : 2u * len;  // the sweep and the write
     }
+    note_walk(walked);
     counts_end();
 }

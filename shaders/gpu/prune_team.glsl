@@ -66,7 +66,7 @@ uint staged_node(uint w) { return w & (kStagedPrimitive - 1u); }
 shared uint s_busy[2];
 // Per step (two, alternately), the most entries any lane of the workgroup took in it (in every
 // phase: evaluated, swept, written): the workgroup walks as long as that lane, and their sum
-// over the steps is how long it walked, in words (walk_words).
+// over the steps is how long it walked, in words (note_walk).
 shared uint s_walked[2];
 
 const uint kStateWords = 16u;
@@ -546,8 +546,7 @@ void main() {
             lane_scratch[st + 12u * kTeam] = lbase;
         }
     }
-    // The step's longest walk, measured: the most any workgroup walked in one dispatch.
-    if (gl_LocalInvocationID.x == 0u && pc.walk_slot < kWalkSlots && group_walked != 0u)
-        atomicMax(walk_words[pc.walk_slot], group_walked);
+    // The step's walks, measured: the most any workgroup walked in one dispatch, and their sum.
+    if (gl_LocalInvocationID.x == 0u) note_walk(group_walked);
     counts_end();
 }

@@ -60,9 +60,10 @@ struct GpuCounters {
     // A team step's jobs taken so far by its workgroups (prune_team.glsl: take_jobs), zeroed
     // before each of its dispatches.
     uint32_t jobs_taken;
-    // Per step of a submission (PrunePush::walk_slot), the longest a workgroup of the team
-    // kernel walked in one dispatch, in tape entries (prune_team.glsl: s_walked).
-    uint32_t walk_words[kPruneWalkSlots];
+    // Per step of a submission (PrunePush::walk_slot), the longest a workgroup walked in one
+    // dispatch, in tape entries, and all its workgroups' walks summed (prune_common.glsl:
+    // note_walk).
+    uint32_t walk_words[kPruneWalkSlots], walk_sum[kPruneWalkSlots];
 };
 // prune.comp: kStateWords, the words of a lane's job state in its team's scratch; kTeam, the
 // lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step
@@ -135,7 +136,7 @@ static_assert(sizeof(GpuNode) == 16 && sizeof(GpuPrimitiveExtra) == 48);
 static_assert(sizeof(math::PrimitiveParams) == 96 && offsetof(math::PrimitiveParams, a) == 48);
 static_assert(sizeof(PrunedCell) == 16 && offsetof(PrunedCell, value) == 8);
 static_assert(sizeof(GpuBlock) == 16 && sizeof(GpuLevel) == 16 && sizeof(GpuGridParams) == 64);
-static_assert(sizeof(GpuCounters) == 152 + 4 * 4 * kPruneOrderClasses + 4 * kPruneWalkSlots &&
+static_assert(sizeof(GpuCounters) == 152 + 4 * 4 * kPruneOrderClasses + 8 * kPruneWalkSlots &&
               offsetof(GpuCounters, near_lo) == 44 && offsetof(GpuCounters, long_jobs) == 68 &&
               offsetof(GpuCounters, copy_cells) == 76 &&
               offsetof(GpuCounters, walk_placed) == 112 &&

@@ -47,6 +47,23 @@ GpuGridParams DeviceGrid::grid_params() const {
 
 namespace pruning {
 
+// Whether a step's kernel measures its walks (PrunePush::walk_slot; prune_common.glsl:
+// note_walk): the team steps (modes 0-2, not the order passes) and refinement's lanes (not
+// their order pass) and squads. The wide steps do not.
+static bool measures_walks(const Step& s) {
+    switch (s.kernel) {
+        case KernelId::kPrune:
+        case KernelId::kPruneBytes:
+            return s.push.mode <= 2;
+        case KernelId::kPruneRefineLanes:
+            return !s.order_pass;
+        case KernelId::kPruneRefine:
+            return true;
+        default:
+            return false;
+    }
+}
+
 Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, DeviceGrid& grid)
     : ctx(device.context()),
       sc(scene),
@@ -396,12 +413,11 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
             *counter = start;
         else
             ctx.update(counters, &start, sizeof(start));
-        for (size_t k = 0; k < steps.size(); ++k) {
-            Step& s = steps[k];
-            // The team steps' walks measured, in a slot each (the first kPruneWalkSlots).
-            if ((s.kernel == KernelId::kPrune || s.kernel == KernelId::kPruneBytes) &&
-                s.push.mode <= 2 && k < kPruneWalkSlots)
-                s.push.walk_slot = uint32_t(k);
+        uint32_t walk_slots = 0;
+        for (Step& s : steps) {
+            // The walks of the team steps and of refinement's lanes and squads measured, in a
+            // slot each (the first kPruneWalkSlots such steps).
+            if (measures_walks(s) && walk_slots < kPruneWalkSlots) s.push.walk_slot = walk_slots++;
             // The longest tape and deepest stack read back: the cells' (the next parents'),
             // not the octants'; and after refinement, the refined cells' deepest stack (what
             // the tracing kernels' stacks are sized by; every near-field cell's refinement adds
@@ -485,8 +501,10 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
             s.shape.longest_walk_words = ceil_div(walked, s.teams) * s.job_walk;
         }
         s.shape.gpu_ms = ctx.stamp_ms(s.last_stamp) - ctx.stamp_ms(s.first_stamp);
-        if (s.push.walk_slot < kPruneWalkSlots)
+        if (s.push.walk_slot < kPruneWalkSlots) {
             s.shape.walked_words = counter->walk_words[s.push.walk_slot];
+            s.shape.walked_sum_words = counter->walk_sum[s.push.walk_slot];
+        }
         if (s.kernel == KernelId::kPruneRefineLanes) {
             // Both passes' time; the first counts the lists.
             s.shape.lanes_ms = s.shape.gpu_ms;
@@ -518,6 +536,7 @@ void Pruner::add_shape(const Level& lv, const GpuStepShape& shape) {
     same->lanes_per_tape = std::max(same->lanes_per_tape, shape.lanes_per_tape);
     same->longest_walk_words += shape.longest_walk_words;  // one slice or pass after another
     same->walked_words += shape.walked_words;
+    same->walked_sum_words += shape.walked_sum_words;
     same->gpu_ms += shape.gpu_ms;
     same->lanes_ms += shape.lanes_ms;
     same->long_jobs += shape.long_jobs;

@@ -297,7 +297,9 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          (unsigned long long)st.jobs, (unsigned long long)st.lanes,
                          st.lanes_per_tape, (unsigned long long)st.longest_walk_words, st.gpu_ms);
                      if (st.walked_words > 0)
-                         std::printf(" (walked %llu)", (unsigned long long)st.walked_words);
+                         std::printf(" (walked %llu, all workgroups %llu)",
+                                     (unsigned long long)st.walked_words,
+                                     (unsigned long long)st.walked_sum_words);
                      if (st.taken) std::printf(", jobs taken as workgroups come free");
                      if (st.scratch_bytes > 0)
                          std::printf(", scratch %.1f MB", double(st.scratch_bytes) / 1e6);
