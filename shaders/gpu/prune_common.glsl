@@ -114,7 +114,8 @@ layout(push_constant) uniform Push {
                      // taken from the order list (prune_team.glsl: ordered_job); 1024: modes
                      // 4 and 5 order blocks (else octants); 2048: mode 5 sorts each window
                      // apart; 4096: ordered jobs dealt in rounds, not in a snake (snake_deal);
-                     // 8192: modes 0-2's team jobs taken as workgroups come free (take_jobs)
+                     // 8192: modes 0-2's team jobs taken as workgroups come free (take_jobs);
+                     // 16384: the sweeps pass over the whole tape (no early end)
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's team jobs: [first_job, jobs)
     uint round;       // 0: start the jobs; later rounds resume them (prune.comp)

@@ -188,8 +188,7 @@ void main() {
                 store(cell, false, c0.value, (far_flags & 1u) != 0u ? lowest : highest,
                       kFarField, 0u, c0);
             } else {
-                refine_write(cell, len, c0);
-                walked += 2u * len;  // the sweep and the write
+                walked += 2u * (len - refine_write(cell, len, c0));  // the sweep and the write
             }
         }
     }

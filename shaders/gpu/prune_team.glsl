@@ -64,14 +64,28 @@ const uint kStagedPrimitive = 1u << 30;  // device_layout.hpp: kStagedPrimitiveB
 uint staged_node(uint w) { return w & (kStagedPrimitive - 1u); }
 // Lanes still busy after a step, counted in one word while the other is reset.
 shared uint s_busy[2];
-// Per step (two, alternately), the most entries any lane of the workgroup took in it (in every
-// phase: evaluated, swept, written): the workgroup walks as long as that lane, and their sum
-// over the steps is how long it walked, in words (note_walk).
-shared uint s_walked[2];
+// Per step (two, alternately), the workgroup's lanes still sweeping after it: a lane whose
+// sweep has ended writes from the step after the workgroup's last sweep ended. A lane's sweep
+// ends where it has reached every entry it kept, and its write starts at the last one it kept
+// (as low as the tape's first entry, or high in it): lanes whose sweeps ended apart would each
+// run one phase's loop while the others run the other's, the workgroup running both loops in
+// every such step (on the generated fluid, 3 % more steps than where every sweep passes over
+// the whole tape). So the sweeps and the writes take no longer than the longest of the
+// workgroup, and less where every lane ends early.
+shared uint s_sweeping[2];
+// Per step (two, alternately) and phase (evaluation, sweep, write: s_walked[3 · parity +
+// phase]), the most entries any lane of the workgroup took in it: the workgroup runs each
+// phase's loop as long as that lane, one phase's loop after the other, and the sum over the
+// steps and phases is how long it walked, in words (note_walk).
+shared uint s_walked[2 * 3];
 
 const uint kStateWords = 16u;
 const uint kPhaseEvaluate = 0u, kPhaseSweep = 1u, kPhaseWrite = 2u, kPhaseDone = 3u;
-// State words: phase, i (next entry), top (stack size; in the write phase the next word),
+// Swept: the lane's sweep has ended and its new tape has its place, but a lane of its workgroup
+// still sweeps; it writes once none does (s_sweeping).
+const uint kPhaseSwept = 4u;
+// State words: phase, i (next entry), top (stack size; in the sweep the kept entries it has not
+// reached yet; in the write phase the next word),
 // out_len, prims, at (the new tape), value, constant (float bits), the parent's stack depth, the
 // new tape's stack depth now and at most, whether the sweep kept an operator that refinement
 // might decide (list_near_cell), where the job's entries are (lbase).
@@ -359,13 +373,14 @@ void main() {
         barrier();  // the previous job's last reads of s_busy and s_walked are done
         if (gl_LocalInvocationID.x == 0u) {
             s_busy[0] = s_busy[1] = 0u;
-            s_walked[0] = s_walked[1] = 0u;
+            for (uint k = 0u; k < 6u; ++k) s_walked[k] = 0u;
+            s_sweeping[0] = s_sweeping[1] = 0u;
         }
         for (uint s = 0u; s < pc.budget; ++s) {
             // The team's window, staged by its lanes together (every lane of a team evaluates
             // the same entries).
             uint w0 = i;
-            uint walked = 0u;  // the entries this lane takes in this step, in every phase
+            uvec3 walked = uvec3(0u);  // the entries this lane takes in this step, per phase
             if (phase == kPhaseEvaluate) {
                 uint we = min(i + kWindow, len);
                 for (uint k = i + lane; k < we; k += kTeam) {
@@ -420,7 +435,7 @@ void main() {
                     t_entry = i;
                     pdepth = max(pdepth, top);
                 }
-                walked = i - w0;
+                walked.x = i - w0;
                 // The top back to scratch for the next step; after the last entry it is the
                 // root, which stage 2 reads from the registers.
                 if (i < len && top > 0u)
@@ -444,15 +459,21 @@ void main() {
                     } else {
                         keep_entry(dbase, len - 1u, lane, 0u);  // the root, with its own sign
                         phase = kPhaseSweep;
+                        top = 1u;  // the root, kept and not yet reached
                     }
                 }
             }
             if (phase == kPhaseSweep) {
                 // Stage 3: the top-down pass (compact_tape), kWindow entries a step. An entry's
                 // flags are final when the reverse sweep reaches it (parents come later), so
-                // the sweep also counts the kept entries.
+                // the sweep also counts the kept entries. Each entry has one parent: once the
+                // sweep has reached every entry kept so far (`top` of them were not), the
+                // entries below are dead, and the sweep ends there, the write starting at the
+                // last one it kept (`first_kept`): a cell near a few primitives low in a long
+                // chain (molecule's) need not pass over the chain's bottom twice more.
                 uint stop = i > kWindow ? i - kWindow : 0u;
-                walked += i - stop;
+                uint from = i, first_kept = 0u;
+                bool ended = false;
                 for (; i > stop; --i) {
                     uint e = i - 1u;
                     uint fl = entry_flags(dbase, e, lane);
@@ -460,12 +481,18 @@ void main() {
                     if ((fl & kFlagPrimitive) != 0u) {
                         ++out_len;
                         ++prims;
+                        if (--top == 0u && (pc.flags & 16384u) == 0u) {
+                            first_kept = e;
+                            ended = true;
+                            break;
+                        }
                         continue;
                     }
                     uint l = lane_scratch[lbase + e], r = e - 1u;
                     uint d = fl & 3u;
                     if (d == kKeepBoth) {
                         ++out_len;
+                        ++top;  // it is reached, its two operands kept
                         may_decide = may_decide || (fl & 32u) != 0u;
                         keep_entry(dbase, l, lane, 0u);
                         keep_entry(dbase, r, lane, 0u);
@@ -475,6 +502,8 @@ void main() {
                     set_entry_flags(dbase, e, lane, skipped);
                     keep_entry(dbase, d == kLeftWins ? l : r, lane, (fl >> 4) & 1u);
                 }
+                walked.y = from - (ended ? first_kept : i);
+                if (ended) i = 0u;
                 if (i == 0u) {
                     note_len(out_len);
                     if (out_len == len && transient) {
@@ -491,15 +520,16 @@ void main() {
                         } else {
                             tape_write(at, out_len);
                             tape_write(at + 1u, prims);
-                            phase = kPhaseWrite;
-                            top = at + 2u;  // the next word to write
+                            phase = kPhaseSwept;  // the write when the team's sweeps have ended
+                            top = at + 2u;         // the next word to write
+                            i = first_kept;        // the entries before it are dead
                         }
                     }
                 }
             }
             if (phase == kPhaseWrite) {
                 uint we = min(i + kWindow, len);
-                walked += we - i;
+                walked.z = we - i;
                 for (; i < we; ++i) {
                     uint fl = entry_flags(dbase, i, lane);
                     if (((fl >> 2) & 3u) != 1u) continue;
@@ -518,15 +548,20 @@ void main() {
                 }
             }
             if (phase != kPhaseDone) atomicAdd(s_busy[s & 1u], 1u);
-            if (walked != 0u) atomicMax(s_walked[s & 1u], walked);
+            if (phase == kPhaseSweep) atomicAdd(s_sweeping[s & 1u], 1u);
+            uint parity = 3u * (s & 1u);
+            for (uint k = 0u; k < 3u; ++k)
+                if (walked[k] != 0u) atomicMax(s_walked[parity + k], walked[k]);
             memoryBarrierBuffer();
             memoryBarrierShared();
             barrier();
             bool busy = s_busy[s & 1u] != 0u;
-            group_walked += s_walked[s & 1u];
+            group_walked += s_walked[parity] + s_walked[parity + 1u] + s_walked[parity + 2u];
+            if (phase == kPhaseSwept && s_sweeping[s & 1u] == 0u) phase = kPhaseWrite;
             if (gl_LocalInvocationID.x == 0u) {
                 s_busy[(s + 1u) & 1u] = 0u;
-                s_walked[(s + 1u) & 1u] = 0u;
+                for (uint k = 3u - parity; k < 6u - parity; ++k) s_walked[k] = 0u;
+                s_sweeping[(s + 1u) & 1u] = 0u;
             }
             if (!busy) break;
         }

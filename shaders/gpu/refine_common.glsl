@@ -79,10 +79,14 @@ void refine_sub_boxes(uint len, vec3 p[REFINE_BATCH], vec3 sub_half, float sub_R
 
 // Stage 3 of a near cell (compact_tape): the top-down sweep from the root, an operator decided
 // alike in every sub-box replaced by its winner; then the kept entries written to the level's
-// pool, and the refined cell `cell` (c0 as it was, with its new tape) stored.
-void refine_write(uint cell, uint len, Cell c0) {
+// pool, and the refined cell `cell` (c0 as it was, with its new tape) stored. Gives the entry
+// the write started at: the sweep ends once it has reached every entry it kept (each has one
+// parent), the entries below being dead, and the write starts at the last one it kept.
+uint refine_write(uint cell, uint len, Cell c0) {
     REFINE_SET_FLAG(len - 1u, 1u | (tape_negated(REFINE_WORD(len - 1u)) ? 4u : 0u));
     uint out_len = 0u, prims = 0u;
+    uint pending = 1u;  // entries kept and not yet reached: the root
+    uint first_kept = 0u;
     for (uint i = len; i > 0u; --i) {
         uint e = i - 1u;
         uint fl = REFINE_FLAG(e);
@@ -90,6 +94,10 @@ void refine_write(uint cell, uint len, Cell c0) {
         if (REFINE_IS_PRIMITIVE(e)) {
             ++out_len;
             ++prims;
+            if (--pending == 0u && (pc.flags & 16384u) == 0u) {
+                first_kept = e;
+                break;
+            }
             continue;
         }
         uint l = REFINE_LEFT(e), r = e - 1u;
@@ -97,6 +105,7 @@ void refine_write(uint cell, uint len, Cell c0) {
         uint d = bitCount(seen) == 1 ? uint(findLSB(seen)) : kKeepBoth;
         if (d == kKeepBoth) {
             ++out_len;
+            ++pending;
             REFINE_SET_FLAG(l, 1u | (tape_negated(REFINE_WORD(l)) ? 4u : 0u));
             REFINE_SET_FLAG(r, 1u | (tape_negated(REFINE_WORD(r)) ? 4u : 0u));
             continue;
@@ -110,12 +119,12 @@ void refine_write(uint cell, uint len, Cell c0) {
     uint at = pool_allocate(false, out_len + 2u);
     if (at == kFarField) {
         store(cell, false, c0.value, 0.0, kFarField, 0u, c0);
-        return;
+        return first_kept;
     }
     tape_write(at, out_len);
     tape_write(at + 1u, prims);
     uint next = at + 2u, depth = 0u, depth_max = 0u;
-    for (uint i = 0u; i < len; ++i) {
+    for (uint i = first_kept; i < len; ++i) {
         uint fl = REFINE_FLAG(i);
         if ((fl & 3u) != 1u) continue;
         uint node = tape_node(REFINE_WORD(i));
@@ -125,6 +134,7 @@ void refine_write(uint cell, uint len, Cell c0) {
     }
     note_depth(depth_max);
     store(cell, true, c0.value, 0.0, at, out_len, c0);
+    return first_kept;
 }
 
 // A listed cell's centre (cell_centre: as the CPU computes it), from its block.

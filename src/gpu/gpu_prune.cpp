@@ -169,13 +169,15 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
         team_order = std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), 2);
     snake = env_flag("SDFPRUNE_VULKAN_SNAKE", snake);
     take_jobs = env_flag("SDFPRUNE_VULKAN_TAKE", take_jobs);
+    sweeps_end = env_flag("SDFPRUNE_VULKAN_SWEEP_END", sweeps_end);
     claims = env_flag("SDFPRUNE_VULKAN_CLAIMS", claims);
     byte_flags =
         env_flag("SDFPRUNE_VULKAN_BYTE_FLAGS", byte_flags) && ctx.can_run(KernelId::kPruneBytes);
     origin = sc.aabb.min;
     extent = sc.aabb.max - sc.aabb.min;
     L = sc.lipschitz[sc.root()];
-    flags = (opt.far_field ? 1u : 0u) | (opt.bounds == CellBounds::kInterval ? 2u : 0u);
+    flags = (opt.far_field ? 1u : 0u) | (opt.bounds == CellBounds::kInterval ? 2u : 0u) |
+            (sweeps_end ? 0u : 16384u);
 }
 
 void Pruner::run() {

@@ -193,6 +193,11 @@ class Pruner {
     // critical path on an H100 than the snake's, by tools/prune_order_model.cpp (not measured
     // on a GPU yet); SDFPRUNE_VULKAN_TAKE=0: dealt out in advance, as before stop 46.
     bool take_jobs = true;
+    // A lane's sweep of a parent tape (compact_tape) ends once it has reached every entry it
+    // kept, and its write starts at the last one (prune_team.glsl, refine_common.glsl:
+    // refine_write); SDFPRUNE_VULKAN_SWEEP_END=0: both pass over the whole tape (push flag
+    // 16384), as before stop 47, to compare.
+    bool sweeps_end = true;
     vec3 origin, extent;
     float L = 1;
     uint32_t flags = 0;  // the push constants' (prune_common.glsl)
