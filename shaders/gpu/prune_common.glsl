@@ -295,20 +295,21 @@ void store(uint dest, bool near, float value, float constant, uint tape, uint wo
     cells[dest] = result;
 }
 
-// Whether refinement's far-field test might pass for a finest near cell whose tape (`len` words
-// at `tape`) is worth `value` at the centre (refine_need in src/prune/prune_cell.cpp: the far
+// Whether refinement's far-field test might pass for a finest near cell whose tape (`len` words,
+// its root `root_node`) is worth `value` at the centre (refine_need in src/prune/prune_cell.cpp: the far
 // field on, and refine_far_possible, with a lone primitive's similarity scale).
-bool refine_far_may_pass(uint tape, uint len, float value) {
+bool refine_far_may_pass(uint root_node, uint len, float value) {
     if ((pc.flags & 1u) == 0u) return false;
     vec3 half_cell = pc.csize.xyz * 0.5;
-    Node root = nodes[tape_node(tape_read(tape, 2u + len - 1u))];
+    Node root = nodes[root_node];
     float clearance = far_field_clearance(pc.csize.w, root.lipschitz, length(half_cell));
     float sigma = len == 1u ? extras[root.primitive].bound0.w : 0.0;
     return refine_far_possible(value, clearance, sigma, half_cell);
 }
 
-// Lists a near cell that the step making the finest cells (flag 4, modes 0 and 2) stored, with
-// its tape (`len` words at `tape`) and centre value, for refinement. From the list's front
+// Lists a near cell that the step making the finest cells (flag 4, modes 0 and 2) stores, with
+// its tape's length and root node and its centre value, for refinement (which runs after the
+// step: the tape may be written after it is listed). From the list's front
 // (refine_cells), the cells it decides again; from its back, the last entry first
 // (copy_cells), those it only copies into the level's pool: where it has nothing to try
 // (refine_need), no operator of the tape that a sub-box might decide (`may_decide`: the compaction
@@ -323,9 +324,10 @@ const uint kCopyOnly = 0x80000000u;  // set on the entries of cells only copied 
 uint refine_walk_class(uint len) { return min((len - 1u) / 4u, kWalkClasses - 1u); }
 // With PRUNE_SUBGROUPS, the lanes of a subgroup that list cells together take their places in
 // both lists with one atomic each (as pool_allocate).
-void list_near_cell(uint dest, uint tape, uint len, float value, bool may_decide) {
+void list_near_cell(uint dest, uint root_node, uint len, float value, bool may_decide) {
     if ((pc.flags & 4u) == 0u || pc.mode == 1u) return;
-    bool decide = len <= kRefineMaxTape && (may_decide || refine_far_may_pass(tape, len, value));
+    bool decide =
+        len <= kRefineMaxTape && (may_decide || refine_far_may_pass(root_node, len, value));
 #ifdef PRUNE_SUBGROUPS
     uint at_front, at_back;
     SUBGROUP_APPEND(at_front, refine_cells, decide);

@@ -65,13 +65,15 @@ uint staged_node(uint w) { return w & (kStagedPrimitive - 1u); }
 // Lanes still busy after a step, counted in one word while the other is reset.
 shared uint s_busy[2];
 // Per step (two, alternately), the workgroup's lanes still sweeping after it: a lane whose
-// sweep has ended writes from the step after the workgroup's last sweep ended. A lane's sweep
-// ends where it has reached every entry it kept, and its write starts at the last one it kept
-// (as low as the tape's first entry, or high in it): lanes whose sweeps ended apart would each
-// run one phase's loop while the others run the other's, the workgroup running both loops in
-// every such step (on the generated fluid, 3 % more steps than where every sweep passes over
-// the whole tape). So the sweeps and the writes take no longer than the longest of the
-// workgroup, and less where every lane ends early.
+// sweep has ended takes its new tape's place, lists its cell for refinement and writes from the
+// step after the workgroup's last sweep ended. A lane's sweep ends where it has reached every
+// entry it kept, and its write starts at the last one it kept (as low as the tape's first
+// entry, or high in it): lanes whose sweeps ended apart would each run one phase's loop while
+// the others run the other's, the workgroup running both loops in every such step (on the
+// generated fluid, 3 % more steps than where every sweep passes over the whole tape), and
+// their appends would take an atomic each. So the sweeps and the writes take no longer than
+// the longest of the workgroup, less where every lane ends early, and the appends are made
+// by all the lanes that have them at once.
 shared uint s_sweeping[2];
 // Per step (two, alternately) and phase (evaluation, sweep, write: s_walked[3 · parity +
 // phase]), the most entries any lane of the workgroup took in it: the workgroup runs each
@@ -81,14 +83,15 @@ shared uint s_walked[2 * 3];
 
 const uint kStateWords = 16u;
 const uint kPhaseEvaluate = 0u, kPhaseSweep = 1u, kPhaseWrite = 2u, kPhaseDone = 3u;
-// Swept: the lane's sweep has ended and its new tape has its place, but a lane of its workgroup
-// still sweeps; it writes once none does (s_sweeping).
+// Swept: the lane's sweep has ended, but a lane of its workgroup still sweeps; it takes its new
+// tape's place and writes once none does (s_sweeping).
 const uint kPhaseSwept = 4u;
 // State words: phase, i (next entry), top (stack size; in the sweep the kept entries it has not
 // reached yet; in the write phase the next word),
 // out_len, prims, at (the new tape), value, constant (float bits), the parent's stack depth, the
 // new tape's stack depth now and at most, whether the sweep kept an operator that refinement
-// might decide (list_near_cell), where the job's entries are (lbase).
+// might decide (list_near_cell), where the job's entries are (lbase), the new tape's root (its
+// entry in the parent tape: the first the sweep kept).
 // An entry's word per lane: bits 0-1 its decision, bit 5 whether its operands at the centre
 // pass blend_may_decide (operators), bit 6 its tape word's sign, bit 7 whether it is a
 // primitive, then the sweep's flags: bits 2-3 alive (0 dead, 1 kept, 2 skipped), bit 4 negate.
@@ -349,6 +352,7 @@ void main() {
         uint dbase = lbase + len;
         uint phase = kPhaseDone, i = 0u, top = 0u, out_len = 0u, prims = 0u, at = 0u;
         uint pdepth = 0u, depth = 0u, depth_max = 0u;
+        uint root = 0u;  // the new tape's root: the entry of the parent tape that stands there
         float value = 0.0, constant = 0.0;
         bool may_decide = false;
         if (walk && pc.round == 0u) {
@@ -368,6 +372,7 @@ void main() {
             depth = lane_scratch[st + 9u * kTeam];
             depth_max = lane_scratch[st + 10u * kTeam];
             may_decide = lane_scratch[st + 11u * kTeam] != 0u;
+            root = lane_scratch[st + 13u * kTeam];
         }
 
         barrier();  // the previous job's last reads of s_busy and s_walked are done
@@ -478,6 +483,7 @@ void main() {
                     uint e = i - 1u;
                     uint fl = entry_flags(dbase, e, lane);
                     if (((fl >> 2) & 3u) != 1u) continue;
+                    if (out_len == 0u) root = e;  // the first entry it keeps
                     if ((fl & kFlagPrimitive) != 0u) {
                         ++out_len;
                         ++prims;
@@ -506,25 +512,8 @@ void main() {
                 if (ended) i = 0u;
                 if (i == 0u) {
                     note_len(out_len);
-                    if (out_len == len && transient) {
-                        // Nothing pruned, and a transient tape: share the parent's.
-                        note_depth(pdepth);
-                        phase = kPhaseDone;
-                        store(dest, true, value, constant, parent, out_len, kNoCell);
-                        list_near_cell(dest, parent, out_len, value, may_decide);
-                    } else {
-                        at = pool_allocate(transient, out_len + 2u);
-                        if (at == kFarField) {
-                            phase = kPhaseDone;
-                            store(dest, false, value, constant, kFarField, 0u, kNoCell);
-                        } else {
-                            tape_write(at, out_len);
-                            tape_write(at + 1u, prims);
-                            phase = kPhaseSwept;  // the write when the team's sweeps have ended
-                            top = at + 2u;         // the next word to write
-                            i = first_kept;        // the entries before it are dead
-                        }
-                    }
+                    phase = kPhaseSwept;  // the rest once the workgroup's sweeps have ended
+                    i = first_kept;       // the write's first entry: the entries before are dead
                 }
             }
             if (phase == kPhaseWrite) {
@@ -544,7 +533,6 @@ void main() {
                     note_depth(depth_max);
                     phase = kPhaseDone;
                     store(dest, true, value, constant, at, out_len, kNoCell);
-                    list_near_cell(dest, at, out_len, value, may_decide);
                 }
             }
             if (phase != kPhaseDone) atomicAdd(s_busy[s & 1u], 1u);
@@ -557,7 +545,32 @@ void main() {
             barrier();
             bool busy = s_busy[s & 1u] != 0u;
             group_walked += s_walked[parity] + s_walked[parity + 1u] + s_walked[parity + 2u];
-            if (phase == kPhaseSwept && s_sweeping[s & 1u] == 0u) phase = kPhaseWrite;
+            if (phase == kPhaseSwept && s_sweeping[s & 1u] == 0u) {
+                // Every lane of the workgroup whose sweep has ended, at once: their appends to
+                // the pool and to refinement's list take one atomic per subgroup.
+                if (out_len == len && transient) {
+                    // Nothing pruned, and a transient tape: share the parent's.
+                    note_depth(pdepth);
+                    phase = kPhaseDone;
+                    store(dest, true, value, constant, parent, out_len, kNoCell);
+                    list_near_cell(dest, tape_node(tape_read(parent, 1u + len)), out_len, value,
+                                   may_decide);
+                } else {
+                    at = pool_allocate(transient, out_len + 2u);
+                    if (at == kFarField) {
+                        phase = kPhaseDone;
+                        store(dest, false, value, constant, kFarField, 0u, kNoCell);
+                    } else {
+                        tape_write(at, out_len);
+                        tape_write(at + 1u, prims);
+                        // (Its root's node from the parent tape: the new tape is not written.)
+                        list_near_cell(dest, tape_node(tape_read(parent, 2u + root)), out_len,
+                                       value, may_decide);
+                        phase = kPhaseWrite;
+                        top = at + 2u;  // the next word to write
+                    }
+                }
+            }
             if (gl_LocalInvocationID.x == 0u) {
                 s_busy[(s + 1u) & 1u] = 0u;
                 for (uint k = 3u - parity; k < 6u - parity; ++k) s_walked[k] = 0u;
@@ -579,6 +592,7 @@ void main() {
             lane_scratch[st + 10u * kTeam] = depth_max;
             lane_scratch[st + 11u * kTeam] = may_decide ? 1u : 0u;
             lane_scratch[st + 12u * kTeam] = lbase;
+            lane_scratch[st + 13u * kTeam] = root;
         }
     }
     // The step's walks, measured: the most any workgroup walked in one dispatch, and their sum.

@@ -654,7 +654,8 @@ void main() {
                 note_depth(s_depth[box]);
                 s_state[box] = 0u;
                 store(dest, true, s_value[box], 0.0, parent, out_len, Cell(0u, 0u, 0.0, 0.0));
-                list_near_cell(dest, parent, out_len, s_value[box], true);
+                list_near_cell(dest, tape_node(tape_read(parent, 1u + len)), out_len,
+                               s_value[box], true);
             } else {
                 // (With subgroups, one append per subgroup.) On overflow the host grows the
                 // pool and redoes the level (see prune.comp).
@@ -686,7 +687,8 @@ void main() {
             store(dest, true, s_value[box], 0.0, s_at[box], s_len[box], Cell(0u, 0u, 0.0, 0.0));
             // (Every tape refined: this kernel does not look for operators refinement might
             // decide, which only saves work.)
-            list_near_cell(dest, s_at[box], s_len[box], s_value[box], true);
+            list_near_cell(dest, tape_node(tape_read(s_at[box], 1u + s_len[box])), s_len[box],
+                           s_value[box], true);
         }
         sync_all();
     }
