@@ -296,8 +296,9 @@ void store(uint dest, bool near, float value, float constant, uint tape, uint wo
 }
 
 // Whether refinement's far-field test might pass for a finest near cell whose tape (`len` words,
-// its root `root_node`) is worth `value` at the centre (refine_need in src/prune/prune_cell.cpp: the far
-// field on, and refine_far_possible, with a lone primitive's similarity scale).
+// its root `root_node`) is worth `value` at the centre (refine_need in
+// src/prune/prune_cell.cpp: the far field on, and refine_far_possible, with a lone primitive's
+// similarity scale).
 bool refine_far_may_pass(uint root_node, uint len, float value) {
     if ((pc.flags & 1u) == 0u) return false;
     vec3 half_cell = pc.csize.xyz * 0.5;
