@@ -1462,6 +1462,16 @@ TEST(Gpu, WideKernelWalksChainsSerially) {
             ::unsetenv("SDFPRUNE_VULKAN_WIDE_RUNS");
             EXPECT_TRUE(gpu.stats().steps[0].wide) << what;
             EXPECT_TRUE(gpu.stats().steps[1].wide) << what;
+            // Their walks measured: about within the bound (which counts a binary search's
+            // steps as the tape's bit width, and each round of the chain once a pass), all
+            // workgroups' at least the longest, at most as if each walked as long.
+            for (const gpu::GpuStepShape& st : gpu.stats().steps) {
+                if (!st.wide) continue;
+                EXPECT_GT(st.walked_words, 0u) << what;
+                EXPECT_LE(st.walked_words, 2 * st.longest_walk_words) << what;
+                EXPECT_GE(st.walked_sum_words, st.walked_words) << what;
+                EXPECT_LE(st.walked_sum_words, st.workgroups * st.walked_words) << what;
+            }
             expect_matches_cpu(sc, cpu, gpu, *dev, what);
             expect_valid_cells(sc, gpu, what);
         }

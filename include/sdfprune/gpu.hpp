@@ -106,12 +106,13 @@ struct GpuStepShape {
     // bound, not a count.
     uint64_t longest_walk_words = 0;
     // The same measured on the device: the most tape entries a workgroup walked in one
-    // dispatch. In teams (modes 0-2, not wide), a workgroup's lockstep walk: over its steps,
-    // each step's busiest lane (evaluated, swept and written), summed. Not a bound: a lane may
-    // finish one phase and start the next within a step. In refinement, its lanes' and squads'
-    // longest lane over its jobs (each cell's tape staged, each walk over it, the sweep and the
-    // write), its passes summed. The walks of a level's slices summed. 0 where not measured
-    // (wide, the order passes, past a submission's first 8 measured steps).
+    // dispatch. In teams (modes 0-2), a workgroup's lockstep walk: over the steps of its loop,
+    // each phase's busiest lane (evaluated, swept, written), summed. When wide, over its stages
+    // (barrier to barrier), each stage's busiest lane (the entries, items, heights and rounds
+    // it took, a binary search's steps), summed. In refinement, its lanes' and squads' longest
+    // lane over its jobs (each cell's tape staged, each walk over it, the sweep and the write),
+    // its passes summed. The walks of a level's slices summed. 0 where not measured (the order
+    // passes, past a submission's first 8 measured steps).
     uint64_t walked_words = 0;
     // The walks of all the step's workgroups (64 lanes each), summed likewise: the step's work
     // in workgroup-words, against which walked_words is its critical path. A 32-bit count on

@@ -136,10 +136,27 @@ uvec4 wg_exclusive_scan(uvec4 x) {
     return s_scan[id] - x;
 }
 
+// The workgroup's walk (note_walk): each lane counts the entries, items, heights and rounds it
+// takes between two barriers (g_walk: the loops' iterations, a binary search's steps); at each
+// barrier the workgroup adds its busiest lane's count to its walk (g_group_walk, the same in
+// every lane), a stage after another, as they run. (Not counted: the prefix sums' few steps,
+// and a staged chunk's search of its rounds for their operands, in shared memory.)
+uint g_walk = 0u, g_group_walk = 0u, g_syncs = 0u;
+// Per barrier (three in turn), the busiest lane's count. After barrier k the workgroup reads
+// word k % 3, and resets word (k + 2) % 3: read after barrier k − 1, counted into before
+// barrier k + 2, a barrier from either.
+shared uint s_stage_walk[3];
+
 void sync_all() {
+    uint turn = g_syncs % 3u;
+    if (g_walk != 0u) atomicMax(s_stage_walk[turn], g_walk);
+    g_walk = 0u;
     memoryBarrierBuffer();
     memoryBarrierShared();
     barrier();
+    g_group_walk += s_stage_walk[turn];
+    if (gl_LocalInvocationID.x == 0u) s_stage_walk[(turn + 2u) % 3u] = 0u;
+    ++g_syncs;
 }
 
 // The boxes of its job a workgroup takes: [g_b0, g_b0 + g_boxes) (pc.wide_split workgroups per
@@ -232,6 +249,7 @@ shared uvec4 s_run_own[kRunChunk * kTeam];
 void stage_run_records(uint c0, uint c1, uint rbase, uint third, bool with_nodes) {
     uint id = gl_LocalInvocationID.x;
     for (uint q = c0 + id; q < c1; q += kWide) {
+        ++g_walk;
         uvec3 rec = run_record(rbase, q, third);
         s_run_rec[q - c0] = uvec4(rec, 0u);
         if (with_nodes) s_run_node[q - c0] = nodes[tape_node(rec.z)];
@@ -269,6 +287,7 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
         // Each operand from scratch: made before the run, or by this lane earlier in it.
         if (id < g_boxes)
             for (uint q = r0; q < end; ++q) {
+                ++g_walk;
                 uvec3 rec = run_record(rbase, q, kRunWord);
                 uint decision;
                 vec3 x = combine_operator(nodes[tape_node(rec.z)], spread_r, interval, false,
@@ -285,6 +304,7 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
         uint c1 = min(c0 + kRunChunk, end);
         stage_run_records(c0, c1, rbase, kRunWord, true);
         for (uint k = id; k < (c1 - c0) * g_boxes; k += kWide) {
+            ++g_walk;
             uvec4 rec = s_run_rec[k / g_boxes];
             uint box = g_b0 + k % g_boxes, at = (k / g_boxes) * kTeam + box;
             if ((rec.w & 0xffu) == kNotInChunk)
@@ -295,6 +315,7 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
         sync_all();
         if (id < g_boxes)
             for (uint q = 0u; q < c1 - c0; ++q) {
+                ++g_walk;
                 uvec4 rec = s_run_rec[q];
                 uint jl = rec.w & 0xffu, jr = rec.w >> 8;
                 vec3 left = jl == kNotInChunk ? s_run_left[q * kTeam + b].xyz
@@ -323,6 +344,7 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
         // Each entry's flags from scratch: set above the run, or by this lane earlier in it.
         if (id < g_boxes && s_state[b] == 1u)
             for (uint q = end; q > r0; --q) {
+                ++g_walk;
                 uvec3 rec = run_record(rbase, q - 1u, kRunSigns);
                 uint e = rec.x, l = rec.y, r = e - 1u;
                 uint fl = item_flags(e, b);
@@ -347,6 +369,7 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
         uint c0 = c1 - min(kRunChunk, c1 - r0);
         stage_run_records(c0, c1, rbase, kRunSigns, false);
         for (uint k = id; k < (c1 - c0) * g_boxes; k += kWide) {
+            ++g_walk;
             uvec4 rec = s_run_rec[k / g_boxes];
             uint box = g_b0 + k % g_boxes;
             s_run_own[(k / g_boxes) * kTeam + box] =
@@ -356,6 +379,7 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
         sync_all();
         if (id < g_boxes && s_state[b] == 1u)
             for (uint q = c1 - c0; q > 0u; --q) {
+                ++g_walk;
                 uvec4 rec = s_run_rec[q - 1u];
                 uvec4 own = s_run_own[(q - 1u) * kTeam + b];
                 uint e = rec.x, l = rec.y, r = e - 1u, fl = own.x;
@@ -387,7 +411,8 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
 }
 
 void main() {
-    counts_begin();
+    if (gl_LocalInvocationID.x < 3u) s_stage_walk[gl_LocalInvocationID.x] = 0u;
+    counts_begin();  // (its barrier orders the reset before any count)
     uint id = gl_LocalInvocationID.x;
 #ifdef PRUNE_WIDE_SUBGROUPS
     if (id == 0u) s_linear = 1u;
@@ -438,12 +463,15 @@ void main() {
 
         // Stage 1: the counting sort by height, and the left operands.
         for (uint h = id; h <= H; h += kWide) {
+            ++g_walk;
             scratch[hbase + 3u * h] = 0u;
             scratch[hbase + 3u * h + 1u] = 0u;
         }
         sync_all();
-        for (uint e = id; e < len; e += kWide)
+        for (uint e = id; e < len; e += kWide) {
+            ++g_walk;
             atomicAdd(scratch[hbase + 3u * node_span[tape_node(tape_read(parent, 2u + e))].y], 1u);
+        }
         sync_all();
         // Each lane sums a slice of the heights (entries, heights with any, and those of them
         // in no run: with other than one entry, or the primitives'), a prefix sum places the
@@ -452,6 +480,7 @@ void main() {
         uint hs = (H + kWide) / kWide;
         uint h0 = min(id * hs, H + 1u), h1 = min(h0 + hs, H + 1u);
         uint sum = 0u, present = 0u, breaks = 0u;
+        g_walk += 2u * (h1 - h0);  // (this loop and the next)
         for (uint h = h0; h < h1; ++h) {
             uint count = scratch[hbase + 3u * h];
             sum += count;
@@ -486,6 +515,7 @@ void main() {
         sync_all();
         uint rounds = s_rounds, round_breaks = s_breaks;
         for (uint e = id; e < len; e += kWide) {
+            ++g_walk;
             uint w = tape_read(parent, 2u + e);
             uint n = tape_node(w);
             uint h = node_span[n].y;
@@ -497,6 +527,7 @@ void main() {
             uint first = node_span[tape_node(tape_read(parent, 1u + e))].x;
             uint lo = 0u, hi = e - 1u;
             while (lo < hi) {
+                ++g_walk;
                 uint mid = (lo + hi) / 2u;
                 if (tape_node(tape_read(parent, 2u + mid)) >= first)
                     hi = mid;
@@ -510,6 +541,7 @@ void main() {
         // primitives', is a break), and its entry is the first in its place. Its record, so
         // that the serial walks start from one load a round.
         for (uint r = id; r < rounds; r += kWide) {
+            ++g_walk;
             uint at = rbase + kRoundWords * r;
             if (scratch[at + 1u] != 1u || r == 0u) continue;
             uint before = scratch[at + 2u];
@@ -537,6 +569,7 @@ void main() {
                 continue;
             }
             for (uint k = id; k < count * g_boxes; k += kWide) {
+                ++g_walk;
                 uint e = scratch[obase + first_place + k / g_boxes];
                 uint w = tape_read(parent, 2u + e);
                 Node nd = nodes[tape_node(w)];
@@ -594,6 +627,7 @@ void main() {
                 continue;
             }
             for (uint k = id; k < count * g_boxes; k += kWide) {
+                ++g_walk;
                 if (s_state[box] != 1u) continue;
                 uint e = scratch[obase + first_place + k / g_boxes];
                 uint fl = item_flags(e, box);
@@ -622,6 +656,7 @@ void main() {
         uint kept = 0u, kept_prims = 0u;
         int depth = 0, depth_peak = 0;  // the stack's change from the slice's start, its peak
         for (uint e = e0; mine && e < e1; ++e) {
+            ++g_walk;
             uint fl = item_flags(e, cbox);
             if (((fl >> 2) & 3u) != 1u) continue;
             bool prim = (fl & kFlagPrimitive) != 0u;
@@ -675,6 +710,7 @@ void main() {
         if (s_state[cbox] == 2u) {
             uint to = s_at[cbox] + 2u + before.x;
             for (uint e = e0; e < e1; ++e) {
+                ++g_walk;
                 uint fl = item_flags(e, cbox);
                 if (((fl >> 2) & 3u) != 1u) continue;
                 uint node = tape_node(tape_read(parent, 2u + e));
@@ -692,5 +728,7 @@ void main() {
         }
         sync_all();
     }
+    // The step's walks, measured: the most any workgroup walked in one dispatch, and their sum.
+    if (id == 0u) note_walk(g_group_walk);
     counts_end();
 }

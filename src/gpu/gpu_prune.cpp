@@ -48,8 +48,8 @@ GpuGridParams DeviceGrid::grid_params() const {
 namespace pruning {
 
 // Whether a step's kernel measures its walks (PrunePush::walk_slot; prune_common.glsl:
-// note_walk): the team steps (modes 0-2, not the order passes) and refinement's lanes (not
-// their order pass) and squads. The wide steps do not.
+// note_walk): the team steps (modes 0-2, not the order passes), the wide steps, and
+// refinement's lanes (not their order pass) and squads.
 static bool measures_walks(const Step& s) {
     switch (s.kernel) {
         case KernelId::kPrune:
@@ -58,6 +58,9 @@ static bool measures_walks(const Step& s) {
         case KernelId::kPruneRefineLanes:
             return !s.order_pass;
         case KernelId::kPruneRefine:
+        case KernelId::kPruneWide:
+        case KernelId::kPruneWideSubgroups:
+        case KernelId::kPruneWideRuns:
             return true;
         default:
             return false;
