@@ -15,9 +15,9 @@
 # allocated much, the reserve came too late) and each step's
 # GPU time (L level, o octants, c cells, x refinement, W wide; [lane pass's part]; {the team
 # steps' longest walk of a workgroup, in tape entries, measured on the device: builds from
-# stop 46 on; from stop 47 on refinement's too, and /the walks of all the step's workgroups
-# summed}): a step whose time follows its longest walk waits on its critical path, one whose
-# time follows the sum is bound by the device's throughput.
+# stop 46 on; from stop 47 on every step's, wide and refinement too, and /the walks of all the
+# step's workgroups summed}): a step whose time follows its longest walk waits on its critical
+# path, one whose time follows the sum is bound by the device's throughput.
 # SDFPRUNE_GPU_SCENES names the scenes (default: molecule, trees and five generated kinds);
 # molecule and trees are read from SDFPRUNE_SCENES (default ../shared/scenes), the others
 # generated. GRID sets `--grid` (default stats' 256; a small one checks the script on lavapipe).
