@@ -509,8 +509,7 @@ void main() {
                     keep_entry(dbase, d == kLeftWins ? l : r, lane, (fl >> 4) & 1u);
                 }
                 walked.y = from - (ended ? first_kept : i);
-                if (ended) i = 0u;
-                if (i == 0u) {
+                if (ended || i == 0u) {
                     note_len(out_len);
                     phase = kPhaseSwept;  // the rest once the workgroup's sweeps have ended
                     i = first_kept;       // the write's first entry: the entries before are dead
@@ -547,14 +546,15 @@ void main() {
             group_walked += s_walked[parity] + s_walked[parity + 1u] + s_walked[parity + 2u];
             if (phase == kPhaseSwept && s_sweeping[s & 1u] == 0u) {
                 // Every lane of the workgroup whose sweep has ended, at once: their appends to
-                // the pool and to refinement's list take one atomic per subgroup.
+                // the pool and to refinement's list take one atomic per subgroup. The new
+                // tape's root node is read from the parent tape (the new one is not written).
+                uint root_node = tape_node(tape_read(parent, 2u + root));
                 if (out_len == len && transient) {
                     // Nothing pruned, and a transient tape: share the parent's.
                     note_depth(pdepth);
                     phase = kPhaseDone;
                     store(dest, true, value, constant, parent, out_len, kNoCell);
-                    list_near_cell(dest, tape_node(tape_read(parent, 1u + len)), out_len, value,
-                                   may_decide);
+                    list_near_cell(dest, root_node, out_len, value, may_decide);
                 } else {
                     at = pool_allocate(transient, out_len + 2u);
                     if (at == kFarField) {
@@ -563,9 +563,7 @@ void main() {
                     } else {
                         tape_write(at, out_len);
                         tape_write(at + 1u, prims);
-                        // (Its root's node from the parent tape: the new tape is not written.)
-                        list_near_cell(dest, tape_node(tape_read(parent, 2u + root)), out_len,
-                                       value, may_decide);
+                        list_near_cell(dest, root_node, out_len, value, may_decide);
                         phase = kPhaseWrite;
                         top = at + 2u;  // the next word to write
                     }
@@ -573,7 +571,8 @@ void main() {
             }
             if (gl_LocalInvocationID.x == 0u) {
                 s_busy[(s + 1u) & 1u] = 0u;
-                for (uint k = 3u - parity; k < 6u - parity; ++k) s_walked[k] = 0u;
+                uint next = 3u - parity;  // the next step's words
+                for (uint k = 0u; k < 3u; ++k) s_walked[next + k] = 0u;
                 s_sweeping[(s + 1u) & 1u] = 0u;
             }
             if (!busy) break;

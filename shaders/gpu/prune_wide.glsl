@@ -689,8 +689,7 @@ void main() {
                 note_depth(s_depth[box]);
                 s_state[box] = 0u;
                 store(dest, true, s_value[box], 0.0, parent, out_len, Cell(0u, 0u, 0.0, 0.0));
-                list_near_cell(dest, tape_node(tape_read(parent, 1u + len)), out_len,
-                               s_value[box], true);
+                list_near_cell(dest, tape_node(root_word), out_len, s_value[box], true);
             } else {
                 // (With subgroups, one append per subgroup.) On overflow the host grows the
                 // pool and redoes the level (see prune.comp).
