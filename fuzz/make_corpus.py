@@ -5,7 +5,8 @@ blendMode (hard and smooth), nesting (left-deep, right-deep, balanced), non-triv
 AABBs, ignored fields; and small .npy files (every format version, shapes of rank 0 to 3, the
 header variants numpy writes, and refused dtypes). Deterministic; run from the repository root:
     python3 fuzz/make_corpus.py
-The reference scenes molecule.json and trees.json are external data and are never copied."""
+The reference scenes (../shared/scenes: test.json, molecule.json, trees.json) are external data
+and are never copied: fuzz/run.sh reads ../shared/scenes as a further seed corpus where it is."""
 import json
 import math
 import os
@@ -53,10 +54,6 @@ PRIMS = {
 
 def scenes():
     out = {}
-    shared = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "scenes", "test.json")
-    if os.path.exists(shared):
-        with open(shared, "rb") as f:
-            out["test"] = f.read().decode()
     for name, p in PRIMS.items():
         out["prim_" + name] = scene(p)
     kinds = list(PRIMS)

@@ -2,7 +2,8 @@
 # Runs each libFuzzer target for FUZZ_SECONDS (default 600) and prints its executions and
 # coverage. Usage: fuzz/run.sh BUILD_DIR [TARGET...] (targets: scene_loader npy_reader
 # prune_eval). The working corpus grows in BUILD_DIR/corpus/<target> (seeded from
-# fuzz/corpus/<target>); crashing, leaking, slow or memory-hungry inputs land in
+# fuzz/corpus/<target>, and for the scene loader from the reference scenes, $SDFPRUNE_SCENES or
+# ../shared/scenes, where they are: external data, not committed); crashing, leaking, slow or memory-hungry inputs land in
 # BUILD_DIR/artifacts/<target>/ — copy them to fuzz/regressions/<target>/ once fixed.
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -17,8 +18,11 @@ for t in "${targets[@]}"; do
     mkdir -p "$build/corpus/$t" "$build/artifacts/$t"
     log="$build/fuzz_$t.log"
     echo "fuzz: $t for ${seconds}s (log: $log)"
+    seeds=("fuzz/corpus/$t")
+    scenes=${SDFPRUNE_SCENES:-../shared/scenes}
+    [ "$t" = scene_loader ] && [ -d "$scenes" ] && seeds+=("$scenes")
     # A slow input (over 10 s) or one needing over 2 GiB counts as a finding.
-    "$build/fuzz_$t" "$build/corpus/$t" "fuzz/corpus/$t" -max_total_time="$seconds" \
+    "$build/fuzz_$t" "$build/corpus/$t" "${seeds[@]}" -max_total_time="$seconds" \
         -timeout=10 -rss_limit_mb=2048 -malloc_limit_mb=2048 -print_final_stats=1 \
         -artifact_prefix="$build/artifacts/$t/" >"$log" 2>&1
     rc=$?
