@@ -109,7 +109,7 @@ for name, r in runs.items():
         "trace_ms": t and t["trace_ms"], "prune_trace_ms": t and t["prune_ms"] + t["trace_ms"],
         "discretize_ms": d and d["eval_ms"], "prune_peak_bytes": g and g["prune_peak_bytes"],
         "cpu_prune_ms": c and c["prune_ms"], "cpu_threads": int(threads), "stats_equal": same,
-        "prune_steps": g and [{k: st.get(k) for k in ("level", "mode", "wide", "jobs", "lanes", "lanes_ms", "long_jobs",
+        "prune_steps": g and [{k: st.get(k) for k in ("level", "mode", "wide", "jobs", "lanes", "lanes_ms", "lane_tape", "long_jobs",
                                                       "longest_walk_words", "gpu_ms")}
                               for st in g.get("gpu_steps", [])]})
 with open(results_path, "w") as f:

@@ -13,7 +13,8 @@
 # (the host's wait for them, the GPU's time in it), the device's making and its
 # reserve (its size and its thread's time: the first call did not wait for it, so where it
 # allocated much, the reserve came too late) and each step's
-# GPU time (L level, o octants, c cells, x refinement, W wide; [lane pass's part]; {the team
+# GPU time (L level, o octants, c cells, x refinement, W wide; [lane pass's part, <its longest
+# tape from stop 48 on]; {the team
 # steps' longest walk of a workgroup, in tape entries, measured on the device: builds from
 # stop 46 on; from stop 47 on every step's, wide and refinement too, and /the walks of all the
 # step's workgroups summed}): a step whose time follows its longest walk waits on its critical
@@ -71,7 +72,8 @@ if d is None:
 else:
     steps = " ".join("L%d%s%s:%.2f" % (s["level"], "bocx"[s["mode"]], "W" if s["wide"] else "",
                                        s["gpu_ms"]) +
-                     ("[%.2f]" % s["lanes_ms"] if s.get("lanes_ms") else "") +
+                     ("[%.2f%s]" % (s["lanes_ms"], "<%d" % s["lane_tape"] if s.get("lane_tape") else "")
+                      if s.get("lanes_ms") else "") +
                      ("{%d/%d}" % (s["walked_words"], s["walked_sum_words"])
                       if s.get("walked_sum_words") else
                       "{%d}" % s["walked_words"] if s.get("walked_words") else "")

@@ -546,6 +546,75 @@ TEST(Gpu, RefinementsSecondPassTakesTheOpenCells) {
     }
 }
 
+// A smooth union of `count` spheres of radius 0.3 whose centres lie on a sphere of radius
+// `spread` (a Fibonacci spiral): near its surface the finest cells' tapes hold many of them.
+Scene sphere_cluster(uint32_t count, float spread, float blend) {
+    SceneBuilder b;
+    Shape cluster = b.sphere(0.3f);
+    for (uint32_t i = 1; i < count; ++i) {
+        const float a = float(i) * 2.39996f, z = 1 - 2 * (float(i) + 0.5f) / float(count);
+        const float r = std::sqrt(1 - z * z);
+        const vec3 centre = spread * vec3(r * std::cos(a), r * std::sin(a), z);
+        cluster = smooth_union(b.sphere(0.3f).translated(centre), cluster, blend);
+    }
+    return b.build(cluster);
+}
+
+// Refinement's lanes take cells with tapes of up to 64 words alone where told
+// (SDFPRUNE_VULKAN_REFINE_LANE_TAPE), leaving the longer ones to the squads. By default they
+// take up to 32 words, or up to 64 where the cells with longer tapes would fill the device's
+// lanes as squads more than once (choose_lane_tape): with many resident lanes, and with few.
+// The cluster's finest cells have tapes of 17 to 80 words. The cells are the CPU's each time.
+TEST(Gpu, RefinementsLanesTakeTapesOfUpTo64Words) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    const Scene sc = sphere_cluster(40, 0.2f, 0.2f);
+    PruneOptions o;
+    o.resolution = 32;
+    PruneOptions unrefined = o;
+    unrefined.refine = 1;
+    const PrunedGrid before = prune(sc, unrefined);
+    uint64_t past_32 = 0, past_64 = 0;  // near cells with longer tapes (to the squads)
+    for (const PrunedCell& c : before.level_cells(before.level_count() - 1)) {
+        if (c.tape == PrunedCell::kFarField) continue;
+        const size_t len = before.tape_at(c.tape).size();
+        past_32 += len > 32;
+        past_64 += len > 64;
+    }
+    ASSERT_GT(past_64, 0u);
+    ASSERT_GT(past_32, past_64);
+    const PrunedGrid cpu = prune(sc, o);
+    const std::unique_ptr<gpu::Device> many =
+        device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "100000000");
+    const std::unique_ptr<gpu::Device> few =
+        device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "64");
+    ASSERT_TRUE(many && few);
+    struct Case {
+        const char* what;
+        gpu::Device& device;
+        const char* lane_tape;  // SDFPRUNE_VULKAN_REFINE_LANE_TAPE, or "" for the choice
+        uint32_t expect_lane_tape;
+        uint64_t expect_long;
+    } cases[] = {{"lanes up to 64 words", *dev, "64", 64, past_64},
+                 {"lanes up to 32 words", *dev, "32", 32, past_32},
+                 {"chosen, many lanes", *many, "", 32, past_32},
+                 {"chosen, 64 lanes", *few, "", 64, past_64}};
+    std::optional<gpu::Grid> first;
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.what);
+        gpu::Grid g =
+            prune_with_env(c.device, sc, o, "SDFPRUNE_VULKAN_REFINE_LANE_TAPE", c.lane_tape);
+        const gpu::GpuStepShape& st = g.stats().steps.back();
+        ASSERT_EQ(st.mode, 3u);
+        EXPECT_EQ(st.lane_tape, c.expect_lane_tape);
+        EXPECT_EQ(st.long_jobs, c.expect_long);
+        expect_matches_cpu(sc, cpu, g, c.device, c.what);
+        if (!first)
+            first.emplace(std::move(g));
+        else if (&c.device == dev)
+            expect_same_device_cells(*first, g, std::string(c.what) + " against 64 words");
+    }
+}
+
 // The finest cells where refinement has nothing to try (refine_need on the CPU: no operator of
 // the cell's tape whose operands at its centre pass blend_may_decide, and no far-field test
 // that might pass), and those with tapes too long to refine, are listed apart and only copied:
@@ -634,7 +703,12 @@ TEST(Gpu, RefinementOrderChangesNoCell) {
     EXPECT_EQ(a.more_jobs, b.more_jobs);
     expect_same_device_cells(ordered, listed, "ordered against listed");
     expect_matches_cpu(sc, prune(sc, o), ordered, *dev, "demo 64³, ordered");
-    const gpu::Grid few = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_RESIDENT_THREADS", "448");
+    // (The device reads its resident threads as it is made.)
+    const std::unique_ptr<gpu::Device> few_lanes =
+        device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "448");
+    ASSERT_TRUE(few_lanes);
+    const gpu::Grid few = gpu::prune(*few_lanes, sc, o);
+    EXPECT_LE(few.stats().steps.back().lanes, 448u);
     EXPECT_GE(few.stats().steps.back().jobs, 3u * 448) << "the lanes' cells in a few rounds only";
     expect_same_device_cells(few, listed, "448 lanes against listed");
 }
@@ -679,22 +753,27 @@ TEST(Gpu, TeamJobOrderChangesNoCell) {
         }
     // (order 3 here: in windows, dealt in advance in rounds, SDFPRUNE_VULKAN_TAKE=0 and
     // SDFPRUNE_VULKAN_SNAKE=0; Gpu.TakenJobsChangeNoCell deals them in a snake)
+    const std::unique_ptr<gpu::Device> few_lanes =
+        device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "448");
+    ASSERT_TRUE(few_lanes);
     for (const char* order : {"1", "2", "3"}) {
         ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", order[0] == '3' ? "1" : order, 1);
         if (order[0] == '3') {
             ::setenv("SDFPRUNE_VULKAN_TAKE", "0", 1);
             ::setenv("SDFPRUNE_VULKAN_SNAKE", "0", 1);
         }
-        const gpu::Grid few =
-            prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_RESIDENT_THREADS", "448");
+        const gpu::Grid few = gpu::prune(*few_lanes, sc, o);
         ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
         ::unsetenv("SDFPRUNE_VULKAN_TAKE");
         ::unsetenv("SDFPRUNE_VULKAN_SNAKE");
         uint64_t rounds = 0;
         for (const gpu::GpuStepShape& st : few.stats().steps)
-            if (in_order(st)) rounds = std::max(rounds, st.jobs / 56);
+            if (in_order(st)) {
+                EXPECT_LE(st.lanes, 448u);
+                rounds = std::max(rounds, st.jobs / 56);
+            }
         EXPECT_GE(rounds, 3u) << "the teams' jobs in a few rounds only";
-        expect_matches_cpu(sc, prune(sc, o), few, *dev,
+        expect_matches_cpu(sc, prune(sc, o), few, *few_lanes,
                            std::string("demo 64³, 56 teams, order ") + order);
     }
 }
@@ -722,13 +801,15 @@ TEST(Gpu, TakenJobsChangeNoCell) {
                  {"56 teams, in order", "0", "1", "448"}};
     for (const Case& c : cases) {
         SCOPED_TRACE(c.what);
+        // (The device reads its resident threads as it is made.)
+        const std::unique_ptr<gpu::Device> own =
+            c.threads ? device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", c.threads) : nullptr;
+        gpu::Device& d = own ? *own : *dev;
         if (c.wide) ::setenv("SDFPRUNE_VULKAN_WIDE", c.wide, 1);
-        if (c.threads) ::setenv("SDFPRUNE_VULKAN_RESIDENT_THREADS", c.threads, 1);
         ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", c.order, 1);
-        const gpu::Grid taken = gpu::prune(*dev, sc, o);
-        const gpu::Grid dealt = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_TAKE", "0");
+        const gpu::Grid taken = gpu::prune(d, sc, o);
+        const gpu::Grid dealt = prune_with_env(d, sc, o, "SDFPRUNE_VULKAN_TAKE", "0");
         ::unsetenv("SDFPRUNE_VULKAN_WIDE");
-        ::unsetenv("SDFPRUNE_VULKAN_RESIDENT_THREADS");
         ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
         const std::vector<gpu::GpuStepShape>&a = taken.stats().steps, &b = dealt.stats().steps;
         ASSERT_EQ(a.size(), b.size());
@@ -747,10 +828,15 @@ TEST(Gpu, TakenJobsChangeNoCell) {
         EXPECT_GT(taking_steps, 0u);
         if (c.threads) {
             EXPECT_GE(most_jobs_a_team, 3u) << "the teams' jobs in a few rounds only";
+            for (const gpu::GpuStepShape& st : a) {
+                if (st.taken) {
+                    EXPECT_LE(st.lanes, std::strtoull(c.threads, nullptr, 10));
+                }
+            }
         }
         expect_same_stats(taken.stats(), dealt.stats(), "taken against dealt");
         expect_same_device_cells(taken, dealt, "taken against dealt");
-        expect_matches_cpu(sc, cpu, taken, *dev, std::string("demo 64³, ") + c.what);
+        expect_matches_cpu(sc, cpu, taken, d, std::string("demo 64³, ") + c.what);
     }
 }
 

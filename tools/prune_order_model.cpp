@@ -52,7 +52,7 @@ uint32_t parent_class(uint32_t len) {
     return std::min(1 + 2 * k + upper, 31u);
 }
 uint32_t walk_class(uint32_t len) {
-    return std::min((len - 1) / 4, 7u);
+    return std::min((len - 1) / 4, 15u);
 }
 
 // Sum over groups of `group` consecutive jobs of the group's longest tape.

@@ -127,6 +127,10 @@ struct GpuStepShape {
     // and the middle), then in a second pass the others of the cells that need them: more_jobs.
     double lanes_ms = 0;
     uint64_t long_jobs = 0;
+    // The longest tape the lane pass took (the longer ones left to the squads): chosen per
+    // slice, by how many cells have longer tapes than 32 words (the most of a level's slices;
+    // 0 without a lane pass).
+    uint32_t lane_tape = 0;
     uint64_t more_jobs = 0;
     // Refinement's jobs (within `jobs`) that it only copies: the cells where it has nothing to
     // try (no operator a sub-box might decide, no far-field test that might pass), or tapes
@@ -191,6 +195,7 @@ void for_each_figure(const GpuStepShape& st, Add&& add) {
     add("gpu_ms", st.gpu_ms);
     add("lanes_ms", st.lanes_ms);
     add("long_jobs", st.long_jobs);
+    add("lane_tape", st.lane_tape);
     add("more_jobs", st.more_jobs);
     add("copy_jobs", st.copy_jobs);
     add("scratch_bytes", st.scratch_bytes);

@@ -29,7 +29,7 @@
 const uint kFlagNegated = 64u, kFlagPrimitive = 128u;
 
 const uint kTeam = 8u;  // boxes per job: lanes per team (gpu_prune.cpp: kPruneTeam)
-const uint kWalkClasses = 8u;  // refine_walk_class's (device_layout.hpp: kRefineWalkClasses)
+const uint kWalkClasses = 16u;  // refine_walk_class's (device_layout.hpp: kRefineWalkClasses)
 // The team steps' order classes (prune_team.glsl: parent_class; device_layout.hpp:
 // kPruneOrderClasses).
 const uint kOrderClasses = 32u;
@@ -318,10 +318,12 @@ bool refine_far_may_pass(uint root_node, uint len, float value) {
 // test that might pass, or a tape too long to refine. Refinement's lanes then take the walks in
 // runs of neighbouring jobs and the copies in others, instead of copies beside walks in every
 // subgroup, where a subgroup takes as long as its longest lane.
-// A cell to decide again goes to the list with its walk class (bits 28-30, counted in
+// A cell to decide again goes to the list with its walk class (bits 28-31, counted in
 // walk_cells), which refinement's order pass sorts the list by.
 const uint kCellBits = 0x0fffffffu;  // a list entry's cell (below 2^28: 16-byte cells in a buffer)
-const uint kCopyOnly = 0x80000000u;  // set on the entries of cells only copied (refine_job)
+// Set on refine_job's entries of cells only copied (its entries of cells to decide again are
+// the cell alone, their class taken off).
+const uint kCopyOnly = 0x80000000u;
 uint refine_walk_class(uint len) { return min((len - 1u) / 4u, kWalkClasses - 1u); }
 // With PRUNE_SUBGROUPS, the lanes of a subgroup that list cells together take their places in
 // both lists with one atomic each (as pool_allocate).
@@ -357,12 +359,14 @@ uint snake_deal(uint j, uint first, uint width, uint end) {
     return (r & 1u) != 0u ? r0 + (min(width, end - r0) - 1u) - (j - r0) : j;
 }
 
-// Refinement's job k, below refine_cells + copy_cells: its list entry (the cell in kCellBits),
-// with kCopyOnly set where the cell is only copied (list_near_cell). The cells to decide again
-// come first, in the order pass's order where it ran (flag 256), longest walks first.
+// Refinement's job k, below refine_cells + copy_cells: its cell, with kCopyOnly set where the
+// cell is only copied (list_near_cell). The cells to decide again come first, in the order
+// pass's order where it ran (flag 256), longest walks first.
 uint refine_job(uint k) {
-    if (k < refine_cells)
-        return (pc.flags & 256u) != 0u ? scratch[pc.order_start + k] : refine_list[k];
+    if (k < refine_cells) {
+        uint entry = (pc.flags & 256u) != 0u ? scratch[pc.order_start + k] : refine_list[k];
+        return entry & kCellBits;
+    }
     return refine_list[uint(refine_list.length()) - 1u - (k - refine_cells)] | kCopyOnly;
 }
 

@@ -8,10 +8,12 @@
 // block, its tape, the nodes) is waited for by 32 cells of a subgroup at once, where a squad
 // (prune_refine.comp) waits for it alone. The lane's tape, left operands and stack are private
 // arrays (which the device keeps in memory, cached); an entry's decisions and sweep flags are
-// bits of six registers. (Everything in registers and shared memory instead cost 18 registers
-// and 13 KB of shared memory a workgroup, and ran 1.7× slower on an H100: BENCHMARKS.md, stop
-// 30.) Cells with longer tapes are listed for the squads, in the long
-// list (scratch[pc.list_start], counted in long_jobs).
+// bits of registers, two a set (up to 64 entries). (Everything in registers and shared memory
+// instead cost 18 registers and 13 KB of shared memory a workgroup, and ran 1.7× slower on an
+// H100: BENCHMARKS.md, stop 30.) Cells with longer tapes are listed for the squads, in the long
+// list (scratch[pc.list_start], counted in long_jobs). The host sets pc.lane_tape per slice
+// (gpu_prune_plan.cpp: choose_lane_tape): 32, or 64 where the squads would otherwise take
+// the longer tapes in several rounds.
 // Job k takes refinement's job k (refine_job), for k below refine_cells + copy_cells (listed by
 // the cells step): the cells to decide again, then those only copied, whose lanes copy alike;
 // the far-field cells stay in binding 5 as they are.
@@ -26,31 +28,34 @@ layout(local_size_x = 64) in;
 #include "cells.glsl"
 #include "prune_common.glsl"
 
-const uint kLaneTape = 32u;  // the longest tape a lane refines (device_layout.hpp)
+const uint kLaneTape = 64u;  // the longest tape a lane refines (device_layout.hpp)
 
 uint r_word[kLaneTape], r_left[kLaneTape];
-// Bit i of each: entry i was decided 0, 1, 2 in some sub-box; is kept, skipped, negated; is a
-// primitive (set as the tape is read, before the walks).
-uint r_seen0, r_seen1, r_seen2, r_kept, r_skipped, r_negated, r_primitive;
+// Bit i of each (a set of kLaneTape bits, 32 to a word: mask_bit): entry i was decided 0, 1, 2
+// in some sub-box; is kept, skipped, negated; is a primitive (set as the tape is read, before
+// the walks).
+uvec2 r_seen0, r_seen1, r_seen2, r_kept, r_skipped, r_negated, r_primitive;
+
+uint mask_bit(uvec2 m, uint i) { return (m[i >> 5] >> (i & 31u)) & 1u; }
+uvec2 mask_of(uint i) { return i < 32u ? uvec2(1u << i, 0u) : uvec2(0u, 1u << (i - 32u)); }
+uvec2 mask_set(uvec2 m, uint i, bool on) { return on ? m | mask_of(i) : m & ~mask_of(i); }
 
 uint refine_seen(uint i) {
-    return ((r_seen0 >> i) & 1u) | (((r_seen1 >> i) & 1u) << 1) | (((r_seen2 >> i) & 1u) << 2);
+    return mask_bit(r_seen0, i) | (mask_bit(r_seen1, i) << 1) | (mask_bit(r_seen2, i) << 2);
 }
 void refine_see(uint i, uint bits) {
-    uint b = 1u << i;
+    uvec2 b = mask_of(i);
     if ((bits & 1u) != 0u) r_seen0 |= b;
     if ((bits & 2u) != 0u) r_seen1 |= b;
     if ((bits & 4u) != 0u) r_seen2 |= b;
 }
 uint refine_flag(uint i) {
-    uint alive = ((r_kept >> i) & 1u) | (((r_skipped >> i) & 1u) << 1);
-    return alive | (((r_negated >> i) & 1u) << 2);
+    return mask_bit(r_kept, i) | (mask_bit(r_skipped, i) << 1) | (mask_bit(r_negated, i) << 2);
 }
 void refine_set_flag(uint i, uint f) {
-    uint b = 1u << i;
-    r_kept = (f & 3u) == 1u ? r_kept | b : r_kept & ~b;
-    r_skipped = (f & 3u) == 2u ? r_skipped | b : r_skipped & ~b;
-    r_negated = (f & 4u) != 0u ? r_negated | b : r_negated & ~b;
+    r_kept = mask_set(r_kept, i, (f & 3u) == 1u);
+    r_skipped = mask_set(r_skipped, i, (f & 3u) == 2u);
+    r_negated = mask_set(r_negated, i, (f & 4u) != 0u);
 }
 #define REFINE_WORD(i) r_word[i]
 #define REFINE_SEEN(i) refine_seen(i)
@@ -59,7 +64,7 @@ void refine_set_flag(uint i, uint f) {
 #define REFINE_SET_LEFT(i, l) r_left[i] = (l)
 #define REFINE_FLAG(i) refine_flag(i)
 #define REFINE_SET_FLAG(i, f) refine_set_flag(i, f)
-#define REFINE_IS_PRIMITIVE(i) (((r_primitive >> (i)) & 1u) != 0u)
+#define REFINE_IS_PRIMITIVE(i) (mask_bit(r_primitive, i) != 0u)
 const uint kRefineStack = kLaneTape / 2u + 1u;
 // Sub-boxes a lane walks its tape for at once: a row of the default 3³, so that an entry's
 // node and primitive are read once for three boxes. On an H200 (BENCHMARKS.md, stop 35) the
@@ -101,7 +106,7 @@ uint first_count(uint subs) {
 }
 
 // A cell's refinement state between the passes (in the more list, kMoreWords a cell).
-const uint kMoreWords = 7u;  // device_layout.hpp: kRefineMoreWords
+const uint kMoreWords = 10u;  // device_layout.hpp: kRefineMoreWords
 
 // The order pass (push flag 128), before the first pass: the list's cells to decide again
 // (refine_cells of them, each with its walk class) sorted by class into the order list
@@ -124,7 +129,7 @@ void order_walks() {
         barrier();
         bool has = first + lane < n;
         uint entry = has ? refine_list[first + lane] : 0u;
-        uint c = (entry >> 28) & (kWalkClasses - 1u);
+        uint c = entry >> 28;  // (kWalkClasses: four bits)
         uint rank = has ? atomicAdd(s_class_count[c], 1u) : 0u;
         memoryBarrierShared();
         barrier();
@@ -175,16 +180,16 @@ void main() {
         bool copy = false;
         uint far_flags = far_field ? 3u : 0u;
         float lowest = kInfinity, highest = -kInfinity;
-        r_seen0 = r_seen1 = r_seen2 = r_kept = r_skipped = r_negated = r_primitive = 0u;
+        r_seen0 = r_seen1 = r_seen2 = r_kept = r_skipped = r_negated = r_primitive = uvec2(0u);
         if (second) {
             uint at = pc.more_start + job * kMoreWords;
             cell = scratch[at];
-            r_seen0 = scratch[at + 1u];
-            r_seen1 = scratch[at + 2u];
-            r_seen2 = scratch[at + 3u];
-            far_flags = scratch[at + 4u];
-            lowest = uintBitsToFloat(scratch[at + 5u]);
-            highest = uintBitsToFloat(scratch[at + 6u]);
+            r_seen0 = uvec2(scratch[at + 1u], scratch[at + 2u]);
+            r_seen1 = uvec2(scratch[at + 3u], scratch[at + 4u]);
+            r_seen2 = uvec2(scratch[at + 5u], scratch[at + 6u]);
+            far_flags = scratch[at + 7u];
+            lowest = uintBitsToFloat(scratch[at + 8u]);
+            highest = uintBitsToFloat(scratch[at + 9u]);
         } else {
             uint entry = refine_job(job);
             copy = (entry & kCopyOnly) != 0u;
@@ -209,7 +214,7 @@ void main() {
         for (uint k = 0u; k < len; ++k) {
             uint w = tape_read(parent, 2u + k);
             r_word[k] = w;
-            if (is_primitive(tape_node(w))) r_primitive |= 1u << k;
+            if (is_primitive(tape_node(w))) r_primitive |= mask_of(k);
         }
         // Stage 1 over each sub-box, then stage 2: the far-field test of is_near_field on the
         // sub-box's root range against the whole cell's clearance. The sub-boxes in visiting
@@ -245,19 +250,22 @@ void main() {
         // After the first boxes: an operator that every one decided alike (left, or right,
         // never both kept) may still be decided for the cell, and a far-field test still open
         // needs every sub-box. Otherwise the other sub-boxes change nothing.
-        uint open_operators = (r_seen1 ^ r_seen2) & ~r_seen0;
-        if (k1 < nsub && (open_operators != 0u || far_flags != 0u)) {
+        uvec2 open_operators = (r_seen1 ^ r_seen2) & ~r_seen0;
+        if (k1 < nsub && (any(notEqual(open_operators, uvec2(0u))) || far_flags != 0u)) {
             // The lanes that list a cell together take their places with one atomic.
             uint listed;
             SUBGROUP_APPEND(listed, more_jobs, true);
             uint at = pc.more_start + listed * kMoreWords;
             scratch[at] = cell;
-            scratch[at + 1u] = r_seen0;
-            scratch[at + 2u] = r_seen1;
-            scratch[at + 3u] = r_seen2;
-            scratch[at + 4u] = far_flags;
-            scratch[at + 5u] = floatBitsToUint(lowest);
-            scratch[at + 6u] = floatBitsToUint(highest);
+            scratch[at + 1u] = r_seen0.x;
+            scratch[at + 2u] = r_seen0.y;
+            scratch[at + 3u] = r_seen1.x;
+            scratch[at + 4u] = r_seen1.y;
+            scratch[at + 5u] = r_seen2.x;
+            scratch[at + 6u] = r_seen2.y;
+            scratch[at + 7u] = far_flags;
+            scratch[at + 8u] = floatBitsToUint(lowest);
+            scratch[at + 9u] = floatBitsToUint(highest);
             continue;
         }
         if (far_flags != 0u)

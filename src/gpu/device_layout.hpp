@@ -45,7 +45,7 @@ struct GpuGridParams {  // GridParams
 // copy_cells: the entries at the back of refinement's list, the cells it only copies.
 // walk_cells: the cells listed to decide again, per walk class; walk_placed: the order pass's
 // places taken per class (prune_refine_lanes.comp).
-inline constexpr uint32_t kRefineWalkClasses = 8;   // prune_common.glsl: kWalkClasses
+inline constexpr uint32_t kRefineWalkClasses = 16;  // prune_common.glsl: kWalkClasses
 inline constexpr uint32_t kPruneOrderClasses = 32;  // prune_common.glsl: kOrderClasses
 inline constexpr uint32_t kPruneWalkSlots = 8;      // prune_common.glsl: kWalkSlots
 struct GpuCounters {
@@ -69,8 +69,9 @@ struct GpuCounters {
 // lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step
 // and phase. prune_refine.comp: kSquad, the lanes that refine one cell.
 // prune_refine_lanes.comp: kLaneTapeMax, the longest tape a lane may refine alone (the size of
-// its arrays); kRefineLaneTape, the longest it does unless SDFPRUNE_VULKAN_REFINE_LANE_TAPE says
-// (0: no lane pass, squads for every cell).
+// its arrays); kRefineLaneTape, the longest it does where few cells have longer tapes
+// (Pruner::choose_lane_tape), unless SDFPRUNE_VULKAN_REFINE_LANE_TAPE says (0: no lane pass,
+// squads for every cell).
 inline constexpr uint64_t kPruneStateWords = 16;
 inline constexpr uint64_t kPruneTeam = 8;
 inline constexpr uint64_t kPruneWindow = 64;
@@ -78,12 +79,12 @@ inline constexpr uint64_t kPruneWindow = 64;
 // kOrderWindow).
 inline constexpr uint64_t kPruneOrderWindow = 256;
 inline constexpr uint64_t kRefineSquad = 32;
-inline constexpr uint32_t kLaneTapeMax = 32;
+inline constexpr uint32_t kLaneTapeMax = 64;
 inline constexpr uint32_t kRefineLaneTape = 32;
 // prune_refine_lanes.comp: kFirstBoxes, the sub-boxes (the corners and the middle) its first
 // pass walks for every cell; kMoreWords, the words of a cell's state in the more list.
 inline constexpr uint64_t kRefineFirstBoxes = 9;
-inline constexpr uint64_t kRefineMoreWords = 7;
+inline constexpr uint64_t kRefineMoreWords = 10;
 // prune_wide.comp: kWide, the lanes of a workgroup that takes one team job (kPruneTeam boxes of
 // one parent tape); its scratch words for `items` items (an item per tape entry and box:
 // value and range, then its flags a byte: prune_wide.glsl's item_words); kWideHeightWords, per
@@ -136,13 +137,13 @@ static_assert(sizeof(GpuNode) == 16 && sizeof(GpuPrimitiveExtra) == 48);
 static_assert(sizeof(math::PrimitiveParams) == 96 && offsetof(math::PrimitiveParams, a) == 48);
 static_assert(sizeof(PrunedCell) == 16 && offsetof(PrunedCell, value) == 8);
 static_assert(sizeof(GpuBlock) == 16 && sizeof(GpuLevel) == 16 && sizeof(GpuGridParams) == 64);
-static_assert(sizeof(GpuCounters) == 152 + 4 * 4 * kPruneOrderClasses + 8 * kPruneWalkSlots &&
+static_assert(sizeof(GpuCounters) == 216 + 4 * 4 * kPruneOrderClasses + 8 * kPruneWalkSlots &&
               offsetof(GpuCounters, near_lo) == 44 && offsetof(GpuCounters, long_jobs) == 68 &&
               offsetof(GpuCounters, copy_cells) == 76 &&
-              offsetof(GpuCounters, walk_placed) == 112 &&
-              offsetof(GpuCounters, scratch_claimed) == 144 &&
-              offsetof(GpuCounters, order_placed) == 148 + 4 * 2 * kPruneOrderClasses &&
-              offsetof(GpuCounters, jobs_taken) == 148 + 4 * 4 * kPruneOrderClasses);
+              offsetof(GpuCounters, walk_placed) == 80 + 4 * kRefineWalkClasses &&
+              offsetof(GpuCounters, scratch_claimed) == 80 + 8 * kRefineWalkClasses &&
+              offsetof(GpuCounters, order_placed) == 212 + 4 * 2 * kPruneOrderClasses &&
+              offsetof(GpuCounters, jobs_taken) == 212 + 4 * 4 * kPruneOrderClasses);
 static_assert(offsetof(PrunePush, first_job) == 64 && sizeof(PrunePush) == 128);
 static_assert(sizeof(TraceParams) == 192 && sizeof(DiscretizeParams) == 96);
 static_assert(sizeof(GpuPixel) == 32 && sizeof(SlicePush) == 32);

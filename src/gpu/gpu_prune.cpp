@@ -162,9 +162,11 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
     }
     // The longest tape refinement's lane pass takes, at most its arrays' (0: no lane pass,
     // squads for every cell; for tests and measurements; and where the device cannot run it).
-    if (const char* env = std::getenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE"); env && *env)
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE"); env && *env) {
         refine_lane_tape =
             std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), kLaneTapeMax);
+        lane_tape_fixed = true;
+    }
     if (!ctx.can_run(KernelId::kPruneRefineLanes)) refine_lane_tape = 0;
     refine_second_pass = env_flag("SDFPRUNE_VULKAN_REFINE_SECOND_PASS", refine_second_pass);
     refine_order = env_flag("SDFPRUNE_VULKAN_REFINE_ORDER", refine_order);
@@ -377,6 +379,7 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             if (room > capacity) resize(g.pool, capacity, room, g.pool_words);
             max_len = std::max(sc->max_len, 1u);
             max_depth = std::max(sc->max_depth, 1u);
+            lane_tape = choose_lane_tape(lv);
             std::vector<Step> refinement = plan_step(lv, 3, b0, blocks_in, blocks_in * lv.per_block,
                                                      *lv.cells, *lv.cells, false);
             const GpuCounters rc = *run_steps(lv, refinement, false, sc->octant_used, false,
@@ -545,6 +548,7 @@ void Pruner::add_shape(const Level& lv, const GpuStepShape& shape) {
     same->gpu_ms += shape.gpu_ms;
     same->lanes_ms += shape.lanes_ms;
     same->long_jobs += shape.long_jobs;
+    same->lane_tape = std::max(same->lane_tape, shape.lane_tape);
     same->more_jobs += shape.more_jobs;
     same->copy_jobs += shape.copy_jobs;
     same->scratch_bytes = std::max(same->scratch_bytes, shape.scratch_bytes);

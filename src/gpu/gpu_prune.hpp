@@ -91,6 +91,7 @@ class Pruner {
                                 const Buffer& cells, bool transient);
     Step plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, uint64_t blocks,
                     uint64_t jobs, const Buffer& octants, const Buffer& cells, bool transient);
+    uint32_t choose_lane_tape(const Level& lv) const;
     Step plan_refine_lanes(const Step& squads, bool second_pass) const;
     Step plan_refine_more(const Step& lanes) const;
     Step plan_order_pass(const Step& step, uint64_t items, uint64_t per_group) const;
@@ -161,9 +162,12 @@ class Pruner {
     uint32_t wide_split = 0;  // SDFPRUNE_VULKAN_WIDE_SPLIT (1, 2, 4 or 8); 0: plan_wide's choice
     int wide_runs_override =
         -1;  // SDFPRUNE_VULKAN_WIDE_RUNS=0|1: prune_wide_runs.comp never, always
-    // The longest tape refinement's lane pass takes (prune_refine_lanes.comp);
-    // SDFPRUNE_VULKAN_REFINE_LANE_TAPE.
-    uint32_t refine_lane_tape = kRefineLaneTape;
+    // The longest tape refinement's lane pass takes (prune_refine_lanes.comp), chosen per slice
+    // (choose_lane_tape): kRefineLaneTape, or up to kLaneTapeMax where the squads would take
+    // the longer tapes in more than one round. SDFPRUNE_VULKAN_REFINE_LANE_TAPE fixes it.
+    uint32_t refine_lane_tape = kLaneTapeMax;
+    bool lane_tape_fixed = false;
+    uint32_t lane_tape = 0;  // the current slice's (choose_lane_tape)
     // The lane pass walks every cell's first sub-boxes, then the others of the cells that need
     // them in a second pass; SDFPRUNE_VULKAN_REFINE_SECOND_PASS=0: all of them in one pass.
     bool refine_second_pass = true;

@@ -64,8 +64,7 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
             return {plan_job_order(teams, parents, 4), plan_job_order(teams, parents, 5), teams};
         }
     }
-    if (mode != 3 || refine_lane_tape == 0 || 4 * teams.team_jobs > ctx.max_buffer_bytes())
-        return {teams};
+    if (mode != 3 || lane_tape == 0 || 4 * teams.team_jobs > ctx.max_buffer_bytes()) return {teams};
     // Scratch: the long list (a word a cell), then the more list (kRefineMoreWords a listed
     // near cell), where the lane pass takes two passes: unless set off, or the lists would not
     // fit a buffer; then the order list (a word a listed near cell), unless set off or it would
@@ -87,7 +86,7 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
     }
     steps.push_back(lanes);
     if (more) steps.push_back(plan_refine_more(lanes));
-    if (max_len <= refine_lane_tape) return steps;
+    if (max_len <= lane_tape) return steps;
     teams.listed = true;
     teams.push.flags |= 8u;
     teams.shape.jobs = 0;  // the lanes' (one shape, add_shape)
@@ -274,16 +273,32 @@ PrunePush Pruner::push_for(const Level& lv, uint32_t mode, uint32_t threads, uin
                      kPruneWalkSlots};
 }
 
+// The longest tape refinement's lanes take alone in the current slice (`lv`'s listed cells, by
+// walk class). A squad refines a cell sooner than a lane (its lanes walk the sub-boxes at
+// once), as long as the squads of the cells with longer tapes all run at once. Where they
+// would take more than one round of the lanes the device runs at once, a lane a cell spreads
+// them over more of the device instead. So the lanes take tapes of up to kRefineLaneTape
+// words, and up to refine_lane_tape (kLaneTapeMax) where the cells of the walk classes past
+// kRefineLaneTape (refine_walk_class: 4 words a class) would fill the device's lanes as
+// squads more than once (at 256³ planned as on an H100, 270,336 lanes: trees' 40,033 such
+// cells would take 1.28 M lanes; molecule's 3,861, 124 k).
+uint32_t Pruner::choose_lane_tape(const Level& lv) const {
+    if (lane_tape_fixed || refine_lane_tape <= kRefineLaneTape) return refine_lane_tape;
+    uint64_t longer = 0;
+    for (uint32_t c = kRefineLaneTape / 4; c < kRefineWalkClasses; ++c) longer += lv.walk_cells[c];
+    return longer * kRefineSquad > ctx.resident_threads() ? refine_lane_tape : kRefineLaneTape;
+}
+
 // Refinement's lane pass (prune_refine_lanes.comp): a lane per listed cell, as many lanes as
 // the device runs at once in a grid-stride loop, each refining its cell alone where its tape
-// has at most refine_lane_tape words, and listing it for the squads where not (from scratch
+// has at most lane_tape words, and listing it for the squads where not (from scratch
 // word 0), and with `second_pass` walking only the first sub-boxes of each cell, listing the
 // cells that need the others for its second pass (the more list, past the long list). Under a
 // loop limit (lavapipe), as many cells per lane and dispatch as its loops allow: per cell, the
 // tape staged, one walk per sub-box (every one, at most), the sweep and the write.
 Step Pruner::plan_refine_lanes(const Step& squads, bool second_pass) const {
     Step s = squads;
-    const uint64_t len = std::min<uint64_t>(max_len, refine_lane_tape);
+    const uint64_t len = std::min<uint64_t>(max_len, lane_tape);
     const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
     const uint64_t walk = (second_pass ? std::min(subs, kRefineFirstBoxes) : subs) * len;
     const uint64_t per_cell = subs * len + subs + 3 * len + 8;
@@ -304,7 +319,8 @@ Step Pruner::plan_refine_lanes(const Step& squads, bool second_pass) const {
     s.push.list_start = 0;
     s.push.more_start = uint32_t(s.team_jobs);  // past the long list
     if (!second_pass) s.push.flags |= 64u;      // every sub-box in one pass
-    s.push.lane_tape = refine_lane_tape;
+    s.push.lane_tape = lane_tape;
+    s.shape.lane_tape = lane_tape;
     s.job_walk = walk;
     s.shape.lanes_per_tape = 1;
     s.shape.lanes = lanes;
@@ -326,7 +342,7 @@ Step Pruner::plan_refine_order(const Step& lanes, uint64_t listed) const {
 // count is the device's (more_jobs): its dispatches are recorded for all the first pass's.
 Step Pruner::plan_refine_more(const Step& lanes) const {
     Step s = lanes;
-    const uint64_t len = std::min<uint64_t>(max_len, refine_lane_tape);
+    const uint64_t len = std::min<uint64_t>(max_len, lane_tape);
     const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
     s.second_pass = true;
     s.push.flags |= 32u;

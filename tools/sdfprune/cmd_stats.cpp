@@ -305,9 +305,9 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                          std::printf(", scratch %.1f MB", double(st.scratch_bytes) / 1e6);
                      if (st.mode == 3)  // refinement: its lane pass
                          std::printf(
-                             " (%llu only copied; lane pass %.2f ms, %llu cells past the first "
-                             "sub-boxes, %llu left to squads)",
-                             (unsigned long long)st.copy_jobs, st.lanes_ms,
+                             " (%llu only copied; lane pass over tapes of up to %u words %.2f "
+                             "ms, %llu cells past the first sub-boxes, %llu left to squads)",
+                             (unsigned long long)st.copy_jobs, st.lane_tape, st.lanes_ms,
                              (unsigned long long)st.more_jobs, (unsigned long long)st.long_jobs);
                      std::printf("\n");
                  }
