@@ -73,6 +73,13 @@ const uint kRefineStack = kLaneTape / 2u + 1u;
 #define REFINE_BATCH 3
 #include "refine_common.glsl"
 
+// Whether some operator is still open: decided alike (left, or right) in every sub-box so far,
+// never kept whole, so that other sub-boxes may yet change its decision.
+bool any_open_operator() {
+    uvec2 open = (r_seen1 ^ r_seen2) & ~r_seen0;
+    return any(notEqual(open, uvec2(0u)));
+}
+
 // The cell's sub-boxes in refine_cell's visiting order (prune_cell.cpp: sub_box_order), split
 // in two: the first kFirstBoxes, the 8 corners and the middle, then the others. On the CPU's
 // reference scenes two cells in three are decided by the first ones alone (no operator left that
@@ -224,7 +231,7 @@ void main() {
         float clearance = far_field_clearance(pc.csize.w, L, radius);
         uint b = 0u;  // the next sub-box of all, past the first ones
         uvec3 sc = uvec3(0u);
-        walked += len * (1u + (k1 - k0 + REFINE_BATCH - 1u) / REFINE_BATCH);  // staged, walks
+        walked += len;  // staged
         for (uint k = k0; k < k1; k += REFINE_BATCH) {
             // A batch past the last sub-box repeats it.
             vec3 p[REFINE_BATCH];
@@ -240,18 +247,21 @@ void main() {
             }
             vec2 range[REFINE_BATCH];
             refine_sub_boxes(len, p, sub_half, sub_R, interval, L, k == k0, range);
+            walked += len;
             for (uint j = 0u; j < REFINE_BATCH; ++j) {
                 if (!clears_above(range[j].x, clearance)) far_flags &= ~1u;
                 if (!clears_below(range[j].y, clearance)) far_flags &= ~2u;
                 lowest = min(lowest, range[j].x);
                 highest = max(highest, range[j].y);
             }
+            // A cell with no operator still open and its far-field test closed is done: the
+            // other sub-boxes change nothing (as refine_cells stops).
+            if (far_flags == 0u && !any_open_operator()) break;
         }
         // After the first boxes: an operator that every one decided alike (left, or right,
         // never both kept) may still be decided for the cell, and a far-field test still open
         // needs every sub-box. Otherwise the other sub-boxes change nothing.
-        uvec2 open_operators = (r_seen1 ^ r_seen2) & ~r_seen0;
-        if (k1 < nsub && (any(notEqual(open_operators, uvec2(0u))) || far_flags != 0u)) {
+        if (k1 < nsub && (any_open_operator() || far_flags != 0u)) {
             // The lanes that list a cell together take their places with one atomic.
             uint listed;
             SUBGROUP_APPEND(listed, more_jobs, true);
