@@ -112,8 +112,12 @@ uint first_count(uint subs) {
     return min(subs * subs * subs, mid_is_corner ? 8u : kFirstBoxes);
 }
 
-// A cell's refinement state between the passes (in the more list, kMoreWords a cell).
-const uint kMoreWords = 10u;  // device_layout.hpp: kRefineMoreWords
+// A cell's refinement state between the passes, in the more list: the cell, its far-field flags
+// and range, its entries' decisions (seen0, seen1, seen2: their low words, then where the lanes
+// take tapes of more than 32 words their high words), kMoreWords words a cell, or 3 fewer
+// (device_layout.hpp: refine_more_words).
+const uint kMoreWords = 10u;
+uint more_words() { return pc.lane_tape > 32u ? kMoreWords : kMoreWords - 3u; }
 
 // The order pass (push flag 128), before the first pass: the list's cells to decide again
 // (refine_cells of them, each with its walk class) sorted by class into the order list
@@ -189,14 +193,17 @@ void main() {
         float lowest = kInfinity, highest = -kInfinity;
         r_seen0 = r_seen1 = r_seen2 = r_kept = r_skipped = r_negated = r_primitive = uvec2(0u);
         if (second) {
-            uint at = pc.more_start + job * kMoreWords;
+            uint at = pc.more_start + job * more_words();
             cell = scratch[at];
-            r_seen0 = uvec2(scratch[at + 1u], scratch[at + 2u]);
-            r_seen1 = uvec2(scratch[at + 3u], scratch[at + 4u]);
-            r_seen2 = uvec2(scratch[at + 5u], scratch[at + 6u]);
-            far_flags = scratch[at + 7u];
-            lowest = uintBitsToFloat(scratch[at + 8u]);
-            highest = uintBitsToFloat(scratch[at + 9u]);
+            far_flags = scratch[at + 1u];
+            lowest = uintBitsToFloat(scratch[at + 2u]);
+            highest = uintBitsToFloat(scratch[at + 3u]);
+            uvec3 high = more_words() == kMoreWords
+                             ? uvec3(scratch[at + 7u], scratch[at + 8u], scratch[at + 9u])
+                             : uvec3(0u);
+            r_seen0 = uvec2(scratch[at + 4u], high.x);
+            r_seen1 = uvec2(scratch[at + 5u], high.y);
+            r_seen2 = uvec2(scratch[at + 6u], high.z);
         } else {
             uint entry = refine_job(job);
             copy = (entry & kCopyOnly) != 0u;
@@ -265,17 +272,19 @@ void main() {
             // The lanes that list a cell together take their places with one atomic.
             uint listed;
             SUBGROUP_APPEND(listed, more_jobs, true);
-            uint at = pc.more_start + listed * kMoreWords;
+            uint at = pc.more_start + listed * more_words();
             scratch[at] = cell;
-            scratch[at + 1u] = r_seen0.x;
-            scratch[at + 2u] = r_seen0.y;
-            scratch[at + 3u] = r_seen1.x;
-            scratch[at + 4u] = r_seen1.y;
-            scratch[at + 5u] = r_seen2.x;
-            scratch[at + 6u] = r_seen2.y;
-            scratch[at + 7u] = far_flags;
-            scratch[at + 8u] = floatBitsToUint(lowest);
-            scratch[at + 9u] = floatBitsToUint(highest);
+            scratch[at + 1u] = far_flags;
+            scratch[at + 2u] = floatBitsToUint(lowest);
+            scratch[at + 3u] = floatBitsToUint(highest);
+            scratch[at + 4u] = r_seen0.x;
+            scratch[at + 5u] = r_seen1.x;
+            scratch[at + 6u] = r_seen2.x;
+            if (more_words() == kMoreWords) {
+                scratch[at + 7u] = r_seen0.y;
+                scratch[at + 8u] = r_seen1.y;
+                scratch[at + 9u] = r_seen2.y;
+            }
             continue;
         }
         if (far_flags != 0u)

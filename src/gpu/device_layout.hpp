@@ -82,9 +82,12 @@ inline constexpr uint64_t kRefineSquad = 32;
 inline constexpr uint32_t kLaneTapeMax = 64;
 inline constexpr uint32_t kRefineLaneTape = 32;
 // prune_refine_lanes.comp: kFirstBoxes, the sub-boxes (the corners and the middle) its first
-// pass walks for every cell; kMoreWords, the words of a cell's state in the more list.
+// pass walks for every cell; more_words(), the words of a cell's state in the more list (its
+// entries' decisions in two words each where the lanes take tapes of more than 32 words).
 inline constexpr uint64_t kRefineFirstBoxes = 9;
-inline constexpr uint64_t kRefineMoreWords = 10;
+inline constexpr uint64_t refine_more_words(uint32_t lane_tape) {
+    return lane_tape > 32 ? 10 : 7;
+}
 // prune_wide.comp: kWide, the lanes of a workgroup that takes one team job (kPruneTeam boxes of
 // one parent tape); its scratch words for `items` items (an item per tape entry and box:
 // value and range, then its flags a byte: prune_wide.glsl's item_words); kWideHeightWords, per

@@ -65,11 +65,11 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
         }
     }
     if (mode != 3 || lane_tape == 0 || 4 * teams.team_jobs > ctx.max_buffer_bytes()) return {teams};
-    // Scratch: the long list (a word a cell), then the more list (kRefineMoreWords a listed
+    // Scratch: the long list (a word a cell), then the more list (refine_more_words a listed
     // near cell), where the lane pass takes two passes: unless set off, or the lists would not
     // fit a buffer; then the order list (a word a listed near cell), unless set off or it would
     // not fit.
-    const uint64_t more_bytes = 4 * kRefineMoreWords * uint64_t(lv.listed_cells);
+    const uint64_t more_bytes = 4 * refine_more_words(lane_tape) * uint64_t(lv.listed_cells);
     const bool more = refine_second_pass &&
                       uint64_t(opt.refine) * opt.refine * opt.refine > kRefineFirstBoxes &&
                       4 * teams.team_jobs + more_bytes <= ctx.max_buffer_bytes();
