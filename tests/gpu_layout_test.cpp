@@ -413,6 +413,9 @@ constexpr uint32_t kPruneBytesSpv[] = {
 constexpr uint32_t kPruneRefineLanesSpv[] = {
 #include "prune_refine_lanes.reflect.spv.inc"
 };
+constexpr uint32_t kPruneRefineLanesLongSpv[] = {
+#include "prune_refine_lanes_long.reflect.spv.inc"
+};
 constexpr uint32_t kPruneRefineSpv[] = {
 #include "prune_refine.reflect.spv.inc"
 };
@@ -440,6 +443,7 @@ constexpr uint32_t kDiscretizeSpv[] = {
 const EmbeddedKernel kKernels[] = {{"prune", kPruneSpv},
                                    {"prune_bytes", kPruneBytesSpv},
                                    {"prune_refine_lanes", kPruneRefineLanesSpv},
+                                   {"prune_refine_lanes_long", kPruneRefineLanesLongSpv},
                                    {"prune_refine", kPruneRefineSpv},
                                    {"prune_wide", kPruneWideSpv},
                                    {"prune_wide_subgroups", kPruneWideSubgroupsSpv},

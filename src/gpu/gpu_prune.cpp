@@ -56,6 +56,7 @@ static bool measures_walks(const Step& s) {
         case KernelId::kPruneBytes:
             return s.push.mode <= 2;
         case KernelId::kPruneRefineLanes:
+        case KernelId::kPruneRefineLanesLong:
             return !s.order_pass;
         case KernelId::kPruneRefine:
         case KernelId::kPruneWide:
@@ -167,6 +168,8 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
             std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), kLaneTapeMax);
         lane_tape_fixed = true;
     }
+    if (!ctx.can_run(KernelId::kPruneRefineLanesLong))
+        refine_lane_tape = std::min(refine_lane_tape, kRefineLaneTape);
     if (!ctx.can_run(KernelId::kPruneRefineLanes)) refine_lane_tape = 0;
     refine_second_pass = env_flag("SDFPRUNE_VULKAN_REFINE_SECOND_PASS", refine_second_pass);
     refine_order = env_flag("SDFPRUNE_VULKAN_REFINE_ORDER", refine_order);
@@ -513,7 +516,8 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
             s.shape.walked_words = counter->walk_words[s.push.walk_slot];
             s.shape.walked_sum_words = counter->walk_sum[s.push.walk_slot];
         }
-        if (s.kernel == KernelId::kPruneRefineLanes) {
+        if (s.kernel == KernelId::kPruneRefineLanes ||
+            s.kernel == KernelId::kPruneRefineLanesLong) {
             // Both passes' time; the first counts the lists.
             s.shape.lanes_ms = s.shape.gpu_ms;
             if (!s.second_pass) {

@@ -306,7 +306,8 @@ Step Pruner::plan_refine_lanes(const Step& squads, bool second_pass) const {
     const uint64_t lanes =
         std::min({std::max<uint64_t>(cells, 1), uint64_t(ctx.max_workgroups()) * kWorkgroupSize,
                   std::max<uint64_t>(ctx.resident_threads(), 1)});
-    s.kernel = KernelId::kPruneRefineLanes;
+    s.kernel =
+        lane_tape > kRefineLaneTape ? KernelId::kPruneRefineLanesLong : KernelId::kPruneRefineLanes;
     s.listed = false;
     s.teams = lanes;
     s.threads = uint32_t(ceil_div(lanes, kWorkgroupSize) * kWorkgroupSize);

@@ -31,6 +31,9 @@ const uint32_t kPruneBytesSpv[] = {
 const uint32_t kPruneRefineLanesSpv[] = {
 #include "prune_refine_lanes.spv.inc"
 };
+const uint32_t kPruneRefineLanesLongSpv[] = {
+#include "prune_refine_lanes_long.spv.inc"
+};
 const uint32_t kPruneRefineSpv[] = {
 #include "prune_refine.spv.inc"
 };
@@ -72,6 +75,8 @@ const KernelCode kKernels[] = {
     {"prune_bytes", kPruneBytesSpv, sizeof(kPruneBytesSpv), 13, kWorkgroupSize, true, true},
     {"prune_refine_lanes", kPruneRefineLanesSpv, sizeof(kPruneRefineLanesSpv), 13, kWorkgroupSize,
      true},
+    {"prune_refine_lanes_long", kPruneRefineLanesLongSpv, sizeof(kPruneRefineLanesLongSpv), 13,
+     kWorkgroupSize, true},
     {"prune_refine", kPruneRefineSpv, sizeof(kPruneRefineSpv), 13},
     {"prune_wide", kPruneWideSpv, sizeof(kPruneWideSpv), 13, uint32_t(kPruneWide), false, true},
     {"prune_wide_subgroups", kPruneWideSubgroupsSpv, sizeof(kPruneWideSubgroupsSpv), 13,

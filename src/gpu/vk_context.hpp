@@ -29,12 +29,13 @@ enum class KernelId : uint32_t {
     kPrune,
     kPruneBytes,  // the same, its decision and sweep flags a byte a lane (needs byte_storage()
                   // and subgroups())
-    kPruneRefineLanes,    // refinement's (mode 3) lane pass: a lane per cell with a short tape
-                          // (needs subgroups())
-    kPruneRefine,         // refinement: a squad of lanes per cell
-    kPruneWide,           // the wide kernels need byte_storage() (else not built)
-    kPruneWideSubgroups,  // needs subgroups() too
-    kPruneWideRuns,       // the same, its long runs walked from shared memory
+    kPruneRefineLanes,      // refinement's (mode 3) lane pass: a lane per cell with a short tape
+                            // (needs subgroups())
+    kPruneRefineLanesLong,  // the same for tapes of up to 64 words
+    kPruneRefine,           // refinement: a squad of lanes per cell
+    kPruneWide,             // the wide kernels need byte_storage() (else not built)
+    kPruneWideSubgroups,    // needs subgroups() too
+    kPruneWideRuns,         // the same, its long runs walked from shared memory
     kExpand,
     kCellInfo,
     kTrace,
