@@ -207,14 +207,22 @@ Mirror mirror(std::string name, std::vector<std::string> kernels, std::vector<Me
 const std::vector<Mirror>& mirrors() {
     using namespace gpu;
     using math::PrimitiveParams;
-    const std::vector<std::string> all = {"prune",           "prune_bytes", "prune_refine_lanes",
-                                          "prune_refine",    "prune_wide",  "prune_wide_subgroups",
-                                          "prune_wide_runs", "expand",      "cell_info",
-                                          "trace",           "discretize"};
+    const std::vector<std::string> all = {"prune",
+                                          "prune_bytes",
+                                          "prune_refine_lanes",
+                                          "prune_refine_lanes_long",
+                                          "prune_refine",
+                                          "prune_wide",
+                                          "prune_wide_subgroups",
+                                          "prune_wide_runs",
+                                          "expand",
+                                          "cell_info",
+                                          "trace",
+                                          "discretize"};
     const std::vector<std::string> scene = {
-        "prune",           "prune_bytes", "prune_refine_lanes",
-        "prune_refine",    "prune_wide",  "prune_wide_subgroups",
-        "prune_wide_runs", "trace",       "discretize"};
+        "prune",        "prune_bytes", "prune_refine_lanes",   "prune_refine_lanes_long",
+        "prune_refine", "prune_wide",  "prune_wide_subgroups", "prune_wide_runs",
+        "trace",        "discretize"};
     const std::vector<std::string> grid = {"trace", "discretize"};
     static const std::vector<Mirror> table = {
         mirror<GpuNode>("Node", scene,
@@ -233,11 +241,12 @@ const std::vector<Mirror>& mirrors() {
             "Cell", all,
             {SDFPRUNE_MEMBER(PrunedCell, tape), SDFPRUNE_MEMBER(PrunedCell, children),
              SDFPRUNE_MEMBER(PrunedCell, value), SDFPRUNE_MEMBER(PrunedCell, bound)}),
-        mirror<GpuBlock>("Block",
-                         {"prune", "prune_bytes", "prune_refine_lanes", "prune_refine",
-                          "prune_wide", "prune_wide_subgroups", "prune_wide_runs", "expand"},
-                         {SDFPRUNE_MEMBER(GpuBlock, x), SDFPRUNE_MEMBER(GpuBlock, y),
-                          SDFPRUNE_MEMBER(GpuBlock, z), SDFPRUNE_MEMBER(GpuBlock, tape)}),
+        mirror<GpuBlock>(
+            "Block",
+            {"prune", "prune_bytes", "prune_refine_lanes", "prune_refine_lanes_long",
+             "prune_refine", "prune_wide", "prune_wide_subgroups", "prune_wide_runs", "expand"},
+            {SDFPRUNE_MEMBER(GpuBlock, x), SDFPRUNE_MEMBER(GpuBlock, y),
+             SDFPRUNE_MEMBER(GpuBlock, z), SDFPRUNE_MEMBER(GpuBlock, tape)}),
         mirror<GpuLevel>("Level", grid,
                          {SDFPRUNE_MEMBER(GpuLevel, res), SDFPRUNE_MEMBER(GpuLevel, factor),
                           SDFPRUNE_MEMBER(GpuLevel, offset), SDFPRUNE_MEMBER(GpuLevel, pad)}),
@@ -245,34 +254,35 @@ const std::vector<Mirror>& mirrors() {
             "GridParams", grid,
             {SDFPRUNE_MEMBER(GpuGridParams, aabb_min), SDFPRUNE_MEMBER(GpuGridParams, aabb_max),
              SDFPRUNE_MEMBER(GpuGridParams, cell_size), SDFPRUNE_MEMBER(GpuGridParams, inv_cell)}),
-        mirror<GpuCounters>("Counters",
-                            {"prune", "prune_bytes", "prune_refine_lanes", "prune_refine",
-                             "prune_wide", "prune_wide_subgroups", "prune_wide_runs"},
-                            {SDFPRUNE_MEMBER(GpuCounters, pool_used),
-                             SDFPRUNE_MEMBER(GpuCounters, pool_capacity),
-                             SDFPRUNE_MEMBER(GpuCounters, overflow),
-                             SDFPRUNE_MEMBER(GpuCounters, max_len),
-                             SDFPRUNE_MEMBER(GpuCounters, near_jobs),
-                             SDFPRUNE_MEMBER(GpuCounters, next_blocks),
-                             SDFPRUNE_MEMBER(GpuCounters, max_depth),
-                             SDFPRUNE_MEMBER(GpuCounters, octant_used),
-                             SDFPRUNE_MEMBER(GpuCounters, octant_capacity),
-                             SDFPRUNE_MEMBER(GpuCounters, near_words),
-                             SDFPRUNE_MEMBER(GpuCounters, refine_cells),
-                             SDFPRUNE_MEMBER(GpuCounters, near_lo),
-                             SDFPRUNE_MEMBER(GpuCounters, near_hi),
-                             SDFPRUNE_MEMBER(GpuCounters, long_jobs),
-                             SDFPRUNE_MEMBER(GpuCounters, more_jobs),
-                             SDFPRUNE_MEMBER(GpuCounters, copy_cells),
-                             SDFPRUNE_MEMBER(GpuCounters, walk_cells),
-                             SDFPRUNE_MEMBER(GpuCounters, walk_placed),
-                             SDFPRUNE_MEMBER(GpuCounters, scratch_claimed),
-                             SDFPRUNE_MEMBER(GpuCounters, order_count),
-                             SDFPRUNE_MEMBER(GpuCounters, order_placed),
-                             SDFPRUNE_MEMBER(GpuCounters, jobs_taken),
-                             SDFPRUNE_MEMBER(GpuCounters, walk_words),
-                             SDFPRUNE_MEMBER(GpuCounters, walk_sum)},
-                            Scope::kKernel),
+        mirror<GpuCounters>(
+            "Counters",
+            {"prune", "prune_bytes", "prune_refine_lanes", "prune_refine_lanes_long",
+             "prune_refine", "prune_wide", "prune_wide_subgroups", "prune_wide_runs"},
+            {SDFPRUNE_MEMBER(GpuCounters, pool_used),
+             SDFPRUNE_MEMBER(GpuCounters, pool_capacity),
+             SDFPRUNE_MEMBER(GpuCounters, overflow),
+             SDFPRUNE_MEMBER(GpuCounters, max_len),
+             SDFPRUNE_MEMBER(GpuCounters, near_jobs),
+             SDFPRUNE_MEMBER(GpuCounters, next_blocks),
+             SDFPRUNE_MEMBER(GpuCounters, max_depth),
+             SDFPRUNE_MEMBER(GpuCounters, octant_used),
+             SDFPRUNE_MEMBER(GpuCounters, octant_capacity),
+             SDFPRUNE_MEMBER(GpuCounters, near_words),
+             SDFPRUNE_MEMBER(GpuCounters, refine_cells),
+             SDFPRUNE_MEMBER(GpuCounters, near_lo),
+             SDFPRUNE_MEMBER(GpuCounters, near_hi),
+             SDFPRUNE_MEMBER(GpuCounters, long_jobs),
+             SDFPRUNE_MEMBER(GpuCounters, more_jobs),
+             SDFPRUNE_MEMBER(GpuCounters, copy_cells),
+             SDFPRUNE_MEMBER(GpuCounters, walk_cells),
+             SDFPRUNE_MEMBER(GpuCounters, walk_placed),
+             SDFPRUNE_MEMBER(GpuCounters, scratch_claimed),
+             SDFPRUNE_MEMBER(GpuCounters, order_count),
+             SDFPRUNE_MEMBER(GpuCounters, order_placed),
+             SDFPRUNE_MEMBER(GpuCounters, jobs_taken),
+             SDFPRUNE_MEMBER(GpuCounters, walk_words),
+             SDFPRUNE_MEMBER(GpuCounters, walk_sum)},
+            Scope::kKernel),
         mirror<TraceParams>(
             "TraceParams", {"trace"},
             {SDFPRUNE_MEMBER(TraceParams, grid), SDFPRUNE_MEMBER(TraceParams, march_min),
@@ -293,8 +303,8 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(DiscretizeParams, pad2)}),
         mirror<PrunePush>(
             "Push",
-            {"prune", "prune_bytes", "prune_refine_lanes", "prune_refine", "prune_wide",
-             "prune_wide_subgroups", "prune_wide_runs"},
+            {"prune", "prune_bytes", "prune_refine_lanes", "prune_refine_lanes_long",
+             "prune_refine", "prune_wide", "prune_wide_subgroups", "prune_wide_runs"},
             {SDFPRUNE_MEMBER(PrunePush, origin),       SDFPRUNE_MEMBER(PrunePush, csize),
              SDFPRUNE_MEMBER(PrunePush, mode),         SDFPRUNE_MEMBER(PrunePush, factor),
              SDFPRUNE_MEMBER(PrunePush, jobs),         SDFPRUNE_MEMBER(PrunePush, threads),
@@ -521,6 +531,9 @@ TEST(GpuLayout, PruneBytes) {
 }
 TEST(GpuLayout, PruneRefineLanes) {
     check_kernel("prune_refine_lanes");
+}
+TEST(GpuLayout, PruneRefineLanesLong) {
+    check_kernel("prune_refine_lanes_long");
 }
 TEST(GpuLayout, PruneRefine) {
     check_kernel("prune_refine");
