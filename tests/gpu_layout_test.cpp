@@ -281,7 +281,8 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(GpuCounters, order_placed),
              SDFPRUNE_MEMBER(GpuCounters, jobs_taken),
              SDFPRUNE_MEMBER(GpuCounters, walk_words),
-             SDFPRUNE_MEMBER(GpuCounters, walk_sum)},
+             SDFPRUNE_MEMBER(GpuCounters, walk_sum),
+             SDFPRUNE_MEMBER(GpuCounters, more_class)},
             Scope::kKernel),
         mirror<TraceParams>(
             "TraceParams", {"trace"},

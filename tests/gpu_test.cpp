@@ -523,7 +523,8 @@ TEST(Gpu, RefinementTakesTheNearFieldCellsOnly) {
 // other sub-boxes of the cells that still need them: those with an operator that every sub-box
 // so far decided alike, or a far-field test still open. The cells are the same as the CPU's
 // for every number of sub-boxes: with 2 per axis the first pass has them all, with 3 or more a
-// second pass takes some cells but not all (the demo scene has both kinds).
+// second pass takes some cells but not all (the demo scene has both kinds), its list sorted by
+// walk class or in the order listed.
 TEST(Gpu, RefinementsSecondPassTakesTheOpenCells) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = builtin_scene("demo");
@@ -543,6 +544,12 @@ TEST(Gpu, RefinementsSecondPassTakesTheOpenCells) {
             EXPECT_LT(st.more_jobs, lane_cells);
         }
         expect_matches_cpu(sc, prune(sc, o), gpu, *dev, "refine " + std::to_string(refine));
+        // The second pass's list sorted by walk class (by default) or in the order listed: the
+        // same cells and the same cells listed.
+        const gpu::Grid as_listed =
+            prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_REFINE_SORTED_MORE", "0");
+        EXPECT_EQ(as_listed.stats().steps.back().more_jobs, st.more_jobs);
+        expect_same_device_cells(gpu, as_listed, "second list sorted against as listed");
     }
 }
 

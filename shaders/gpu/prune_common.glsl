@@ -72,6 +72,9 @@ layout(std430, binding = 7) buffer Counters {
     // in tape entries (note_walk), and the walks of all its workgroups summed.
     uint walk_words[kWalkSlots];
     uint walk_sum[kWalkSlots];
+    // Refinement's second list by walk class (refine_lanes.glsl: more_place), its cells of each
+    // class listed so far.
+    uint more_class[kWalkClasses];
 };
 // The kernel's scratch (its layout is the kernel's own). Coherent: lanes read what other lanes
 // of their workgroup wrote at earlier steps (a barrier between). In refinement, from
@@ -115,7 +118,8 @@ layout(push_constant) uniform Push {
                      // 4 and 5 order blocks (else octants); 2048: mode 5 sorts each window
                      // apart; 4096: ordered jobs dealt in rounds, not in a snake (snake_deal);
                      // 8192: modes 0-2's team jobs taken as workgroups come free (take_jobs);
-                     // 16384: the sweeps pass over the whole tape (no early end)
+                     // 16384: the sweeps pass over the whole tape (no early end);
+                     // 32768: refinement's second list in the order listed (refine_lanes.glsl)
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's team jobs: [first_job, jobs)
     uint round;       // 0: start the jobs; later rounds resume them (prune.comp)

@@ -107,6 +107,40 @@ bool any_open_operator() { return any_entry((r_seen1 ^ r_seen2) & ~r_seen0); }
 // lanes do the same walks, so a subgroup does not wait for its one cell that needs them all.
 // With push flag 64 the first pass walks every sub-box and lists nothing (one pass, as before;
 // SDFPRUNE_VULKAN_REFINE_SECOND_PASS=0, for comparisons).
+// The more list is sorted by walk class as the order list is, the longest tapes first: class c
+// takes the places from the cells to decide of the longer classes on (walk_cells: none of its
+// own more), so that the second pass's subgroups, which take neighbouring jobs, walk tapes of
+// about one length, as the first pass's do. A subgroup's listing lanes take their places with
+// an atomic per class among them (more_place). With push flag 32768, in the order they were
+// listed instead (SDFPRUNE_VULKAN_REFINE_SORTED_MORE=0: as before stop 48, for comparisons),
+// where a subgroup's cells come from several of the first pass's subgroups.
+uint more_region(uint c) {
+    uint start = 0u;
+    for (uint d = kWalkClasses - 1u; d > c; --d) start += walk_cells[d];
+    return start;
+}
+// The place of a cell of walk class `c` in the more list (all the subgroup's active lanes call
+// it; each class among them adds its count to more_class once).
+uint more_place(uint c) {
+    for (;;) {
+        uint first = subgroupBroadcastFirst(c);
+        if (c == first) {
+            uint placed;
+            SUBGROUP_APPEND(placed, more_class[first], true);
+            return more_region(first) + placed;
+        }
+    }
+}
+// The second pass's job k (below more_jobs): its place, its class's cells after the longer
+// classes' listed ones.
+uint more_job(uint k) {
+    for (uint d = kWalkClasses; d > 0u; --d) {
+        uint n = more_class[d - 1u];
+        if (k < n) return more_region(d - 1u) + k;
+        k -= n;
+    }
+    return 0u;  // (k is below more_jobs, the classes' sum)
+}
 const uint kFirstBoxes = 9u;  // device_layout.hpp: kRefineFirstBoxes
 // Sub-box k (< kFirstBoxes) of the first ones: corner k (bit 0: x, 1: y, 2: z at the far end),
 // then the middle. Sub-box b of all, x fastest, is one of them where is_first_box(b).
@@ -203,7 +237,8 @@ void main() {
     for (uint j = pc.first_job + gl_GlobalInvocationID.x; j < jobs; j += pc.threads) {
         // In order (flag 256), the jobs dealt in a snake: on an H100's lanes molecule's critical
         // path goes from 38 to 31 words (tools/prune_order_model.cpp).
-        bool in_order = !second && (pc.flags & 256u) != 0u;
+        bool sorted_more = (pc.flags & 32768u) == 0u;
+        bool in_order = (!second || sorted_more) && (pc.flags & 256u) != 0u;
         uint job = in_order ? snake_deal(j, pc.first_job, pc.threads, jobs) : j;
         uint cell;
         bool copy = false;
@@ -211,7 +246,7 @@ void main() {
         float lowest = kInfinity, highest = -kInfinity;
         r_seen0 = r_seen1 = r_seen2 = r_kept = r_skipped = r_negated = r_primitive = kNoEntries;
         if (second) {
-            uint at = pc.more_start + job * more_words();
+            uint at = pc.more_start + (sorted_more ? more_job(job) : job) * more_words();
             cell = scratch[at];
             far_flags = scratch[at + 1u];
             lowest = uintBitsToFloat(scratch[at + 2u]);
@@ -287,9 +322,10 @@ void main() {
         // never both kept) may still be decided for the cell, and a far-field test still open
         // needs every sub-box. Otherwise the other sub-boxes change nothing.
         if (k1 < nsub && (any_open_operator() || far_flags != 0u)) {
-            // The lanes that list a cell together take their places with one atomic.
+            // The lanes that list a cell together count it with one atomic.
             uint listed;
             SUBGROUP_APPEND(listed, more_jobs, true);
+            if ((pc.flags & 32768u) == 0u) listed = more_place(refine_walk_class(len));
             uint at = pc.more_start + listed * more_words();
             scratch[at] = cell;
             scratch[at + 1u] = far_flags;

@@ -64,6 +64,8 @@ struct GpuCounters {
     // dispatch, in tape entries, and all its workgroups' walks summed (prune_common.glsl:
     // note_walk).
     uint32_t walk_words[kPruneWalkSlots], walk_sum[kPruneWalkSlots];
+    // Refinement's second list (refine_lanes.glsl: more_place): its cells of each walk class.
+    uint32_t more_class[kRefineWalkClasses];
 };
 // prune.comp: kStateWords, the words of a lane's job state in its team's scratch; kTeam, the
 // lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step
@@ -140,7 +142,8 @@ static_assert(sizeof(GpuNode) == 16 && sizeof(GpuPrimitiveExtra) == 48);
 static_assert(sizeof(math::PrimitiveParams) == 96 && offsetof(math::PrimitiveParams, a) == 48);
 static_assert(sizeof(PrunedCell) == 16 && offsetof(PrunedCell, value) == 8);
 static_assert(sizeof(GpuBlock) == 16 && sizeof(GpuLevel) == 16 && sizeof(GpuGridParams) == 64);
-static_assert(sizeof(GpuCounters) == 216 + 4 * 4 * kPruneOrderClasses + 8 * kPruneWalkSlots &&
+static_assert(sizeof(GpuCounters) ==
+                  216 + 4 * 4 * kPruneOrderClasses + 8 * kPruneWalkSlots + 4 * kRefineWalkClasses &&
               offsetof(GpuCounters, near_lo) == 44 && offsetof(GpuCounters, long_jobs) == 68 &&
               offsetof(GpuCounters, copy_cells) == 76 &&
               offsetof(GpuCounters, walk_placed) == 80 + 4 * kRefineWalkClasses &&

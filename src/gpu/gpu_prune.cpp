@@ -172,6 +172,7 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
         refine_lane_tape = std::min(refine_lane_tape, kRefineLaneTape);
     if (!ctx.can_run(KernelId::kPruneRefineLanes)) refine_lane_tape = 0;
     refine_second_pass = env_flag("SDFPRUNE_VULKAN_REFINE_SECOND_PASS", refine_second_pass);
+    refine_sorted_more = env_flag("SDFPRUNE_VULKAN_REFINE_SORTED_MORE", refine_sorted_more);
     refine_order = env_flag("SDFPRUNE_VULKAN_REFINE_ORDER", refine_order);
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_TEAM_ORDER"); env && *env)
         team_order = std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), 2);

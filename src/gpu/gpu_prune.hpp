@@ -171,6 +171,10 @@ class Pruner {
     // The lane pass walks every cell's first sub-boxes, then the others of the cells that need
     // them in a second pass; SDFPRUNE_VULKAN_REFINE_SECOND_PASS=0: all of them in one pass.
     bool refine_second_pass = true;
+    // The second pass's list is sorted by walk class as the cells are listed (refine_lanes.glsl:
+    // more_place); SDFPRUNE_VULKAN_REFINE_SORTED_MORE=0: in the order listed (push flag 32768),
+    // as before stop 48.
+    bool refine_sorted_more = true;
     // The lane pass takes its cells longest tapes first, in an order pass before it;
     // SDFPRUNE_VULKAN_REFINE_ORDER=0: in the order they were listed.
     bool refine_order = true;

@@ -318,8 +318,9 @@ Step Pruner::plan_refine_lanes(const Step& squads, bool second_pass) const {
             : std::max<uint64_t>(cells, 1);
     s.push.threads = s.threads;
     s.push.list_start = 0;
-    s.push.more_start = uint32_t(s.team_jobs);  // past the long list
-    if (!second_pass) s.push.flags |= 64u;      // every sub-box in one pass
+    s.push.more_start = uint32_t(s.team_jobs);        // past the long list
+    if (!second_pass) s.push.flags |= 64u;            // every sub-box in one pass
+    if (!refine_sorted_more) s.push.flags |= 32768u;  // the more list as listed
     s.push.lane_tape = lane_tape;
     s.shape.lane_tape = lane_tape;
     s.job_walk = walk;
