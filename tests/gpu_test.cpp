@@ -78,6 +78,17 @@ void expect_same_stats(const PruneStats& cpu, const PruneStats& gpu, const std::
     EXPECT_PRED2(near, cpu.tape_avg, gpu.tape_avg);
 }
 
+// A step's walks as measured on the device: some, the longest within twice the planned bound
+// (a team's lane may pass from one phase to the next within a step; a wide lane's bound counts
+// a binary search's steps as the tape's bit width), and all workgroups' walks at least the
+// longest and at most as if every workgroup walked as long.
+void expect_walks_within_bound(const gpu::GpuStepShape& st, const std::string& what) {
+    EXPECT_GT(st.walked_words, 0u) << what;
+    EXPECT_LE(st.walked_words, 2 * st.longest_walk_words) << what;
+    EXPECT_GE(st.walked_sum_words, st.walked_words) << what;
+    EXPECT_LE(st.walked_sum_words, st.workgroups * st.walked_words) << what;
+}
+
 // What every finest cell must guarantee, whichever device made it, at its centre and 8 points
 // near its corners: a near-field cell's tape gives the full tree's value (within float
 // rounding); a far-field constant has the value's sign and never overstates it (a lower bound of
@@ -390,13 +401,8 @@ TEST(Gpu, StepShapesFollowTheLevels) {
         // One lane per cell or octant; refinement has a squad per cell.
         EXPECT_LE(st.lanes, st.mode == 3 ? st.lanes_per_tape * st.jobs : st.jobs);
         EXPECT_GT(st.longest_walk_words, 0u);
-        // The walks measured (the most a workgroup walked), about within the bound (a team's
-        // lane may pass from one phase to the next within a step), refinement's squads' too;
-        // all workgroups' at least the longest, at most as if each walked as long.
-        EXPECT_GT(st.walked_words, 0u);
-        EXPECT_LE(st.walked_words, 2 * st.longest_walk_words);
-        EXPECT_GE(st.walked_sum_words, st.walked_words);
-        EXPECT_LE(st.walked_sum_words, st.workgroups * st.walked_words);
+        // The walks measured, refinement's squads' too.
+        expect_walks_within_bound(st, "");
         EXPECT_EQ(st.lanes_ms, 0.0);
         EXPECT_EQ(st.long_jobs, 0u);
         if (st.mode == 0 || st.mode == 2) jobs += st.jobs;
@@ -1555,15 +1561,10 @@ TEST(Gpu, WideKernelWalksChainsSerially) {
             ::unsetenv("SDFPRUNE_VULKAN_WIDE_RUNS");
             EXPECT_TRUE(gpu.stats().steps[0].wide) << what;
             EXPECT_TRUE(gpu.stats().steps[1].wide) << what;
-            // Their walks measured: about within the bound (which counts a binary search's
-            // steps as the tape's bit width, and each round of the chain once a pass), all
-            // workgroups' at least the longest, at most as if each walked as long.
+            // Their walks measured (the bound counts each round of the chain once a pass).
             for (const gpu::GpuStepShape& st : gpu.stats().steps) {
                 if (!st.wide) continue;
-                EXPECT_GT(st.walked_words, 0u) << what;
-                EXPECT_LE(st.walked_words, 2 * st.longest_walk_words) << what;
-                EXPECT_GE(st.walked_sum_words, st.walked_words) << what;
-                EXPECT_LE(st.walked_sum_words, st.workgroups * st.walked_words) << what;
+                expect_walks_within_bound(st, what);
             }
             expect_matches_cpu(sc, cpu, gpu, *dev, what);
             expect_valid_cells(sc, gpu, what);

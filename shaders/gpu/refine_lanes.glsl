@@ -1,8 +1,7 @@
 // refine_lanes.glsl — prune_refine_lanes.comp and prune_refine_lanes_long.comp: refinement
-// (mode 3), its first pass: each finest near-field cell
-// whose tape has at most pc.lane_tape words decided again over its refine³ sub-boxes by one
-// lane alone (src/prune/prune_cell.cpp: refine_cell), in place: read from `cells`, written
-// through binding 5, the same buffer.
+// (mode 3), its first pass: each finest near-field cell whose tape has at most pc.lane_tape
+// words decided again over its refine³ sub-boxes by one lane alone (src/prune/prune_cell.cpp:
+// refine_cell), in place: read from `cells`, written through binding 5, the same buffer.
 // Most refined cells have tapes of a few words, and a lane per cell keeps as many cells in
 // flight as the device has lanes: a cell's chain of dependent loads (the list, the cell, its
 // block, its tape, the nodes) is waited for by 32 cells of a subgroup at once, where a squad
@@ -107,40 +106,6 @@ bool any_open_operator() { return any_entry((r_seen1 ^ r_seen2) & ~r_seen0); }
 // lanes do the same walks, so a subgroup does not wait for its one cell that needs them all.
 // With push flag 64 the first pass walks every sub-box and lists nothing (one pass, as before;
 // SDFPRUNE_VULKAN_REFINE_SECOND_PASS=0, for comparisons).
-// The more list is sorted by walk class as the order list is, the longest tapes first: class c
-// takes the places from the cells to decide of the longer classes on (walk_cells: none of its
-// own more), so that the second pass's subgroups, which take neighbouring jobs, walk tapes of
-// about one length, as the first pass's do. A subgroup's listing lanes take their places with
-// an atomic per class among them (more_place). With push flag 32768, in the order they were
-// listed instead (SDFPRUNE_VULKAN_REFINE_SORTED_MORE=0: as before stop 48, for comparisons),
-// where a subgroup's cells come from several of the first pass's subgroups.
-uint more_region(uint c) {
-    uint start = 0u;
-    for (uint d = kWalkClasses - 1u; d > c; --d) start += walk_cells[d];
-    return start;
-}
-// The place of a cell of walk class `c` in the more list (all the subgroup's active lanes call
-// it; each class among them adds its count to more_class once).
-uint more_place(uint c) {
-    for (;;) {
-        uint first = subgroupBroadcastFirst(c);
-        if (c == first) {
-            uint placed;
-            SUBGROUP_APPEND(placed, more_class[first], true);
-            return more_region(first) + placed;
-        }
-    }
-}
-// The second pass's job k (below more_jobs): its place, its class's cells after the longer
-// classes' listed ones.
-uint more_job(uint k) {
-    for (uint d = kWalkClasses; d > 0u; --d) {
-        uint n = more_class[d - 1u];
-        if (k < n) return more_region(d - 1u) + k;
-        k -= n;
-    }
-    return 0u;  // (k is below more_jobs, the classes' sum)
-}
 const uint kFirstBoxes = 9u;  // device_layout.hpp: kRefineFirstBoxes
 // Sub-box k (< kFirstBoxes) of the first ones: corner k (bit 0: x, 1: y, 2: z at the far end),
 // then the middle. Sub-box b of all, x fastest, is one of them where is_first_box(b).
@@ -171,6 +136,14 @@ uint first_count(uint subs) {
 const uint kMoreWords = 10u;
 uint more_words() { return pc.lane_tape > 32u ? kMoreWords : kMoreWords - 3u; }
 
+// The first place of walk class c in a list of the cells to decide again sorted by class, the
+// longest first (the order list, the more list): the cells of the longer classes.
+uint class_start(uint c) {
+    uint start = 0u;
+    for (uint d = kWalkClasses - 1u; d > c; --d) start += walk_cells[d];
+    return start;
+}
+
 // The order pass (push flag 128), before the first pass: the list's cells to decide again
 // (refine_cells of them, each with its walk class) sorted by class into the order list
 // (scratch[pc.order_start]), the longest walks first, so that the first pass's neighbouring
@@ -198,15 +171,44 @@ void order_walks() {
         barrier();
         if (lane < kWalkClasses) {
             uint count = s_class_count[lane];
-            uint before = 0u;  // the places of the longer classes
-            for (uint d = lane + 1u; d < kWalkClasses; ++d) before += walk_cells[d];
-            s_class_at[lane] = count == 0u ? 0u : before + atomicAdd(walk_placed[lane], count);
+            s_class_at[lane] =
+                count == 0u ? 0u : class_start(lane) + atomicAdd(walk_placed[lane], count);
         }
         memoryBarrierShared();
         barrier();
         if (has) scratch[pc.order_start + s_class_at[c] + rank] = entry;
         barrier();  // the counts read before the next entries reset them
     }
+}
+
+// The more list is sorted by walk class as the order list is, the longest tapes first: class c
+// takes the places from class_start(c) on (room for all its cells to decide, more than it
+// lists), so that the second pass's subgroups, which take neighbouring jobs, walk tapes of
+// about one length, as the first pass's do. A subgroup's listing lanes take their places with
+// an atomic per class among them (more_place). With push flag 32768, in the order they were
+// listed instead (SDFPRUNE_VULKAN_REFINE_SORTED_MORE=0: as before stop 48, for comparisons),
+// where a subgroup's cells come from several of the first pass's subgroups.
+// The place of a cell of walk class `c` in the more list (all the subgroup's active lanes call
+// it; each class among them adds its count to more_class once).
+uint more_place(uint c) {
+    for (;;) {
+        uint first = subgroupBroadcastFirst(c);
+        if (c == first) {
+            uint placed;
+            SUBGROUP_APPEND(placed, more_class[first], true);
+            return class_start(first) + placed;
+        }
+    }
+}
+// The second pass's job k (below more_jobs): its place, its class's cells after the longer
+// classes' listed ones.
+uint more_job(uint k) {
+    for (uint d = kWalkClasses; d > 0u; --d) {
+        uint n = more_class[d - 1u];
+        if (k < n) return class_start(d - 1u) + k;
+        k -= n;
+    }
+    return 0u;  // (k is below more_jobs, the classes' sum)
 }
 
 void main() {

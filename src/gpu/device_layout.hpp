@@ -88,7 +88,7 @@ inline constexpr uint32_t kRefineLaneTape = 32;
 // entries' decisions in two words each where the lanes take tapes of more than 32 words).
 inline constexpr uint64_t kRefineFirstBoxes = 9;
 inline constexpr uint64_t refine_more_words(uint32_t lane_tape) {
-    return lane_tape > 32 ? 10 : 7;
+    return lane_tape > kRefineLaneTape ? 10 : 7;
 }
 // prune_wide.comp: kWide, the lanes of a workgroup that takes one team job (kPruneTeam boxes of
 // one parent tape); its scratch words for `items` items (an item per tape entry and box:
