@@ -1045,6 +1045,73 @@ TEST(Gpu, TopLevelsRunWide) {
     }
 }
 
+// Planned as on an H100 (270,336 resident lanes, 1,056 wide workgroups), a wide step's jobs
+// are split over more workgroups where the model says their walk falls by a quarter or more: a
+// balanced tree's (a generated fluid's) level-1 cells, 512 jobs over tapes of hundreds of
+// words, where 512 workgroups would leave half the device idle. The busiest lane, measured on
+// the device, then walks less than with every job on one workgroup, and the cells are the same.
+// A chain's (a generated molecule's) level-1 steps stay whole: a chain's rounds take as long
+// on any share of the boxes. And the model the choice rests on follows the walks the device
+// measures, within a factor of 2 either way, for every wide step of both scenes, and of a
+// right-deep chain whose every search for a left operand spans the rest of the tape.
+TEST(Gpu, WideStepsSplitWhereTheirWalkFalls) {
+    const std::unique_ptr<gpu::Device> h100 =
+        device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "270336");
+    ASSERT_TRUE(h100);
+    PruneOptions o;
+    o.resolution = 64;
+    o.refine = 1;
+    const auto expect_model_follows_walks = [](const gpu::Grid& g, const std::string& what) {
+        int wide = 0;
+        for (const gpu::GpuStepShape& st : g.stats().steps) {
+            if (!st.wide || st.jobs == 0) continue;
+            ++wide;
+            SCOPED_TRACE(what + ", level " + std::to_string(st.level) + " mode " +
+                         std::to_string(st.mode));
+            EXPECT_LE(st.walked_words, 2 * st.longest_walk_words);
+            EXPECT_GE(2 * st.walked_words, st.longest_walk_words);
+        }
+        EXPECT_GT(wide, 0) << what;
+    };
+    const Scene fluid = generate_scene("fluid", 1, 1000);
+    const gpu::Grid split = gpu::prune(*h100, fluid, o);
+    const gpu::Grid whole = prune_with_env(*h100, fluid, o, "SDFPRUNE_VULKAN_WIDE_SPLIT", "1");
+    ASSERT_EQ(split.stats().steps.size(), whole.stats().steps.size());
+    bool gained = false;
+    for (size_t i = 0; i < split.stats().steps.size(); ++i) {
+        const gpu::GpuStepShape &st = split.stats().steps[i], &one = whole.stats().steps[i];
+        SCOPED_TRACE("fluid, step " + std::to_string(i));
+        EXPECT_EQ(st.jobs, one.jobs);
+        if (!st.wide || !one.wide) continue;
+        EXPECT_EQ(one.lanes_per_tape, 256u);
+        // (Steps of at most 256 boxes, 32 jobs, were split before by their count alone.)
+        if (st.level >= 1 && st.jobs > 256 && st.lanes_per_tape > 256) {
+            gained = true;
+            EXPECT_LT(4 * st.walked_words, 3 * one.walked_words);
+        }
+    }
+    EXPECT_TRUE(gained) << "no level-1 step of the fluid was split by its modelled walk";
+    expect_same_stats(whole.stats(), split.stats(), "fluid, split against whole");
+    expect_same_device_cells(whole, split, "fluid, split against whole");
+    expect_matches_cpu(fluid, prune(fluid, o), split, *h100, "fluid 1000, 64³");
+    expect_model_follows_walks(split, "fluid");
+    expect_model_follows_walks(whole, "fluid, whole");
+
+    const Scene molecule = generate_scene("molecule", 1, 400);
+    const gpu::Grid chain = gpu::prune(*h100, molecule, o);
+    for (const gpu::GpuStepShape& st : chain.stats().steps)
+        if (st.wide && st.level >= 1) EXPECT_EQ(st.lanes_per_tape, 256u) << "molecule";
+    expect_model_follows_walks(chain, "molecule");
+    expect_matches_cpu(molecule, prune(molecule, o), chain, *h100, "molecule 400, 64³");
+
+    const Scene right = right_deep_chain(600);
+    PruneOptions small = o;
+    small.resolution = 32;
+    const gpu::Grid deep = prune_with_env(*h100, right, small, "SDFPRUNE_VULKAN_WIDE", "1");
+    expect_model_follows_walks(deep, "right-deep chain");
+    expect_matches_cpu(right, prune(right, small), deep, *h100, "right-deep chain, 32³");
+}
+
 // Steps of many jobs run wide too where the teams would be held back by scratch: with a small
 // scratch budget (SDFPRUNE_VULKAN_SCRATCH_BYTES, standing in for a large scene's long tapes),
 // a generated fluid's finer levels have more than 1,024 jobs over tapes of hundreds of words;

@@ -35,6 +35,7 @@
 #endif
 
 const uint kWide = 256u;  // lanes per workgroup (gpu_prune.cpp: kPruneWide)
+const uint kSearchTurn = 37u;  // (stage 1: odd, so that a lane takes every place in turn)
 layout(local_size_x = kWide) in;
 
 #include "cells.glsl"
@@ -514,7 +515,14 @@ void main() {
         }
         sync_all();
         uint rounds = s_rounds, round_breaks = s_breaks;
-        for (uint e = id; e < len; e += kWide) {
+        // Each lane takes an entry of every kWide in turn, at a place that moves by
+        // kSearchTurn from one kWide to the next: the searches' lengths follow the tape's
+        // shape, which repeats (a balanced tree's highest operators, with the longest
+        // searches, lie kWide and a power of two apart), and a lane that took the same place
+        // each time took every long one. The workgroup's loads are still of adjacent words.
+        for (uint e0 = 0u, turn = 0u; e0 < len; e0 += kWide, turn += kSearchTurn) {
+            uint e = e0 + (id + turn) % kWide;
+            if (e >= len) continue;
             ++g_walk;
             uint w = tape_read(parent, 2u + e);
             uint n = tape_node(w);
@@ -523,9 +531,12 @@ void main() {
             scratch[obase + place] = e;
             if (h == 0u) continue;
             // The left operand ends just before the right operand's subtree: the entries of
-            // a subtree are those of its scene subtree's nodes, in the same order.
-            uint first = node_span[tape_node(tape_read(parent, 1u + e))].x;
-            uint lo = 0u, hi = e - 1u;
+            // a subtree are those of its scene subtree's nodes, in the same order. So the
+            // subtree's entries are at most its nodes, and the search starts that far back: a
+            // step per level of the right operand's subtree, not per level of the whole tape.
+            uint right = tape_node(tape_read(parent, 1u + e));
+            uint first = node_span[right].x;
+            uint hi = e - 1u, lo = hi - min(hi, right - first);
             while (lo < hi) {
                 ++g_walk;
                 uint mid = (lo + hi) / 2u;

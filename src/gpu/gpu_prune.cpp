@@ -120,6 +120,15 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
             prim ? 0 : 1 + std::max(spans[2 * sc.left[n] + 1], spans[2 * sc.right[n] + 1]);
     }
     scene_height = spans[2 * sc.root() + 1];
+    // The search steps back from an operator's right operand over at most that operand's
+    // subtree (prune_wide.glsl): bit_width of its nodes less one, a step per level of a balanced
+    // subtree, none for a primitive (a left-deep chain's). Rounded up, a step more for the
+    // lanes' spread: the generated fluid's 13,988 operators take 20,967 steps, 1 an entry.
+    uint64_t search_steps = 0;
+    for (uint32_t n = 0; n < sc.size(); ++n)
+        if (!sc.is_primitive(n))
+            search_steps += std::bit_width(sc.right[n] - spans[2 * sc.right[n]]);
+    wide_search_steps = uint32_t(ceil_div(search_steps, std::max<uint64_t>(sc.size(), 1)) + 1);
     node_spans = ctx.create_buffer(spans.size() * 4);
 
     // Each level's tapes go to a pool of its own (g.pool while the level is made; it grows on
@@ -156,6 +165,8 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
         wide_override = std::atoi(env) != 0;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_RUNS"); env && *env)
         wide_runs_override = std::atoi(env) != 0;
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_MEAN"); env && *env)
+        wide_mean = std::atoi(env) != 0;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_SPLIT"); env && *env) {
         const unsigned long split = std::strtoul(env, nullptr, 10);
         if (split > 0 && split <= kPruneTeam && (split & (split - 1)) == 0)

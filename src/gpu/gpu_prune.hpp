@@ -121,8 +121,11 @@ class Pruner {
     // Temporaries: what is left of them is freed on return, or when an error is thrown.
     LocalBuffers local;
     const uint64_t max_pool_words;
-    std::vector<uint32_t> head;                        // the full tape with its header
-    uint32_t scene_height = 0;                         // the root's height (prune_wide.comp)
+    std::vector<uint32_t> head;  // the full tape with its header
+    uint32_t scene_height = 0;   // the root's height (prune_wide.comp)
+    // prune_wide.comp's search for an operator's left operand: its steps per tape entry, on
+    // average over the scene (plan_wide).
+    uint32_t wide_search_steps = 0;
     uint64_t capacity = 0, octant_capacity = 1 << 16;  // of g.pool and octant_pool, in words
     Buffer& node_spans;
     // The steps' counters (prune_common.glsl: Counters), which every workgroup's atomics hit:
@@ -159,6 +162,9 @@ class Pruner {
     // buffer, or SDFPRUNE_VULKAN_PRESIZE_WORDS).
     uint64_t room_cap = 0;
     int wide_override = -1;
+    // plan_wide's cost of a workgroup that takes several jobs: from their mean tape (1) or as
+    // if every tape were the longest (0); SDFPRUNE_VULKAN_WIDE_MEAN.
+    bool wide_mean = true;
     uint32_t wide_split = 0;  // SDFPRUNE_VULKAN_WIDE_SPLIT (1, 2, 4 or 8); 0: plan_wide's choice
     int wide_runs_override =
         -1;  // SDFPRUNE_VULKAN_WIDE_RUNS=0|1: prune_wide_runs.comp never, always

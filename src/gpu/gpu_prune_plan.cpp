@@ -22,6 +22,8 @@ namespace sdfprune::gpu::pruning {
 // the kernel fits (for tests).
 constexpr uint64_t kWideMinTape = 128, kWideRoundCost = 4;
 constexpr uint64_t kWideSplitGroups = 64;  // plan_wide
+// plan_wide splits a step's jobs further where the modelled cost falls to this share or less.
+constexpr struct { uint64_t num, den; } kWideSplitGain{3, 4};
 // Wide steps of at most kWideRunsJobs jobs over tapes of kWideRunsRounds heights or more run
 // prune_wide_runs.comp (long runs walked from shared memory): on an H200 molecule's four top
 // steps went from 3.18 to 2.14 ms, but its staging arrays slowed the steps of many jobs and
@@ -392,7 +394,8 @@ void Pruner::plan_squads(const Level& lv, Step& s) {
 
 // The wide kernel instead of teams, where it fits and its modelled cost wins (kWideRoundCost).
 // Per job the tape entries a lane takes one after another (prune_wide.comp): its share of the
-// entries counted, then placed (with a binary search for an operator's left operand), in the
+// entries counted, then placed (with a binary search for an operator's left operand: the
+// scene's wide_search_steps on average, at most the tape's bit width under a loop limit), in the
 // evaluation and the top-down pass its share of each round's entries and kPruneTeam boxes (at
 // most one more than an even share per round: a round per height the tape has, no more than
 // its operators plus one), and the compaction's two passes over a slice. A run of rounds of
@@ -406,28 +409,75 @@ void Pruner::plan_squads(const Level& lv, Step& s) {
 void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_words) {
     const uint64_t len = max_len, heights = uint64_t(scene_height) + 1;
     const uint64_t rounds = std::min<uint64_t>(heights, len / 2 + 1);
+    const uint64_t resident_groups = std::max<uint64_t>(ctx.resident_threads() / kPruneWide, 1);
+    // Workgroups whose scratch fits a buffer, and all the buffers a step may spread over.
+    const uint64_t buffers = std::min(ctx.prune_scratch_buffers(), scratch_buffers_cap);
+    const bool limited = ctx.loop_limited();
+    // A workgroup's scratch with `split` workgroups per job: per tape entry two words, and the
+    // items of its own kPruneTeam / split boxes.
+    const auto group_bytes_for = [&](uint64_t split) {
+        return (len * 2 + prune_wide_item_words(len * (kPruneTeam / split)) +
+                kPruneWideHeightWords * heights) *
+               4;
+    };
+    const auto fitting = [&](uint64_t split) {
+        return buffers * (ctx.prune_scratch_budget_bytes() / group_bytes_for(split));
+    };
+    // The step's shape and modelled cost with `split` workgroups per job: how many workgroups
+    // fit, how they spread over buffers, the jobs each takes one after another, its walk.
+    struct Shape {
+        uint64_t split, group_bytes, per_job, spread, dispatch_groups, groups, walk, cost;
+        bool fits;
+    };
+    const auto shape_for = [&](uint64_t split) {
+        Shape w{};
+        w.split = split;
+        const uint64_t boxes = kPruneTeam / split;
+        w.group_bytes = group_bytes_for(split);
+        // A job's walk over a tape of `n` entries, `search` steps a search.
+        const auto job_walk = [&](uint64_t n, uint64_t search) {
+            return ceil_div(n, kPruneWide) * (2 + search) +
+                   2 * (std::min(rounds, n / 2 + 1) + ceil_div(n * boxes, kPruneWide)) +
+                   2 * ceil_div(n, kPruneWide / boxes);
+        };
+        const uint64_t walk_job = job_walk(len, wide_search_steps);
+        // (Under a loop limit, with every search as long as the whole tape's.)
+        w.per_job = job_walk(len, std::max<uint64_t>(std::bit_width(len), wide_search_steps)) +
+                    3 * ceil_div(heights, kPruneWide) + ceil_div(rounds, kPruneWide) + 2 * rounds +
+                    2 * ceil_div(rounds, kPruneWideRunChunk) * (kPruneWideRunChunk + 4) +
+                    4 * std::bit_width(kPruneWide);
+        const uint64_t buffer_groups = ctx.prune_scratch_budget_bytes() / w.group_bytes;
+        w.fits = buffer_groups > 0 && !(limited && 2 * w.per_job + 1024 > Context::kLoopLimit);
+        if (!w.fits) return w;
+        const uint64_t parts = s.team_jobs * split;
+        const uint64_t unlimited_groups = std::min(
+            {std::max<uint64_t>(parts, 1), uint64_t(ctx.max_workgroups()), resident_groups});
+        // As few buffers as hold the workgroups, as many workgroups in each.
+        w.spread = std::min(buffers, ceil_div(unlimited_groups, buffer_groups));
+        w.dispatch_groups = std::min(buffer_groups, ceil_div(unlimited_groups, w.spread));
+        w.groups = w.spread * w.dispatch_groups;
+        const uint64_t group_jobs = ceil_div(parts, w.groups);
+        // A workgroup of several jobs walks their tapes one after another: the longest, and
+        // the jobs' mean tape for each of the others (`claimable_words`: the jobs' tapes
+        // summed, a bound).
+        const uint64_t mean = s.team_jobs == 0 ? 0 : ceil_div(claimable_words, s.team_jobs);
+        w.walk = s.team_jobs == 0 ? 0
+                 : !wide_mean || mean >= len
+                     ? group_jobs * walk_job
+                     : walk_job + (group_jobs - 1) * job_walk(mean, wide_search_steps);
+        w.cost = w.walk + group_jobs * 2 * (kWideRoundCost - 1) * rounds;
+        return w;
+    };
     // Workgroups per job (wide_split): where a step has very few jobs (level 0: the root's 64
     // cells are 8; split into octants, one, then 8), a job's boxes are shared out among up to
     // kPruneTeam workgroups, each walking the tape for its share (all of them sort it), up to
     // kWideSplitGroups workgroups in all. On an H200, level 0 of the generated fluid (then its
     // octants, then its cells) went from 2.47 and 3.32 ms to 0.74 and 1.11 ms; level 1's steps
     // (63 and 504 jobs) ran slower split than not (stop 28).
-    const uint64_t resident_groups = std::max<uint64_t>(ctx.resident_threads() / kPruneWide, 1);
     uint64_t split = 1;
     while (split < kPruneTeam && std::max<uint64_t>(s.team_jobs, 1) * split * 2 <=
                                      std::min(kWideSplitGroups, resident_groups))
         split *= 2;
-    // A workgroup's scratch: per tape entry two words, and the items of its own boxes.
-    const auto group_bytes_for = [&](uint64_t sp) {
-        return (len * 2 + prune_wide_item_words(len * (kPruneTeam / sp)) +
-                kPruneWideHeightWords * heights) *
-               4;
-    };
-    // Workgroups whose scratch fits a buffer, and all the buffers a step may spread over.
-    const uint64_t buffers = std::min(ctx.prune_scratch_buffers(), scratch_buffers_cap);
-    const auto fitting = [&](uint64_t sp) {
-        return buffers * (ctx.prune_scratch_budget_bytes() / group_bytes_for(sp));
-    };
     // Where scratch holds the step to fewer workgroups than it has jobs and the device runs
     // (the million-sphere fluid's top levels: parent tapes of a million words and more), the
     // jobs are split further, as long as more workgroups then fit: a workgroup of 1 box in 8
@@ -435,29 +485,23 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_word
     while (split < kPruneTeam && fitting(split) < std::min(s.team_jobs * split, resident_groups) &&
            fitting(2 * split) > fitting(split))
         split *= 2;
-    if (wide_split > 0) split = wide_split;
-    const uint64_t boxes = kPruneTeam / split;
-    const uint64_t walk_job = ceil_div(len, kPruneWide) * (2 + std::bit_width(len)) +
-                              2 * (rounds + ceil_div(len * boxes, kPruneWide)) +
-                              2 * ceil_div(len, kPruneWide / boxes);
-    const uint64_t per_job = walk_job + 3 * ceil_div(heights, kPruneWide) +
-                             ceil_div(rounds, kPruneWide) + 2 * rounds +
-                             2 * ceil_div(rounds, kPruneWideRunChunk) * (kPruneWideRunChunk + 4) +
-                             4 * std::bit_width(kPruneWide);
-    const uint64_t group_bytes = group_bytes_for(split);
-    const uint64_t buffer_groups = ctx.prune_scratch_budget_bytes() / group_bytes;
-    const bool limited = ctx.loop_limited();
-    if (buffer_groups == 0 || (limited && 2 * per_job + 1024 > Context::kLoopLimit)) return;
-    const uint64_t parts = s.team_jobs * split;
-    const uint64_t unlimited_groups =
-        std::min({std::max<uint64_t>(parts, 1), uint64_t(ctx.max_workgroups()), resident_groups});
-    // As few buffers as hold the workgroups, as many workgroups in each.
-    const uint64_t spread = std::min(buffers, ceil_div(unlimited_groups, buffer_groups));
-    const uint64_t dispatch_groups = std::min(buffer_groups, ceil_div(unlimited_groups, spread));
-    const uint64_t groups = spread * dispatch_groups;
-    const uint64_t group_jobs = ceil_div(parts, groups);
-    const uint64_t walk = s.team_jobs == 0 ? 0 : group_jobs * walk_job;
-    const uint64_t cost = walk + group_jobs * 2 * (kWideRoundCost - 1) * rounds;
+    // Split further where the modelled cost falls to kWideSplitGain of the best so far or
+    // less: where the jobs' tapes are wide (not a chain, whose rounds no split shortens) and
+    // more workgroups still run at once. Planned as on an H100, the generated fluid's level-1
+    // octants (64 team jobs) walk 743 words split 8 against 3,402 whole, and its level-1 cells
+    // (512) 1,385 split 2 against 2,489 (measured on lavapipe); molecule's chains stay whole.
+    Shape w = shape_for(split);
+    if (w.fits)
+        for (uint64_t more = split * 2; more <= kPruneTeam; more *= 2)
+            if (const Shape m = shape_for(more);
+                m.fits && m.cost * kWideSplitGain.den < w.cost * kWideSplitGain.num)
+                w = m;
+    if (wide_split > 0) w = shape_for(wide_split);
+    if (!w.fits) return;
+    split = w.split;
+    const uint64_t group_bytes = w.group_bytes, per_job = w.per_job, spread = w.spread;
+    const uint64_t dispatch_groups = w.dispatch_groups, groups = w.groups;
+    const uint64_t parts = s.team_jobs * split, walk = w.walk, cost = w.cost;
     const bool pick =
         wide_override == 1 || (len >= kWideMinTape && cost < 2 * s.shape.longest_walk_words);
     if (!pick) return;
