@@ -1578,7 +1578,8 @@ TEST(Gpu, SweepsEndAtTheirLastKeptEntry) {
 }
 
 // The wide kernel (forced wherever it fits) walks a run of rounds of one operator each (a
-// chain's) with a few lanes and no barriers between its rounds: the same cells as the CPU's,
+// chain's) with a few lanes and no barriers between its rounds, and sweeps a long one by a
+// scan over its rounds (a chunk not a path, round by round): the same cells as the CPU's,
 // bit for bit on lavapipe, on a left-deep chain of mixed operators, and on a chain whose lower
 // part is bushy (a balanced tree, and chains of other lengths: heights with several
 // operators below the run; at the finer levels, their pruned tapes leave runs between such
@@ -1618,14 +1619,22 @@ TEST(Gpu, WideKernelWalksChainsSerially) {
         o.resolution = 32;
         const PrunedGrid cpu = prune(sc, o);
         // Runs walked from scratch (prune_wide_subgroups.comp), and long runs from shared
-        // memory (prune_wide_runs.comp), in chunks of 32 rounds.
-        for (const char* runs : {"0", "1"}) {
-            const std::string what = name + ", wide, runs kernel " + runs;
+        // memory (prune_wide_runs.comp), in chunks of 32 rounds; runs of 64 rounds or more
+        // swept by a scan over their rounds, or (SDFPRUNE_VULKAN_WIDE_SCAN=0) round by round.
+        // The scan walks less, where a run is that long (the mixed chain's 300 operators).
+        uint64_t scanned_walk = 0, serial_walk = 0;
+        for (const auto& [runs, scan] : {std::pair{"0", "1"}, {"1", "1"}, {"1", "0"}}) {
+            const std::string what =
+                name + ", wide, runs kernel " + runs + ", scanned sweep " + scan;
             ::setenv("SDFPRUNE_VULKAN_WIDE", "1", 1);
             ::setenv("SDFPRUNE_VULKAN_WIDE_RUNS", runs, 1);
+            ::setenv("SDFPRUNE_VULKAN_WIDE_SCAN", scan, 1);
             const gpu::Grid gpu = gpu::prune(*dev, sc, o);
             ::unsetenv("SDFPRUNE_VULKAN_WIDE");
             ::unsetenv("SDFPRUNE_VULKAN_WIDE_RUNS");
+            ::unsetenv("SDFPRUNE_VULKAN_WIDE_SCAN");
+            (std::string(scan) == "1" ? scanned_walk : serial_walk) =
+                gpu.stats().steps[0].walked_words;
             EXPECT_TRUE(gpu.stats().steps[0].wide) << what;
             EXPECT_TRUE(gpu.stats().steps[1].wide) << what;
             // Their walks measured (the bound counts each round of the chain once a pass).
@@ -1636,6 +1645,7 @@ TEST(Gpu, WideKernelWalksChainsSerially) {
             expect_matches_cpu(sc, cpu, gpu, *dev, what);
             expect_valid_cells(sc, gpu, what);
         }
+        if (name == "mixed chain") EXPECT_LT(4 * scanned_walk, 3 * serial_walk) << name;
     }
 }
 

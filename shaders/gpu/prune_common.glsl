@@ -119,7 +119,8 @@ layout(push_constant) uniform Push {
                      // apart; 4096: ordered jobs dealt in rounds, not in a snake (snake_deal);
                      // 8192: modes 0-2's team jobs taken as workgroups come free (take_jobs);
                      // 16384: the sweeps pass over the whole tape (no early end);
-                     // 32768: refinement's second list in the order listed (refine_lanes.glsl)
+                     // 32768: refinement's second list in the order listed (refine_lanes.glsl);
+                     // 65536: prune_wide.comp sweeps long runs round by round (no scan)
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's team jobs: [first_job, jobs)
     uint round;       // 0: start the jobs; later rounds resume them (prune.comp)

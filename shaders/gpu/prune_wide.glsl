@@ -335,33 +335,152 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
 #endif
 }
 
+// Stage 4 for round q of a run, box b, from scratch as it is: an entry's flags were set above
+// the run, or by the round above it in the run.
+void sweep_round(uint rbase, uint q, uint b) {
+    ++g_walk;
+    uvec3 rec = run_record(rbase, q, kRunSigns);
+    uint e = rec.x, l = rec.y, r = e - 1u;
+    uint fl = item_flags(e, b);
+    if (((fl >> 2) & 3u) != 1u) return;
+    uint d = fl & 3u;
+    uint nl = rec.z & 1u, nr = (rec.z >> 1) & 1u;
+    if (d == kKeepBoth) {
+        set_kept(l, b, (1u << 2) | (nl << 4));
+        set_kept(r, b, (1u << 2) | (nr << 4));
+    } else {
+        bool left = d == kLeftWins;
+        uint neg = ((fl >> 4) & 1u) ^ (left ? nl : nr);
+        set_item_flags(e, b, (fl & kEvaluationFlags) | (2u << 2) | (fl & 16u));
+        set_kept(left ? l : r, b, (1u << 2) | (neg << 4));
+    }
+}
+
+// A long run's top-down pass as a scan. Where each round's operator is an operand of the round
+// above it (a chain), the pass hands one state down the path: whether the operator is kept and
+// its sign. Each operator maps its state to its path operand's by a map of three bits (kPass:
+// kept stays kept, unless the other operand wins; kSign: the sign passes on, where the
+// operator is skipped; kFlip: then flipped by the operand's tape sign, or set to it), and maps
+// compose. So the rounds are shared out among a box's kWide / g_boxes lanes, kScanRounds each
+// from the top: each lane composes its rounds' maps, a scan over the lanes gives each the map
+// from the chunk's top to its first round, and each lane then walks its rounds again with its
+// state, writing every flag the serial pass writes: its operators' own, and those of operands
+// off the path or below the chunk. A chunk where some round's operator is not an operand of
+// the one above (a pruned tape's heights can skip) is swept round by round as before.
+const uint kScanRounds = 8u;
+// Runs of at least this many rounds are swept so (shorter ones: a scan's barriers cost more
+// than the rounds).
+const uint kRunScanned = 64u;
+const uint kPass = 1u, kSign = 2u, kFlip = 4u, kSameState = kPass | kSign;
+// The map of `upper` then `lower`.
+uint compose_maps(uint upper, uint lower) {
+    bool flip = ((upper & kFlip) != 0u && (lower & kSign) != 0u) != ((lower & kFlip) != 0u);
+    return (upper & lower & kSameState) | (flip ? kFlip : 0u);
+}
+// A state (kPass: kept, kFlip: negated) through a map.
+uint map_state(uint map, uint state) {
+    bool negated = ((state & kFlip) != 0u && (map & kSign) != 0u) != ((map & kFlip) != 0u);
+    return (state & map & kPass) | (negated ? kFlip : 0u);
+}
+// The map of an operator with decision d, whose path operand is its left one or not, with
+// the operands' tape signs nl and nr.
+uint path_map(uint d, bool left, uint nl, uint nr) {
+    bool pass = d == kKeepBoth || d == (left ? kLeftWins : kRightWins);
+    return (pass ? kPass : 0u) | (d != kKeepBoth ? kSign : 0u) |
+           ((left ? nl : nr) != 0u ? kFlip : 0u);
+}
+shared uint s_unlinked;  // a round of the chunk not linked to the one above it
+
+void sweep_run_scanned(uint r0, uint end, uint rbase) {
+    uint id = gl_LocalInvocationID.x, per_box = kWide / g_boxes;
+    uint b = g_b0 + id / per_box, lane = id % per_box;
+    bool mine = s_state[b] == 1u;
+    for (uint c1 = end; c1 > r0;) {
+        uint c0 = c1 - min(per_box * kScanRounds, c1 - r0);
+        // This lane's rounds [q0, q1), the highest first.
+        uint q1 = c1 - min(c1 - c0, lane * kScanRounds);
+        uint q0 = q1 - min(q1 - c0, kScanRounds);
+        if (id == 0u) s_unlinked = 0u;
+        memoryBarrierShared();
+        barrier();
+        // The chunk's top operator's state, as the rounds above left it.
+        uint top = item_flags(scratch[rbase + kRoundWords * (c1 - 1u) + kRunEntry], b);
+        uint top_state = (((top >> 2) & 3u) == 1u ? kPass : 0u) | ((top & 16u) != 0u ? kFlip : 0u);
+        uint map = kSameState;
+        // (The chunk's lowest round's map is not needed.)
+        for (uint q = q1; mine && q > q0 && q - 1u > c0; --q) {
+            ++g_walk;
+            uvec3 rec = run_record(rbase, q - 1u, kRunSigns);
+            uint below = scratch[rbase + kRoundWords * (q - 2u) + kRunEntry];
+            bool left = below == rec.y;
+            if (!left && below != rec.x - 1u) s_unlinked = 1u;
+            uint d = item_flags(rec.x, b) & 3u;
+            map = compose_maps(map, path_map(d, left, rec.z & 1u, (rec.z >> 1) & 1u));
+        }
+        s_scan[id].x = map;
+        sync_all();
+        if (s_unlinked != 0u) {
+            if (id < g_boxes && s_state[g_b0 + id] == 1u)
+                for (uint q = c1; q > c0; --q) sweep_round(rbase, q - 1u, g_b0 + id);
+            sync_all();
+            c1 = c0;
+            continue;
+        }
+        // An inclusive scan of the maps over the box's lanes, from the top.
+        for (uint k = 1u; k < per_box; k <<= 1) {
+            ++g_walk;
+            uint above = lane >= k ? s_scan[id - k].x : kSameState;
+            memoryBarrierShared();
+            barrier();
+            s_scan[id].x = compose_maps(above, s_scan[id].x);
+            memoryBarrierShared();
+            barrier();
+        }
+        uint state = map_state(lane == 0u ? kSameState : s_scan[id - 1u].x, top_state);
+        for (uint q = q1; mine && q > q0; --q) {
+            ++g_walk;
+            uvec3 rec = run_record(rbase, q - 1u, kRunSigns);
+            uint e = rec.x, l = rec.y, r = e - 1u;
+            // The operand whose flags the round below writes, if it is in the chunk.
+            uint below = q - 1u > c0 ? scratch[rbase + kRoundWords * (q - 2u) + kRunEntry]
+                                     : 0xffffffffu;
+            uint fl = item_flags(e, b), d = fl & 3u;
+            uint nl = rec.z & 1u, nr = (rec.z >> 1) & 1u, neg = (state & kFlip) != 0u ? 1u : 0u;
+            if ((state & kPass) != 0u) {
+                set_item_flags(e, b, (fl & kEvaluationFlags) |
+                                         ((d == kKeepBoth ? 1u : 2u) << 2) | (neg << 4));
+                if (d == kKeepBoth) {
+                    if (l != below) set_kept(l, b, (1u << 2) | (nl << 4));
+                    if (r != below) set_kept(r, b, (1u << 2) | (nr << 4));
+                } else {
+                    bool left = d == kLeftWins;
+                    uint winner = left ? l : r;
+                    if (winner != below)
+                        set_kept(winner, b, (1u << 2) | ((neg ^ (left ? nl : nr)) << 4));
+                }
+            }
+            if (below == 0xffffffffu) break;
+            state = map_state(path_map(d, below == l, nl, nr), state);
+        }
+        sync_all();
+        c1 = c0;
+    }
+}
+
 // Stage 4 over a run of rounds [r0, end), one operator each, for every box whose tape is being
 // compacted (s_state 1), from the highest round down; every lane of the workgroup calls it. The
 // flags an entry of the chunk gets from a round above it in the chunk are kept in its item;
 // its operands' decisions (the low two bits of their flags) do not change in this stage.
 void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
     uint id = gl_LocalInvocationID.x, b = g_b0 + id;
+    if (end - r0 >= kRunScanned && (pc.flags & 65536u) == 0u) {
+        sweep_run_scanned(r0, end, rbase);
+        return;
+    }
     if (run_walked_as_is(r0, end)) {
         // Each entry's flags from scratch: set above the run, or by this lane earlier in it.
         if (id < g_boxes && s_state[b] == 1u)
-            for (uint q = end; q > r0; --q) {
-                ++g_walk;
-                uvec3 rec = run_record(rbase, q - 1u, kRunSigns);
-                uint e = rec.x, l = rec.y, r = e - 1u;
-                uint fl = item_flags(e, b);
-                if (((fl >> 2) & 3u) != 1u) continue;
-                uint d = fl & 3u;
-                uint nl = rec.z & 1u, nr = (rec.z >> 1) & 1u;
-                if (d == kKeepBoth) {
-                    set_kept(l, b, (1u << 2) | (nl << 4));
-                    set_kept(r, b, (1u << 2) | (nr << 4));
-                } else {
-                    bool left = d == kLeftWins;
-                    uint neg = ((fl >> 4) & 1u) ^ (left ? nl : nr);
-                    set_item_flags(e, b, (fl & kEvaluationFlags) | (2u << 2) | (fl & 16u));
-                    set_kept(left ? l : r, b, (1u << 2) | (neg << 4));
-                }
-            }
+            for (uint q = end; q > r0; --q) sweep_round(rbase, q - 1u, b);
         sync_all();
         return;
     }

@@ -165,6 +165,9 @@ class Pruner {
     // plan_wide's cost of a workgroup that takes several jobs: from their mean tape (1) or as
     // if every tape were the longest (0); SDFPRUNE_VULKAN_WIDE_MEAN.
     bool wide_mean = true;
+    // prune_wide.comp sweeps a long run by a scan over its rounds (1) or round by round (0);
+    // SDFPRUNE_VULKAN_WIDE_SCAN.
+    bool wide_scan = true;
     uint32_t wide_split = 0;  // SDFPRUNE_VULKAN_WIDE_SPLIT (1, 2, 4 or 8); 0: plan_wide's choice
     int wide_runs_override =
         -1;  // SDFPRUNE_VULKAN_WIDE_RUNS=0|1: prune_wide_runs.comp never, always

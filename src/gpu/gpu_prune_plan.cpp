@@ -521,6 +521,7 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_word
     s.push.max_stack = scene_height;
     s.push.budget = 0;
     s.push.wide_split = uint32_t(split);
+    if (!wide_scan) s.push.flags |= 65536u;
     const bool runs =
         wide_runs_override == 1 ||
         (wide_runs_override != 0 && s.team_jobs <= kWideRunsJobs && rounds >= kWideRunsRounds);
