@@ -1049,7 +1049,8 @@ TEST(Gpu, TopLevelsRunWide) {
 // are split over more workgroups where the model says their walk falls by a quarter or more: a
 // balanced tree's (a generated fluid's) level-1 cells, 512 jobs over tapes of hundreds of
 // words, where 512 workgroups would leave half the device idle. The busiest lane, measured on
-// the device, then walks less than with every job on one workgroup, and the cells are the same.
+// the device, then walks less than where jobs are split by their count and scratch alone
+// (SDFPRUNE_VULKAN_WIDE_SPLIT_BY_COST=0), and the cells are the same.
 // A chain's (a generated molecule's) level-1 steps stay whole: a chain's rounds take as long
 // on any share of the boxes. And the model the choice rests on follows the walks the device
 // measures, within a factor of 2 either way, for every wide step of both scenes, and of a
@@ -1075,7 +1076,8 @@ TEST(Gpu, WideStepsSplitWhereTheirWalkFalls) {
     };
     const Scene fluid = generate_scene("fluid", 1, 1000);
     const gpu::Grid split = gpu::prune(*h100, fluid, o);
-    const gpu::Grid whole = prune_with_env(*h100, fluid, o, "SDFPRUNE_VULKAN_WIDE_SPLIT", "1");
+    const gpu::Grid whole =
+        prune_with_env(*h100, fluid, o, "SDFPRUNE_VULKAN_WIDE_SPLIT_BY_COST", "0");
     ASSERT_EQ(split.stats().steps.size(), whole.stats().steps.size());
     bool gained = false;
     for (size_t i = 0; i < split.stats().steps.size(); ++i) {
@@ -1083,10 +1085,11 @@ TEST(Gpu, WideStepsSplitWhereTheirWalkFalls) {
         SCOPED_TRACE("fluid, step " + std::to_string(i));
         EXPECT_EQ(st.jobs, one.jobs);
         if (!st.wide || !one.wide) continue;
-        EXPECT_EQ(one.lanes_per_tape, 256u);
-        // (Steps of at most 256 boxes, 32 jobs, were split before by their count alone.)
-        if (st.level >= 1 && st.jobs > 256 && st.lanes_per_tape > 256) {
+        // (Split by their count alone where they have few jobs, as level 0's, in both.)
+        EXPECT_LE(one.lanes_per_tape, st.lanes_per_tape);
+        if (st.lanes_per_tape > one.lanes_per_tape) {
             gained = true;
+            EXPECT_GE(st.level, 1u);
             EXPECT_LT(4 * st.walked_words, 3 * one.walked_words);
         }
     }

@@ -167,6 +167,8 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
         wide_runs_override = std::atoi(env) != 0;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_MEAN"); env && *env)
         wide_mean = std::atoi(env) != 0;
+    if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_SPLIT_BY_COST"); env && *env)
+        wide_split_by_cost = std::atoi(env) != 0;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_SCAN"); env && *env)
         wide_scan = std::atoi(env) != 0;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_SPLIT"); env && *env) {

@@ -165,6 +165,9 @@ class Pruner {
     // plan_wide's cost of a workgroup that takes several jobs: from their mean tape (1) or as
     // if every tape were the longest (0); SDFPRUNE_VULKAN_WIDE_MEAN.
     bool wide_mean = true;
+    // plan_wide splits a step's jobs further where its modelled cost falls (kWideSplitGain), or
+    // only by their count and scratch (0, as before); SDFPRUNE_VULKAN_WIDE_SPLIT_BY_COST.
+    bool wide_split_by_cost = true;
     // prune_wide.comp sweeps a long run by a scan over its rounds (1) or round by round (0);
     // SDFPRUNE_VULKAN_WIDE_SCAN.
     bool wide_scan = true;

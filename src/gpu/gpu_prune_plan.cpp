@@ -491,7 +491,7 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_word
     // octants (64 team jobs) walk 743 words split 8 against 3,402 whole, and its level-1 cells
     // (512) 1,385 split 2 against 2,489 (measured on lavapipe); molecule's chains stay whole.
     Shape w = shape_for(split);
-    if (w.fits)
+    if (w.fits && wide_split_by_cost)
         for (uint64_t more = split * 2; more <= kPruneTeam; more *= 2)
             if (const Shape m = shape_for(more);
                 m.fits && m.cost * kWideSplitGain.den < w.cost * kWideSplitGain.num)
