@@ -93,6 +93,25 @@ void expect_walks_within_bound(const gpu::GpuStepShape& st, const std::string& w
 // near its corners: a near-field cell's tape gives the full tree's value (within float
 // rounding); a far-field constant has the value's sign and never overstates it (a lower bound of
 // |f| over the cell).
+// Whether a tape walk can run `tape`: every word names a node of the scene, each operator finds
+// two values on the stack, which is at most scene.max_stack deep, and one value is left. (A
+// broken kernel's tape must fail a test, not crash the test binary.)
+bool runnable_tape(const Scene& sc, std::span<const uint32_t> tape) {
+    uint64_t depth = 0;
+    for (const uint32_t w : tape) {
+        const uint32_t n = math::tape_node(w);
+        if (n >= sc.size()) return false;
+        if (sc.is_primitive(n)) {
+            if (++depth > sc.max_stack) return false;
+        } else if (depth < 2) {
+            return false;
+        } else {
+            --depth;
+        }
+    }
+    return depth == 1;
+}
+
 void expect_valid_cells(const Scene& sc, const gpu::Grid& gpu, const std::string& what) {
     SCOPED_TRACE(what);
     const uint32_t N = gpu.stats().grid;
@@ -103,6 +122,12 @@ void expect_valid_cells(const Scene& sc, const gpu::Grid& gpu, const std::string
         const uint32_t x = uint32_t(i % N), y = uint32_t(i / N % N), z = uint32_t(i / N / N);
         const vec3 centre =
             sc.aabb.min + vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * cs;
+        if (!c.far_field && !runnable_tape(sc, c.tape)) {
+            if (++bad <= 3)
+                ADD_FAILURE() << "cell (" << x << ", " << y << ", " << z << "): a tape of "
+                              << c.tape.size() << " words that no walk can run";
+            return;
+        }
         for (uint32_t k = 0; k < 9; ++k) {
             const vec3 d = k == 0 ? vec3(0, 0, 0)
                                   : vec3(k & 1 ? 0.45f : -0.45f, k & 2 ? 0.45f : -0.45f,
