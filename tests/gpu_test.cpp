@@ -80,8 +80,8 @@ void expect_same_stats(const PruneStats& cpu, const PruneStats& gpu, const std::
 
 // A step's walks as measured on the device: some, the longest within twice the planned bound
 // (a team's lane may pass from one phase to the next within a step; a wide lane's bound counts
-// a binary search's steps as the tape's bit width), and all workgroups' walks at least the
-// longest and at most as if every workgroup walked as long.
+// its searches by the scene's mean steps, and a chain's top-down pass round by round), and all
+// workgroups' walks at least the longest and at most as if every workgroup walked as long.
 void expect_walks_within_bound(const gpu::GpuStepShape& st, const std::string& what) {
     EXPECT_GT(st.walked_words, 0u) << what;
     EXPECT_LE(st.walked_words, 2 * st.longest_walk_words) << what;
@@ -89,10 +89,6 @@ void expect_walks_within_bound(const gpu::GpuStepShape& st, const std::string& w
     EXPECT_LE(st.walked_sum_words, st.workgroups * st.walked_words) << what;
 }
 
-// What every finest cell must guarantee, whichever device made it, at its centre and 8 points
-// near its corners: a near-field cell's tape gives the full tree's value (within float
-// rounding); a far-field constant has the value's sign and never overstates it (a lower bound of
-// |f| over the cell).
 // Whether a tape walk can run `tape`: every word names a node of the scene, each operator finds
 // two values on the stack, which is at most scene.max_stack deep, and one value is left. (A
 // broken kernel's tape must fail a test, not crash the test binary.)
@@ -112,6 +108,10 @@ bool runnable_tape(const Scene& sc, std::span<const uint32_t> tape) {
     return depth == 1;
 }
 
+// What every finest cell must guarantee, whichever device made it, at its centre and 8 points
+// near its corners: a near-field cell's tape gives the full tree's value (within float
+// rounding); a far-field constant has the value's sign and never overstates it (a lower bound of
+// |f| over the cell).
 void expect_valid_cells(const Scene& sc, const gpu::Grid& gpu, const std::string& what) {
     SCOPED_TRACE(what);
     const uint32_t N = gpu.stats().grid;
@@ -1094,7 +1094,7 @@ TEST(Gpu, WideStepsSplitWhereTheirWalkFalls) {
             ++wide;
             SCOPED_TRACE(what + ", level " + std::to_string(st.level) + " mode " +
                          std::to_string(st.mode));
-            EXPECT_LE(st.walked_words, 2 * st.longest_walk_words);
+            expect_walks_within_bound(st, what);
             EXPECT_GE(2 * st.walked_words, st.longest_walk_words);
         }
         EXPECT_GT(wide, 0) << what;
@@ -1128,7 +1128,9 @@ TEST(Gpu, WideStepsSplitWhereTheirWalkFalls) {
     const Scene molecule = generate_scene("molecule", 1, 400);
     const gpu::Grid chain = gpu::prune(*h100, molecule, o);
     for (const gpu::GpuStepShape& st : chain.stats().steps)
-        if (st.wide && st.level >= 1) EXPECT_EQ(st.lanes_per_tape, 256u) << "molecule";
+        if (st.wide && st.level >= 1) {
+            EXPECT_EQ(st.lanes_per_tape, 256u) << "molecule";
+        }
     expect_model_follows_walks(chain, "molecule");
     expect_matches_cpu(molecule, prune(molecule, o), chain, *h100, "molecule 400, 64³");
 
@@ -1673,7 +1675,9 @@ TEST(Gpu, WideKernelWalksChainsSerially) {
             expect_matches_cpu(sc, cpu, gpu, *dev, what);
             expect_valid_cells(sc, gpu, what);
         }
-        if (name == "mixed chain") EXPECT_LT(4 * scanned_walk, 3 * serial_walk) << name;
+        if (name == "mixed chain") {
+            EXPECT_LT(4 * scanned_walk, 3 * serial_walk) << name;
+        }
     }
 }
 

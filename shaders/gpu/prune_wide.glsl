@@ -221,6 +221,8 @@ uvec3 run_record(uint rbase, uint q, uint third) {
     uint at = rbase + kRoundWords * q;
     return uvec3(scratch[at + kRunEntry], scratch[at + kRunLeft], scratch[at + third]);
 }
+// Round q's entry in a run.
+uint run_entry(uint rbase, uint q) { return scratch[rbase + kRoundWords * q + kRunEntry]; }
 
 // A run is walked by a lane a box (g_b0 + lane), each operand from scratch, made before the run
 // or by the lane earlier in it. PRUNE_WIDE_RUNS (prune_wide_runs.comp): a run of kRunStaged
@@ -335,25 +337,32 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
 #endif
 }
 
+const uint kNoEntry = 0xffffffffu;
+// Stage 4 for a kept operator of a run (its record `rec`: entry, left operand, tape signs), box
+// b, its flags `fl` and its sign `neg`: its own flags (kept, or skipped where one operand
+// wins), and its kept operands', all but `below` (kNoEntry: none), whose flags are written by
+// its own round.
+void sweep_operator(uvec3 rec, uint b, uint fl, uint neg, uint below) {
+    uint e = rec.x, l = rec.y, r = e - 1u, d = fl & 3u;
+    uint nl = rec.z & 1u, nr = (rec.z >> 1) & 1u;
+    uint own = (fl & kEvaluationFlags) | ((d == kKeepBoth ? 1u : 2u) << 2) | (neg << 4);
+    if (own != fl) set_item_flags(e, b, own);  // (written already where the round above set it)
+    if (d == kKeepBoth) {
+        if (l != below) set_kept(l, b, (1u << 2) | (nl << 4));
+        if (r != below) set_kept(r, b, (1u << 2) | (nr << 4));
+    } else {
+        bool left = d == kLeftWins;
+        uint winner = left ? l : r;
+        if (winner != below) set_kept(winner, b, (1u << 2) | ((neg ^ (left ? nl : nr)) << 4));
+    }
+}
 // Stage 4 for round q of a run, box b, from scratch as it is: an entry's flags were set above
 // the run, or by the round above it in the run.
 void sweep_round(uint rbase, uint q, uint b) {
     ++g_walk;
     uvec3 rec = run_record(rbase, q, kRunSigns);
-    uint e = rec.x, l = rec.y, r = e - 1u;
-    uint fl = item_flags(e, b);
-    if (((fl >> 2) & 3u) != 1u) return;
-    uint d = fl & 3u;
-    uint nl = rec.z & 1u, nr = (rec.z >> 1) & 1u;
-    if (d == kKeepBoth) {
-        set_kept(l, b, (1u << 2) | (nl << 4));
-        set_kept(r, b, (1u << 2) | (nr << 4));
-    } else {
-        bool left = d == kLeftWins;
-        uint neg = ((fl >> 4) & 1u) ^ (left ? nl : nr);
-        set_item_flags(e, b, (fl & kEvaluationFlags) | (2u << 2) | (fl & 16u));
-        set_kept(left ? l : r, b, (1u << 2) | (neg << 4));
-    }
+    uint fl = item_flags(rec.x, b);
+    if (((fl >> 2) & 3u) == 1u) sweep_operator(rec, b, fl, (fl >> 4) & 1u, kNoEntry);
 }
 
 // A long run's top-down pass as a scan. Where each round's operator is an operand of the round
@@ -404,14 +413,14 @@ void sweep_run_scanned(uint r0, uint end, uint rbase) {
         memoryBarrierShared();
         barrier();
         // The chunk's top operator's state, as the rounds above left it.
-        uint top = item_flags(scratch[rbase + kRoundWords * (c1 - 1u) + kRunEntry], b);
+        uint top = item_flags(run_entry(rbase, c1 - 1u), b);
         uint top_state = (((top >> 2) & 3u) == 1u ? kPass : 0u) | ((top & 16u) != 0u ? kFlip : 0u);
         uint map = kSameState;
         // (The chunk's lowest round's map is not needed.)
         for (uint q = q1; mine && q > q0 && q - 1u > c0; --q) {
             ++g_walk;
             uvec3 rec = run_record(rbase, q - 1u, kRunSigns);
-            uint below = scratch[rbase + kRoundWords * (q - 2u) + kRunEntry];
+            uint below = run_entry(rbase, q - 2u);
             bool left = below == rec.y;
             if (!left && below != rec.x - 1u) s_unlinked = 1u;
             uint d = item_flags(rec.x, b) & 3u;
@@ -440,27 +449,14 @@ void sweep_run_scanned(uint r0, uint end, uint rbase) {
         for (uint q = q1; mine && q > q0; --q) {
             ++g_walk;
             uvec3 rec = run_record(rbase, q - 1u, kRunSigns);
-            uint e = rec.x, l = rec.y, r = e - 1u;
             // The operand whose flags the round below writes, if it is in the chunk.
-            uint below = q - 1u > c0 ? scratch[rbase + kRoundWords * (q - 2u) + kRunEntry]
-                                     : 0xffffffffu;
-            uint fl = item_flags(e, b), d = fl & 3u;
-            uint nl = rec.z & 1u, nr = (rec.z >> 1) & 1u, neg = (state & kFlip) != 0u ? 1u : 0u;
-            if ((state & kPass) != 0u) {
-                set_item_flags(e, b, (fl & kEvaluationFlags) |
-                                         ((d == kKeepBoth ? 1u : 2u) << 2) | (neg << 4));
-                if (d == kKeepBoth) {
-                    if (l != below) set_kept(l, b, (1u << 2) | (nl << 4));
-                    if (r != below) set_kept(r, b, (1u << 2) | (nr << 4));
-                } else {
-                    bool left = d == kLeftWins;
-                    uint winner = left ? l : r;
-                    if (winner != below)
-                        set_kept(winner, b, (1u << 2) | ((neg ^ (left ? nl : nr)) << 4));
-                }
-            }
-            if (below == 0xffffffffu) break;
-            state = map_state(path_map(d, below == l, nl, nr), state);
+            uint below = q - 1u > c0 ? run_entry(rbase, q - 2u) : kNoEntry;
+            uint fl = item_flags(rec.x, b);
+            if ((state & kPass) != 0u)
+                sweep_operator(rec, b, fl, (state & kFlip) != 0u ? 1u : 0u, below);
+            if (below == kNoEntry) break;
+            state = map_state(path_map(fl & 3u, below == rec.y, rec.z & 1u, (rec.z >> 1) & 1u),
+                              state);
         }
         sync_all();
         c1 = c0;

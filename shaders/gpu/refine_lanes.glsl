@@ -327,7 +327,7 @@ void main() {
             // The lanes that list a cell together count it with one atomic.
             uint listed;
             SUBGROUP_APPEND(listed, more_jobs, true);
-            if ((pc.flags & 32768u) == 0u) listed = more_place(refine_walk_class(len));
+            if (sorted_more) listed = more_place(refine_walk_class(len));
             uint at = pc.more_start + listed * more_words();
             scratch[at] = cell;
             scratch[at + 1u] = far_flags;

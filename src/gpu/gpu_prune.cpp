@@ -111,23 +111,22 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
     g.params = ctx.create_buffer(bytes_of(params));
     g.extras = ctx.create_buffer(bytes_of(extras));
     // For prune_wide.comp: per node the first node of its subtree and its height (post-order:
-    // operands first, so one pass), and the highest, the root's.
+    // operands first, so one pass), and the highest, the root's. And the steps of its search
+    // for an operator's left operand, back from the right operand over at most that operand's
+    // subtree (prune_wide.glsl): the bit width of its nodes less one, a step per level of a
+    // balanced subtree, none for a primitive (a left-deep chain's); per entry, rounded up, and
+    // a step more for the lanes' spread (the generated fluid's 13,988 operators take 20,967
+    // steps, 1 an entry, so 2).
     std::vector<uint32_t> spans(2 * uint64_t(sc.size()));
+    uint64_t search_steps = 0;
     for (uint32_t n = 0; n < sc.size(); ++n) {
         const bool prim = sc.is_primitive(n);
         spans[2 * n] = prim ? n : spans[2 * sc.left[n]];
         spans[2 * n + 1] =
             prim ? 0 : 1 + std::max(spans[2 * sc.left[n] + 1], spans[2 * sc.right[n] + 1]);
+        if (!prim) search_steps += std::bit_width(sc.right[n] - spans[2 * sc.right[n]]);
     }
     scene_height = spans[2 * sc.root() + 1];
-    // The search steps back from an operator's right operand over at most that operand's
-    // subtree (prune_wide.glsl): bit_width of its nodes less one, a step per level of a balanced
-    // subtree, none for a primitive (a left-deep chain's). Rounded up, a step more for the
-    // lanes' spread: the generated fluid's 13,988 operators take 20,967 steps, 1 an entry.
-    uint64_t search_steps = 0;
-    for (uint32_t n = 0; n < sc.size(); ++n)
-        if (!sc.is_primitive(n))
-            search_steps += std::bit_width(sc.right[n] - spans[2 * sc.right[n]]);
     wide_search_steps = uint32_t(ceil_div(search_steps, std::max<uint64_t>(sc.size(), 1)) + 1);
     node_spans = ctx.create_buffer(spans.size() * 4);
 
@@ -165,12 +164,9 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
         wide_override = std::atoi(env) != 0;
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_RUNS"); env && *env)
         wide_runs_override = std::atoi(env) != 0;
-    if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_MEAN"); env && *env)
-        wide_mean = std::atoi(env) != 0;
-    if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_SPLIT_BY_COST"); env && *env)
-        wide_split_by_cost = std::atoi(env) != 0;
-    if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_SCAN"); env && *env)
-        wide_scan = std::atoi(env) != 0;
+    wide_mean = env_flag("SDFPRUNE_VULKAN_WIDE_MEAN", wide_mean);
+    wide_split_by_cost = env_flag("SDFPRUNE_VULKAN_WIDE_SPLIT_BY_COST", wide_split_by_cost);
+    wide_scan = env_flag("SDFPRUNE_VULKAN_WIDE_SCAN", wide_scan);
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_SPLIT"); env && *env) {
         const unsigned long split = std::strtoul(env, nullptr, 10);
         if (split > 0 && split <= kPruneTeam && (split & (split - 1)) == 0)
