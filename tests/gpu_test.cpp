@@ -1607,6 +1607,49 @@ TEST(Gpu, SweepsEndAtTheirLastKeptEntry) {
     }
 }
 
+// plan_wide counts a barrier only for the rounds that end at one: a run's rounds (a chain's
+// operators, one a round) are walked with none between them. A chain's steps then go wide where
+// every round counted as a barrier's kept them in teams (SDFPRUNE_VULKAN_WIDE_CHAINS=0), and
+// walk less there; a scene whose heights are all shared (the fluid's balanced tree) is planned
+// as before. Planned as on an H100; the cells are the CPU's.
+TEST(Gpu, WideStepsWalkAChainsRoundsWithoutBarriers) {
+    const std::unique_ptr<gpu::Device> h100 =
+        device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "270336");
+    ASSERT_TRUE(h100);
+    PruneOptions o;
+    o.resolution = 64;
+    o.refine = 1;
+    const Scene chain = right_deep_chain(300);
+    const gpu::Grid chained = gpu::prune(*h100, chain, o);
+    const gpu::Grid counted = prune_with_env(*h100, chain, o, "SDFPRUNE_VULKAN_WIDE_CHAINS", "0");
+    ASSERT_EQ(chained.stats().steps.size(), counted.stats().steps.size());
+    int moved = 0;
+    for (size_t i = 0; i < chained.stats().steps.size(); ++i) {
+        const gpu::GpuStepShape &st = chained.stats().steps[i], &before = counted.stats().steps[i];
+        SCOPED_TRACE("chain, step " + std::to_string(i));
+        EXPECT_EQ(st.jobs, before.jobs);
+        EXPECT_TRUE(st.wide || !before.wide);  // none goes back to teams
+        if (st.wide && !before.wide) {
+            ++moved;
+            EXPECT_LT(2 * st.walked_words, before.walked_words);
+        }
+    }
+    EXPECT_GT(moved, 0) << "no step of the chain went wide";
+    expect_same_stats(counted.stats(), chained.stats(), "chain, rounds counted alike");
+    expect_same_device_cells(counted, chained, "chain, rounds counted alike");
+    expect_matches_cpu(chain, prune(chain, o), chained, *h100, "right-deep chain of 300, 64³");
+
+    const Scene fluid = generate_scene("fluid", 1, 1000);
+    const gpu::Grid shared = gpu::prune(*h100, fluid, o);
+    const gpu::Grid every = prune_with_env(*h100, fluid, o, "SDFPRUNE_VULKAN_WIDE_CHAINS", "0");
+    ASSERT_EQ(shared.stats().steps.size(), every.stats().steps.size());
+    for (size_t i = 0; i < shared.stats().steps.size(); ++i) {
+        SCOPED_TRACE("fluid, step " + std::to_string(i));
+        EXPECT_EQ(shared.stats().steps[i].wide, every.stats().steps[i].wide);
+        EXPECT_EQ(shared.stats().steps[i].lanes_per_tape, every.stats().steps[i].lanes_per_tape);
+    }
+}
+
 // The wide kernel (forced wherever it fits) walks a run of rounds of one operator each (a
 // chain's) with a few lanes and no barriers between its rounds, and sweeps a long one by a
 // scan over its rounds (a chunk not a path, round by round): the same cells as the CPU's,
@@ -2121,4 +2164,5 @@ TEST(GpuCli, DeviceOutOfMemoryExitsTwo) {
 }
 
 }  // namespace
+
 }  // namespace sdfprune::test

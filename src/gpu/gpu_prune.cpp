@@ -127,6 +127,14 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
         if (!prim) search_steps += std::bit_width(sc.right[n] - spans[2 * sc.right[n]]);
     }
     scene_height = spans[2 * sc.root() + 1];
+    // The heights above the primitives' that more than one operator of the scene shares: only
+    // those can be a round of more than one entry in a tape (plan_wide: a round with a barrier
+    // of its own, not in a run). None in a left-deep chain (the reference molecule).
+    std::vector<uint32_t> height_operators(uint64_t(scene_height) + 1, 0);
+    for (uint32_t n = 0; n < sc.size(); ++n)
+        if (!sc.is_primitive(n)) ++height_operators[spans[2 * n + 1]];
+    shared_heights = uint32_t(std::count_if(height_operators.begin(), height_operators.end(),
+                                            [](uint32_t c) { return c > 1; }));
     wide_search_steps = uint32_t(ceil_div(search_steps, std::max<uint64_t>(sc.size(), 1)) + 1);
     node_spans = ctx.create_buffer(spans.size() * 4);
 
@@ -165,6 +173,7 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_RUNS"); env && *env)
         wide_runs_override = std::atoi(env) != 0;
     wide_mean = env_flag("SDFPRUNE_VULKAN_WIDE_MEAN", wide_mean);
+    wide_chains = env_flag("SDFPRUNE_VULKAN_WIDE_CHAINS", wide_chains);
     wide_split_by_cost = env_flag("SDFPRUNE_VULKAN_WIDE_SPLIT_BY_COST", wide_split_by_cost);
     wide_scan = env_flag("SDFPRUNE_VULKAN_WIDE_SCAN", wide_scan);
     if (const char* env = std::getenv("SDFPRUNE_VULKAN_WIDE_SPLIT"); env && *env) {

@@ -126,6 +126,8 @@ class Pruner {
     // prune_wide.comp's search for an operator's left operand: its steps per tape entry, on
     // average over the scene (plan_wide).
     uint32_t wide_search_steps = 0;
+    // The scene's heights above 0 that more than one operator shares (plan_wide's barriers).
+    uint32_t shared_heights = 0;
     uint64_t capacity = 0, octant_capacity = 1 << 16;  // of g.pool and octant_pool, in words
     Buffer& node_spans;
     // The steps' counters (prune_common.glsl: Counters), which every workgroup's atomics hit:
@@ -165,6 +167,9 @@ class Pruner {
     // plan_wide's cost of a workgroup that takes several jobs: from their mean tape (1) or as
     // if every tape were the longest (0); SDFPRUNE_VULKAN_WIDE_MEAN.
     bool wide_mean = true;
+    // plan_wide's cost counts a barrier for the rounds that end at one (1), or for every round
+    // (0, as before stop 50); SDFPRUNE_VULKAN_WIDE_CHAINS.
+    bool wide_chains = true;
     // plan_wide splits a step's jobs further where its modelled cost falls (kWideSplitGain), or
     // only by their count and scratch (0, as before); SDFPRUNE_VULKAN_WIDE_SPLIT_BY_COST.
     bool wide_split_by_cost = true;

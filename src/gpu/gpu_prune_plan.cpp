@@ -20,7 +20,12 @@ namespace sdfprune::gpu::pruning {
 // workgroup each, in a grid-stride loop): the generated fluid's level-2 octants, 3,518 team
 // jobs, take 3.0 ms wide against 12.5 ms in teams. SDFPRUNE_VULKAN_WIDE=0 never, =1 wherever
 // the kernel fits (for tests).
-constexpr uint64_t kWideMinTape = 128, kWideRoundCost = 4;
+// A round in a run (a chain's operators, one a round, walked with no barrier between them)
+// counts kWideRunRoundCost times instead: on an H200 molecule's four top steps, about 3,450
+// such rounds, took 2.14 ms (stop 28), about 620 ns a round against 485-672 ns a team's word
+// (stop 36), so a run's round costs about what a team's word does, twice a wide lane's word.
+// SDFPRUNE_VULKAN_WIDE_CHAINS=0 counts every round as a barrier's (before stop 50).
+constexpr uint64_t kWideMinTape = 128, kWideRoundCost = 4, kWideRunRoundCost = 2;
 constexpr uint64_t kWideSplitGroups = 64;  // plan_wide
 // plan_wide splits a step's jobs further where the modelled cost falls to this share or less.
 constexpr struct { uint64_t num, den; } kWideSplitGain{3, 4};
@@ -409,6 +414,16 @@ void Pruner::plan_squads(const Level& lv, Step& s) {
 void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_words) {
     const uint64_t len = max_len, heights = uint64_t(scene_height) + 1;
     const uint64_t rounds = std::min<uint64_t>(heights, len / 2 + 1);
+    // The rounds that end at a barrier (in stages 2 and 4 each), at most: a round of more than
+    // one entry (at a height the scene's operators share, or the primitives'), a run's last
+    // round (runs lie between those), and in a long run one round a chunk (staged, or
+    // scanned); the others are in runs. A job's rounds cost, beyond their walked words:
+    const uint64_t barrier_rounds =
+        !wide_chains ? rounds
+                     : std::min(rounds, 2 * uint64_t(shared_heights) + 3 +
+                                            ceil_div(rounds, kPruneWideRunChunk));
+    const uint64_t round_cost = 2 * ((kWideRoundCost - 1) * barrier_rounds +
+                                     (kWideRunRoundCost - 1) * (rounds - barrier_rounds));
     const uint64_t resident_groups = std::max<uint64_t>(ctx.resident_threads() / kPruneWide, 1);
     // Workgroups whose scratch fits a buffer, and all the buffers a step may spread over.
     const uint64_t buffers = std::min(ctx.prune_scratch_buffers(), scratch_buffers_cap);
@@ -465,7 +480,7 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_word
                  : !wide_mean || mean >= len
                      ? group_jobs * walk_job
                      : walk_job + (group_jobs - 1) * job_walk(mean, wide_search_steps);
-        w.cost = w.walk + group_jobs * 2 * (kWideRoundCost - 1) * rounds;
+        w.cost = w.walk + group_jobs * round_cost;
         return w;
     };
     // Workgroups per job (wide_split): where a step has very few jobs (level 0: the root's 64
