@@ -338,23 +338,28 @@ void evaluate_run(uint r0, uint end, uint rbase, uint vbase, float spread_r, boo
 }
 
 const uint kNoEntry = 0xffffffffu;
-// Stage 4 for a kept operator of a run (its record `rec`: entry, left operand, tape signs), box
-// b, its flags `fl` and its sign `neg`: its own flags (kept, or skipped where one operand
-// wins), and its kept operands', all but `below` (kNoEntry: none), whose flags are written by
-// its own round.
-void sweep_operator(uvec3 rec, uint b, uint fl, uint neg, uint below) {
-    uint e = rec.x, l = rec.y, r = e - 1u, d = fl & 3u;
-    uint nl = rec.z & 1u, nr = (rec.z >> 1) & 1u;
+// Stage 4 at a kept operator of a run, its flags `fl` and its sign `neg`, its operands' tape
+// signs in `signs` (its record's: bit 0 the left's, bit 1 the right's): its own flags (kept, or
+// skipped where one operand wins), and the sweep's flags it gives its left and its right
+// operand (0: none, for one that loses), their evaluation flags aside.
+uvec3 swept_operator(uint fl, uint neg, uint signs) {
+    uint d = fl & 3u, nl = signs & 1u, nr = (signs >> 1) & 1u;
     uint own = (fl & kEvaluationFlags) | ((d == kKeepBoth ? 1u : 2u) << 2) | (neg << 4);
-    if (own != fl) set_item_flags(e, b, own);  // (written already where the round above set it)
-    if (d == kKeepBoth) {
-        if (l != below) set_kept(l, b, (1u << 2) | (nl << 4));
-        if (r != below) set_kept(r, b, (1u << 2) | (nr << 4));
-    } else {
-        bool left = d == kLeftWins;
-        uint winner = left ? l : r;
-        if (winner != below) set_kept(winner, b, (1u << 2) | ((neg ^ (left ? nl : nr)) << 4));
-    }
+    if (d == kKeepBoth) return uvec3(own, (1u << 2) | (nl << 4), (1u << 2) | (nr << 4));
+    bool left = d == kLeftWins;
+    uint winner = (1u << 2) | ((neg ^ (left ? nl : nr)) << 4);
+    return uvec3(own, left ? winner : 0u, left ? 0u : winner);
+}
+// Stage 4 for a kept operator of a run (its record `rec`: entry, left operand, tape signs), box
+// b, its flags `fl` and its sign `neg` (swept_operator): its own flags and its kept operands',
+// all but `below` (kNoEntry: none), whose flags are written by its own round.
+void sweep_operator(uvec3 rec, uint b, uint fl, uint neg, uint below) {
+    uint e = rec.x, l = rec.y, r = e - 1u;
+    uvec3 swept = swept_operator(fl, neg, rec.z);
+    // (Its own flags are written already where the round above set them.)
+    if (swept.x != fl) set_item_flags(e, b, swept.x);
+    if (swept.y != 0u && l != below) set_kept(l, b, swept.y);
+    if (swept.z != 0u && r != below) set_kept(r, b, swept.z);
 }
 // Stage 4 for round q of a run, box b, from scratch as it is: an entry's flags were set above
 // the run, or by the round above it in the run.
@@ -500,24 +505,17 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
                 uvec4 own = s_run_own[(q - 1u) * kTeam + b];
                 uint e = rec.x, l = rec.y, r = e - 1u, fl = own.x;
                 if (((fl >> 2) & 3u) != 1u) continue;
-                uint d = fl & 3u;
-                uint nl = rec.z & 1u, nr = (rec.z >> 1) & 1u;
                 uint jl = rec.w & 0xffu, jr = rec.w >> 8;
-                if (d == kKeepBoth) {
-                    uint set_l = own.y | (1u << 2) | (nl << 4);
-                    uint set_r = own.z | (1u << 2) | (nr << 4);
-                    set_item_flags(l, b, set_l);
-                    set_item_flags(r, b, set_r);
-                    if (jl != kNotInChunk) s_run_own[jl * kTeam + b].x = set_l;
-                    if (jr != kNotInChunk) s_run_own[jr * kTeam + b].x = set_r;
-                } else {
-                    bool left = d == kLeftWins;
-                    uint wn = left ? l : r, jw = left ? jl : jr;
-                    uint neg = ((fl >> 4) & 1u) ^ (left ? nl : nr);
-                    set_item_flags(e, b, (fl & kEvaluationFlags) | (2u << 2) | (fl & 16u));
-                    uint set_w = (left ? own.y : own.z) | (1u << 2) | (neg << 4);
-                    set_item_flags(wn, b, set_w);
-                    if (jw != kNotInChunk) s_run_own[jw * kTeam + b].x = set_w;
+                uvec3 swept = swept_operator(fl, (fl >> 4) & 1u, rec.z);
+                if (swept.x != fl) set_item_flags(e, b, swept.x);
+                // Each kept operand's flags, in scratch and, where the chunk has it, in its own.
+                if (swept.y != 0u) {
+                    set_item_flags(l, b, own.y | swept.y);
+                    if (jl != kNotInChunk) s_run_own[jl * kTeam + b].x = own.y | swept.y;
+                }
+                if (swept.z != 0u) {
+                    set_item_flags(r, b, own.z | swept.z);
+                    if (jr != kNotInChunk) s_run_own[jr * kTeam + b].x = own.z | swept.z;
                 }
             }
         sync_all();
