@@ -188,6 +188,22 @@ void expect_matches_cpu(const Scene& sc, const PrunedGrid& cpu, const gpu::Grid&
         expect_valid_cells(sc, gpu, what);
 }
 
+// Two grids of one device, cell by cell: the same far-field constants and tapes.
+void expect_same_device_cells(const gpu::Grid& a, const gpu::Grid& b, const std::string& what);
+
+// Two grids of one scene whose plans may take other kernels for some steps (teams or wide,
+// refinement's lanes or squads): on an exact device the same statistics and cells, bit for bit;
+// elsewhere each kernel may round a bound differently, so the statistics agree within their
+// tolerance and each grid holds what a grid guarantees.
+void expect_same_grid_if_exact(const Scene& sc, const gpu::Grid& a, const gpu::Grid& b,
+                               const gpu::Device& dev, const std::string& what) {
+    const bool exact = exact_device(dev);
+    expect_same_stats(a.stats(), b.stats(), what, exact);
+    if (exact) return expect_same_device_cells(a, b, what);
+    expect_valid_cells(sc, a, what);
+    expect_valid_cells(sc, b, what);
+}
+
 TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const TreeShape shapes[] = {TreeShape::kBalanced, TreeShape::kLeftDeep, TreeShape::kRightDeep,
@@ -300,15 +316,6 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
     expect_matches_cpu(sc, prune(sc, o), wide, *dev, "demo 32³, wide");
 }
 
-// The steps' work shapes (GpuStepShape) follow the hierarchy: per level the cells from their
-// blocks (the top levels, splits_into_octants), or the octants then the cells from them, then
-// the refinement; jobs are the CPU's cells and octants, lanes come in
-// teams that share a parent tape (one lane per cell or octant; in refinement a squad per cell,
-// a lane per sub-box), and
-// the busiest lane walks at least one parent tape; their GPU times add up to at most the
-// pruning's. (Teams only: SDFPRUNE_VULKAN_WIDE=0.)
-void expect_same_device_cells(const gpu::Grid& a, const gpu::Grid& b, const std::string& what);
-
 // A device made with an environment variable set (for the figures it reads once).
 std::unique_ptr<gpu::Device> device_with_envs(
     std::initializer_list<std::pair<const char*, const char*>> settings) {
@@ -394,6 +401,12 @@ TEST(Gpu, SubgroupSizeIsTheOneAskedFor) {
     EXPECT_FALSE(g.stats().subgroups);
 }
 
+// The steps' work shapes (GpuStepShape) follow the hierarchy: per level the cells from their
+// blocks (the top levels, splits_into_octants), or the octants then the cells from them, then
+// the refinement; jobs are the CPU's cells and octants, lanes come in teams that share a parent
+// tape (one lane per cell or octant; in refinement a squad per cell, a lane per sub-box), and
+// the busiest lane walks at least one parent tape; their GPU times add up to at most the
+// pruning's. (Teams only: SDFPRUNE_VULKAN_WIDE=0.)
 TEST(Gpu, StepShapesFollowTheLevels) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = builtin_scene("demo");
@@ -649,7 +662,8 @@ TEST(Gpu, RefinementsLanesTakeTapesOfUpTo64Words) {
         if (!first)
             first.emplace(std::move(g));
         else if (&c.device == dev)
-            expect_same_device_cells(*first, g, std::string(c.what) + " against 64 words");
+            expect_same_grid_if_exact(sc, *first, g, *dev,
+                                      std::string(c.what) + " against 64 words");
     }
 }
 
@@ -748,7 +762,8 @@ TEST(Gpu, RefinementOrderChangesNoCell) {
     const gpu::Grid few = gpu::prune(*few_lanes, sc, o);
     EXPECT_LE(few.stats().steps.back().lanes, 448u);
     EXPECT_GE(few.stats().steps.back().jobs, 3u * 448) << "the lanes' cells in a few rounds only";
-    expect_same_device_cells(few, listed, "448 lanes against listed");
+    // (Its plan may take other kernels: the lane tape, the top levels wide or not.)
+    expect_same_grid_if_exact(sc, few, listed, *few_lanes, "448 lanes against listed");
 }
 
 // The octants' and cells' steps in teams take their parents (blocks, octants) longest tapes
@@ -1492,8 +1507,7 @@ TEST(Gpu, PrunePeakStaysNearTheResult) {
     EXPECT_LT(st.prune_peak_bytes, large.stats().prune_peak_bytes);
     for (const gpu::GpuStepShape& step : st.steps)
         EXPECT_LE(step.lanes, 2048u) << "level " << step.level << " mode " << step.mode;
-    expect_same_stats(large.stats(), st, "resident teams capped");
-    expect_same_device_cells(large, small, "resident teams capped");
+    expect_same_grid_if_exact(sc, large, small, *capped, "resident teams capped");
 }
 
 TEST(Gpu, DeepChainPrunes) {
@@ -1635,8 +1649,7 @@ TEST(Gpu, WideStepsWalkAChainsRoundsWithoutBarriers) {
         }
     }
     EXPECT_GT(moved, 0) << "no step of the chain went wide";
-    expect_same_stats(counted.stats(), chained.stats(), "chain, rounds counted alike");
-    expect_same_device_cells(counted, chained, "chain, rounds counted alike");
+    expect_same_grid_if_exact(chain, counted, chained, *h100, "chain, rounds counted alike");
     expect_matches_cpu(chain, prune(chain, o), chained, *h100, "right-deep chain of 300, 64³");
 
     const Scene fluid = generate_scene("fluid", 1, 1000);
