@@ -14,7 +14,8 @@
 # reserve (its size and its thread's time: the first call did not wait for it, so where it
 # allocated much, the reserve came too late) and each step's
 # GPU time (L level, o octants, c cells, x refinement, W wide, W2-W8 wide with each job split
-# over that many workgroups; [lane pass's part, <its longest
+# over that many workgroups, R after it: long runs staged in shared memory, from stop 50 on;
+# [lane pass's part, <its longest
 # tape from stop 48 on]; {the team
 # steps' longest walk of a workgroup, in tape entries, measured on the device: builds from
 # stop 46 on; from stop 47 on every step's, wide and refinement too, and /the walks of all the
@@ -71,9 +72,10 @@ if d is not None and os.environ.get("SAVE"):
 if d is None:
     print(scene, label, "no result")
 else:
-    def kernel(s):  # W wide, W2..W8 its jobs split over that many workgroups
+    def kernel(s):  # W wide, W2..W8 its jobs split over that many workgroups, R its runs staged
         split = s.get("lanes_per_tape", 256) // 256
-        return ("W%d" % split if split > 1 else "W") if s["wide"] else ""
+        runs = "R" if s.get("wide_runs") else ""
+        return ("W%d" % split if split > 1 else "W") + runs if s["wide"] else ""
     steps = " ".join("L%d%s%s:%.2f" % (s["level"], "bocx"[s["mode"]], kernel(s), s["gpu_ms"]) +
                      ("[%.2f%s]" % (s["lanes_ms"], "<%d" % s["lane_tape"] if s.get("lane_tape") else "")
                       if s.get("lanes_ms") else "") +

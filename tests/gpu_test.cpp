@@ -1624,7 +1624,8 @@ TEST(Gpu, SweepsEndAtTheirLastKeptEntry) {
 // plan_wide counts a barrier only for the rounds that end at one: a run's rounds (a chain's
 // operators, one a round) are walked with none between them. A chain's steps then go wide where
 // every round counted as a barrier's kept them in teams (SDFPRUNE_VULKAN_WIDE_CHAINS=0), and
-// walk less there; a scene whose heights are all shared (the fluid's balanced tree) is planned
+// walk less there, their long runs staged in shared memory (prune_wide_runs.comp) however many
+// jobs they have; a scene whose heights are all shared (the fluid's balanced tree) is planned
 // as before. Planned as on an H100; the cells are the CPU's.
 TEST(Gpu, WideStepsWalkAChainsRoundsWithoutBarriers) {
     const std::unique_ptr<gpu::Device> h100 =
@@ -1646,6 +1647,9 @@ TEST(Gpu, WideStepsWalkAChainsRoundsWithoutBarriers) {
         if (st.wide && !before.wide) {
             ++moved;
             EXPECT_LT(2 * st.walked_words, before.walked_words);
+            // (Its runs staged, though it has more than 512 team jobs: they are long.)
+            EXPECT_TRUE(st.wide_runs);
+            EXPECT_GT(st.jobs, 8u * 512);
         }
     }
     EXPECT_GT(moved, 0) << "no step of the chain went wide";
@@ -1660,6 +1664,7 @@ TEST(Gpu, WideStepsWalkAChainsRoundsWithoutBarriers) {
         SCOPED_TRACE("fluid, step " + std::to_string(i));
         EXPECT_EQ(shared.stats().steps[i].wide, every.stats().steps[i].wide);
         EXPECT_EQ(shared.stats().steps[i].lanes_per_tape, every.stats().steps[i].lanes_per_tape);
+        EXPECT_EQ(shared.stats().steps[i].wide_runs, every.stats().steps[i].wide_runs);
     }
 }
 

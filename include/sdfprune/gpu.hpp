@@ -92,6 +92,9 @@ struct GpuStepShape {
     // takes one parent tape and its kPruneTeam boxes, the tape's nodes spread over its lanes
     // and combined height by height.
     bool wide = false;
+    // Wide: whether it ran prune_wide_runs.comp, which walks a long run of rounds (a chain's)
+    // from shared memory, each chunk staged first, instead of from scratch as it is.
+    bool wide_runs = false;
     // In teams: whether its workgroups took their jobs as they came free (from a counter,
     // SDFPRUNE_VULKAN_TAKE), not dealt out to the teams in advance.
     bool taken = false;
@@ -183,6 +186,7 @@ void for_each_figure(const GpuStepShape& st, Add&& add) {
     add("level", st.level);
     add("mode", st.mode);
     add("wide", st.wide);
+    add("wide_runs", st.wide_runs);
     add("taken", st.taken);
     add("dispatches", st.dispatches);
     add("workgroups", st.workgroups);

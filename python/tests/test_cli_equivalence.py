@@ -89,7 +89,7 @@ def test_gpu_stats_match_cli(tmp_path, cli, example):
     assert len(got["gpu_steps"]) == len(want["gpu_steps"]) > 0
     for mine, theirs in zip(got["gpu_steps"], want["gpu_steps"]):
         assert set(mine) == set(theirs)
-        for key in ("level", "mode", "wide", "taken", "dispatches", "workgroups", "jobs", "lanes",
+        for key in ("level", "mode", "wide", "wide_runs", "taken", "dispatches", "workgroups", "jobs", "lanes",
                     "lanes_per_tape", "longest_walk_words", "copy_jobs", "scratch_bytes"):
             assert mine[key] == theirs[key], (mine["level"], mine["mode"], key)
         # Walks are measured in every step that has jobs (teams, wide, refinement).

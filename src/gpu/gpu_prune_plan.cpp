@@ -24,6 +24,8 @@ namespace sdfprune::gpu::pruning {
 // counts kWideRunRoundCost times instead: on an H200 molecule's four top steps, about 3,450
 // such rounds, took 2.14 ms (stop 28), about 620 ns a round against 485-672 ns a team's word
 // (stop 36), so a run's round costs about what a team's word does, twice a wide lane's word.
+// (A run walked as it is, from scratch, costs more: on the same steps 3.18 ms; plan_wide then
+// takes prune_wide_runs.comp for steps whose rounds are mostly in runs.)
 // SDFPRUNE_VULKAN_WIDE_CHAINS=0 counts every round as a barrier's (before stop 50).
 constexpr uint64_t kWideMinTape = 128, kWideRoundCost = 4, kWideRunRoundCost = 2;
 constexpr uint64_t kWideSplitGroups = 64;  // plan_wide
@@ -32,7 +34,8 @@ constexpr struct { uint64_t num, den; } kWideSplitGain{3, 4};
 // Wide steps of at most kWideRunsJobs jobs over tapes of kWideRunsRounds heights or more run
 // prune_wide_runs.comp (long runs walked from shared memory): on an H200 molecule's four top
 // steps went from 3.18 to 2.14 ms, but its staging arrays slowed the steps of many jobs and
-// short runs that shared the kernel (monument's level-2 cells 1.24 -> 1.97 ms; stop 28).
+// short runs that shared the kernel (monument's level-2 cells 1.24 -> 1.97 ms; stop 28). So
+// do steps of more jobs whose rounds are mostly in runs (plan_wide: a chain's).
 constexpr uint64_t kWideRunsJobs = 512, kWideRunsRounds = 64;
 
 // A step over the blocks [first_block, first_block + blocks), `jobs` cells or octants (or in
@@ -537,13 +540,18 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_word
     s.push.budget = 0;
     s.push.wide_split = uint32_t(split);
     if (!wide_scan) s.push.flags |= 65536u;
+    // (Or any number of jobs where at most a quarter of the rounds end at a barrier: a chain's
+    // steps, whose runs are long, as molecule's level-2 octants, 1,675 jobs. The staged walk
+    // is what kWideRunRoundCost was measured on.)
+    const bool mostly_runs = wide_chains && 4 * barrier_rounds <= rounds;
     const bool runs =
-        wide_runs_override == 1 ||
-        (wide_runs_override != 0 && s.team_jobs <= kWideRunsJobs && rounds >= kWideRunsRounds);
+        wide_runs_override == 1 || (wide_runs_override != 0 && rounds >= kWideRunsRounds &&
+                                    (s.team_jobs <= kWideRunsJobs || mostly_runs));
     s.kernel = runs && ctx.can_run(KernelId::kPruneWideRuns) ? KernelId::kPruneWideRuns
                : ctx.can_run(KernelId::kPruneWideSubgroups)  ? KernelId::kPruneWideSubgroups
                                                              : KernelId::kPruneWide;
     s.shape.wide = true;
+    s.shape.wide_runs = s.kernel == KernelId::kPruneWideRuns;
     s.shape.lanes_per_tape = uint32_t(kPruneWide * split);
     s.shape.lanes = std::min<uint64_t>(parts, groups) * kPruneWide;
     s.shape.longest_walk_words = walk;

@@ -301,6 +301,7 @@ void add_stats(CLI::App& app, std::vector<Command>& commands) {
                                      (unsigned long long)st.walked_words,
                                      (unsigned long long)st.walked_sum_words);
                      if (st.taken) std::printf(", jobs taken as workgroups come free");
+                     if (st.wide_runs) std::printf(", long runs staged in shared memory");
                      if (st.scratch_bytes > 0)
                          std::printf(", scratch %.1f MB", double(st.scratch_bytes) / 1e6);
                      if (st.mode == 3)  // refinement: its lane pass
