@@ -345,6 +345,11 @@ std::unique_ptr<gpu::Device> device_with_envs(
 std::unique_ptr<gpu::Device> device_with_env(const char* name, const char* value) {
     return device_with_envs({{name, value}});
 }
+// A device that plans its steps for an H100's or H200's resident lanes (132 SMs of 2,048), so
+// that lavapipe takes the shapes a GPU takes.
+std::unique_ptr<gpu::Device> device_planned_as_h100() {
+    return device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "270336");
+}
 
 // A pruning with the environment variable `name` set to `value` (a setting read by the pruner)
 // for its duration.
@@ -932,8 +937,7 @@ TEST(Gpu, ClaimsChangeNoCell) {
     std::vector<Case> cases;
     cases.push_back({"demo 64³", builtin_scene("demo"), 64, true});
     cases.push_back({"chain of 12,000 at 16³", right_deep_chain(12000), 16, false});
-    const std::unique_ptr<gpu::Device> h100_like =
-        device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "270336");
+    const std::unique_ptr<gpu::Device> h100_like = device_planned_as_h100();
     ASSERT_TRUE(h100_like);
     for (const Case& c : cases)
         for (const bool wide : {false, true}) {
@@ -973,8 +977,7 @@ TEST(Gpu, ClaimsChangeNoCell) {
 // whose items' flags are bytes too, are not built there.
 TEST(Gpu, ByteFlagsChangeNoCell) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
-    const std::unique_ptr<gpu::Device> h100_like =
-        device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "270336");
+    const std::unique_ptr<gpu::Device> h100_like = device_planned_as_h100();
     const std::unique_ptr<gpu::Device> no_bytes =
         device_with_env("SDFPRUNE_VULKAN_8BIT_STORAGE", "0");
     ASSERT_TRUE(h100_like && no_bytes);
@@ -1096,8 +1099,7 @@ TEST(Gpu, TopLevelsRunWide) {
 // measures, within a factor of 2 either way, for every wide step of both scenes, and of a
 // right-deep chain whose every search for a left operand spans the rest of the tape.
 TEST(Gpu, WideStepsSplitWhereTheirWalkFalls) {
-    const std::unique_ptr<gpu::Device> h100 =
-        device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "270336");
+    const std::unique_ptr<gpu::Device> h100 = device_planned_as_h100();
     ASSERT_TRUE(h100);
     PruneOptions o;
     o.resolution = 64;
@@ -1628,8 +1630,7 @@ TEST(Gpu, SweepsEndAtTheirLastKeptEntry) {
 // jobs they have; a scene whose heights are all shared (the fluid's balanced tree) is planned
 // as before. Planned as on an H100; the cells are the CPU's.
 TEST(Gpu, WideStepsWalkAChainsRoundsWithoutBarriers) {
-    const std::unique_ptr<gpu::Device> h100 =
-        device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "270336");
+    const std::unique_ptr<gpu::Device> h100 = device_planned_as_h100();
     ASSERT_TRUE(h100);
     PruneOptions o;
     o.resolution = 64;
