@@ -837,11 +837,13 @@ TEST(Gpu, TeamJobOrderChangesNoCell) {
 }
 
 // The team steps' workgroups take their jobs as they come free, from a counter zeroed before
-// each dispatch (prune_team.glsl: take_jobs), instead of having them dealt out in advance
-// (SDFPRUNE_VULKAN_TAKE=0): the same cells, statistics and dispatches, and the CPU's. In teams
-// throughout and by default (the top levels wide, which take no jobs so), in order and block
-// by block, and with 56 teams (448 resident threads), which take many jobs each, each
-// workgroup at most as many as dealt out (lavapipe's loop limit).
+// each dispatch (prune_team.glsl: take_jobs), and the wide steps' workgroups their jobs' parts
+// (prune_wide.glsl: take_part), instead of having them dealt out in advance
+// (SDFPRUNE_VULKAN_TAKE=0, SDFPRUNE_VULKAN_WIDE_TAKE=0): the same cells, statistics and
+// dispatches, and the CPU's. In teams throughout and by default (the top levels wide), in order
+// and block by block, and with 56 teams (448 resident threads), which take many jobs each, each
+// workgroup at most as many as dealt out (lavapipe's loop limit); and wide wherever it fits, a
+// workgroup then taking many parts.
 TEST(Gpu, TakenJobsChangeNoCell) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const Scene sc = builtin_scene("demo");
@@ -856,7 +858,8 @@ TEST(Gpu, TakenJobsChangeNoCell) {
     } cases[] = {{"teams, in order", "0", "1", nullptr},
                  {"default", nullptr, "1", nullptr},
                  {"teams, block by block", "0", "0", nullptr},
-                 {"56 teams, in order", "0", "1", "448"}};
+                 {"56 teams, in order", "0", "1", "448"},
+                 {"wide wherever it fits", "1", "1", nullptr}};
     for (const Case& c : cases) {
         SCOPED_TRACE(c.what);
         // (The device reads its resident threads as it is made.)
@@ -866,7 +869,9 @@ TEST(Gpu, TakenJobsChangeNoCell) {
         if (c.wide) ::setenv("SDFPRUNE_VULKAN_WIDE", c.wide, 1);
         ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", c.order, 1);
         const gpu::Grid taken = gpu::prune(d, sc, o);
+        ::setenv("SDFPRUNE_VULKAN_WIDE_TAKE", "0", 1);
         const gpu::Grid dealt = prune_with_env(d, sc, o, "SDFPRUNE_VULKAN_TAKE", "0");
+        ::unsetenv("SDFPRUNE_VULKAN_WIDE_TAKE");
         ::unsetenv("SDFPRUNE_VULKAN_WIDE");
         ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
         const std::vector<gpu::GpuStepShape>&a = taken.stats().steps, &b = dealt.stats().steps;
@@ -876,7 +881,7 @@ TEST(Gpu, TakenJobsChangeNoCell) {
         for (size_t i = 0; i < a.size(); ++i) {
             EXPECT_EQ(a[i].jobs, b[i].jobs) << "step " << i;
             EXPECT_EQ(a[i].dispatches, b[i].dispatches) << "step " << i;
-            EXPECT_EQ(a[i].taken, a[i].mode <= 2 && !a[i].wide) << "step " << i;
+            EXPECT_EQ(a[i].taken, a[i].mode <= 2) << "step " << i;  // teams and wide
             EXPECT_FALSE(b[i].taken) << "step " << i;
             if (a[i].taken && a[i].lanes >= 8) {
                 ++taking_steps;
@@ -884,6 +889,12 @@ TEST(Gpu, TakenJobsChangeNoCell) {
             }
         }
         EXPECT_GT(taking_steps, 0u);
+        if (c.wide && std::string(c.wide) == "1") {
+            const auto wide_taken = [](const gpu::GpuStepShape& st) {
+                return st.wide && st.taken && st.jobs > st.lanes / 32;  // many parts a workgroup
+            };
+            EXPECT_TRUE(std::any_of(a.begin(), a.end(), wide_taken));
+        }
         if (c.threads) {
             EXPECT_GE(most_jobs_a_team, 3u) << "the teams' jobs in a few rounds only";
             for (const gpu::GpuStepShape& st : a) {

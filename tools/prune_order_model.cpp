@@ -24,6 +24,14 @@
 // GPU's equal: the octants' pruned from their blocks' tapes (the coarse level's, kept), the
 // cells' as the grid without refinement has them. The orders are the level's storage order, about
 // the order the device lists the blocks and cells in (its atomics spread the cells further).
+// And the octants steps of the levels above the finest as wide steps
+// (shaders/gpu/prune_wide.glsl), a workgroup of 256 lanes a job of a block's 8 octants, the
+// jobs' parents each coarse level's near cells (a top level without octants takes 8 jobs a
+// parent instead, and the finest level's octants run in teams): their critical path on an
+// H100's 1,056 resident workgroups of 256 when the jobs are dealt out in advance (workgroup w's
+// are w, w + 1,056, ...) or taken as workgroups come free (take_part), each job's walk as
+// plan_wide models it (gpu_prune_plan.cpp: a share of the tape per lane in the sort and the
+// compaction, a step per round, at most a height of the scene, in the evaluation and the sweep).
 //
 // Usage: sdfprune_order_model SCENE [GRID]
 #include <algorithm>
@@ -138,6 +146,15 @@ uint64_t ideal(const std::vector<uint32_t>& lengths, uint32_t group) {
     uint64_t words = 0;
     for (const uint32_t len : lengths) words += len;
     return (words + group - 1) / group;
+}
+
+// A wide job's walk over a parent tape of n entries (gpu_prune_plan.cpp: plan_wide's job_walk,
+// one workgroup a job of 8 boxes): `rounds` the scene's heights, `search` its steps an entry.
+uint64_t wide_job_walk(uint64_t n, uint64_t rounds, uint64_t search) {
+    constexpr uint64_t kWide = 256, kBoxes = 8;
+    return (n + kWide - 1) / kWide * (2 + search) +
+           2 * (std::min(rounds, n / 2 + 1) + (n * kBoxes + kWide - 1) / kWide) +
+           2 * ((n + kWide / kBoxes - 1) / (kWide / kBoxes));
 }
 
 std::span<const uint32_t> tape_of(const PrunedGrid& grid, const PrunedCell& c) {
@@ -299,6 +316,41 @@ int main(int argc, char** argv) {
         waves("cells step", ordered(octants, parent_class, kOrderWindow));
         paths("lane pass", apart, "by walk class", ordered(apart, walk_class), kResident,
               kSubgroup);
+
+        // The wide steps: the scene's heights and search steps as gpu_prune.cpp counts them.
+        std::vector<uint32_t> first(sc.size()), height(sc.size());
+        uint64_t search_steps = 0;
+        for (uint32_t n = 0; n < sc.size(); ++n) {
+            const bool prim = sc.is_primitive(n);
+            first[n] = prim ? n : first[sc.left[n]];
+            height[n] = prim ? 0 : 1 + std::max(height[sc.left[n]], height[sc.right[n]]);
+            if (!prim) search_steps += std::bit_width(sc.right[n] - first[sc.right[n]]);
+        }
+        const uint64_t rounds = uint64_t(height[sc.root()]) + 1;
+        const uint64_t search = (search_steps + sc.size() - 1) / sc.size() + 1;
+        constexpr uint32_t kWideGroups = kResident / 256;
+        for (uint32_t l = 0; l < finest; ++l) {
+            std::vector<uint64_t> walks;
+            for (const PrunedCell& c : grid.level_cells(l))
+                if (c.tape != PrunedCell::kFarField)
+                    walks.push_back(wide_job_walk(tape_of(grid, c).size(), rounds, search));
+            if (walks.empty()) continue;
+            std::vector<uint64_t> dealt(std::min<size_t>(kWideGroups, walks.size()), 0);
+            uint64_t longest = 0, words = 0;
+            for (size_t j = 0; j < walks.size(); ++j) {
+                dealt[j % dealt.size()] += walks[j];
+                longest = std::max(longest, walks[j]);
+                words += walks[j];
+            }
+            std::printf(
+                "  level %u's octants step, wide (%zu jobs: level %u's near cells), critical path "
+                "(words, %u workgroups): dealt %llu, taken as workgroups come free %llu; floor "
+                "%llu\n",
+                l + 1, walks.size(), l, kWideGroups,
+                (unsigned long long)*std::max_element(dealt.begin(), dealt.end()),
+                (unsigned long long)end_on_slots(walks, kWideGroups),
+                (unsigned long long)std::max(longest, (words + kWideGroups - 1) / kWideGroups));
+        }
         return 0;
     } catch (const std::exception& e) {
         std::fprintf(stderr, "sdfprune_order_model: %s\n", e.what());

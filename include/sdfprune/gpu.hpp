@@ -95,8 +95,8 @@ struct GpuStepShape {
     // Wide: whether it ran prune_wide_runs.comp, which walks a long run of rounds (a chain's)
     // from shared memory, each chunk staged first, instead of from scratch as it is.
     bool wide_runs = false;
-    // In teams: whether its workgroups took their jobs as they came free (from a counter,
-    // SDFPRUNE_VULKAN_TAKE), not dealt out to the teams in advance.
+    // In teams and wide: whether its workgroups took their jobs as they came free (from a
+    // counter, SDFPRUNE_VULKAN_TAKE), not dealt out to the teams or workgroups in advance.
     bool taken = false;
     // Lanes that take one parent tape together: the team (8), the workgroup (256) when wide, in
     // refinement a squad (32), or 1 where its lane pass took every cell (see long_jobs).

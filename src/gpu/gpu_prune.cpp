@@ -198,6 +198,7 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
         team_order = std::min<uint32_t>(uint32_t(std::strtoul(env, nullptr, 10)), 2);
     snake = env_flag("SDFPRUNE_VULKAN_SNAKE", snake);
     take_jobs = env_flag("SDFPRUNE_VULKAN_TAKE", take_jobs);
+    wide_take = env_flag("SDFPRUNE_VULKAN_WIDE_TAKE", wide_take);
     sweeps_end = env_flag("SDFPRUNE_VULKAN_SWEEP_END", sweeps_end);
     claims = env_flag("SDFPRUNE_VULKAN_CLAIMS", claims);
     byte_flags =

@@ -218,6 +218,12 @@ class Pruner {
     // critical path on an H100 than the snake's, by tools/prune_order_model.cpp (not measured
     // on a GPU yet); SDFPRUNE_VULKAN_TAKE=0: dealt out in advance, as before stop 46.
     bool take_jobs = true;
+    // The wide steps' workgroups take their jobs' parts as they come free, likewise
+    // (prune_wide.glsl: take_part): a shorter critical path on an H100 by
+    // tools/prune_order_model.cpp (the generated fluid's level-2 octants 1,944 -> 1,416 words;
+    // not measured on a GPU yet); SDFPRUNE_VULKAN_WIDE_TAKE=0: dealt in advance, as before
+    // stop 50.
+    bool wide_take = true;
     // A lane's sweep of a parent tape (compact_tape) ends once it has reached every entry it
     // kept, and its write starts at the last one (prune_team.glsl, refine_common.glsl:
     // refine_write); SDFPRUNE_VULKAN_SWEEP_END=0: both pass over the whole tape (push flag

@@ -537,8 +537,13 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_word
             : std::max<uint64_t>(s.team_jobs, 1);
     s.push.threads = s.threads;
     s.push.max_stack = scene_height;
-    s.push.budget = 0;
     s.push.wide_split = uint32_t(split);
+    // Parts taken as workgroups come free (prune_wide.glsl: take_part), as the team steps take
+    // their jobs; under a loop limit (push budget other than 0xffffffff) each workgroup takes
+    // at most the parts it would be dealt.
+    s.shape.taken = wide_take;
+    if (wide_take) s.push.flags |= 8192u;
+    s.push.budget = limited ? 1u : 0xffffffffu;
     if (!wide_scan) s.push.flags |= 65536u;
     // (Or any number of jobs where at most a quarter of the rounds end at a barrier: a chain's
     // steps, whose runs are long, as molecule's level-2 octants, 1,675 jobs. The staged walk
