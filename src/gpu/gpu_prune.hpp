@@ -220,7 +220,7 @@ class Pruner {
     bool take_jobs = true;
     // The wide steps' workgroups take their jobs' parts as they come free, likewise
     // (prune_wide.glsl: take_part): a shorter critical path on an H100 by
-    // tools/prune_order_model.cpp (the generated fluid's level-2 octants 1,944 -> 1,416 words;
+    // tools/prune_order_model.cpp (the generated fluid's level-2 octants 1,824 -> 1,308 words;
     // not measured on a GPU yet); SDFPRUNE_VULKAN_WIDE_TAKE=0: dealt in advance, as before
     // stop 50.
     bool wide_take = true;
