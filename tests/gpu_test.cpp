@@ -2194,5 +2194,4 @@ TEST(GpuCli, DeviceOutOfMemoryExitsTwo) {
 }
 
 }  // namespace
-
 }  // namespace sdfprune::test
