@@ -335,10 +335,11 @@ int main(int argc, char** argv) {
                 if (c.tape != PrunedCell::kFarField)
                     walks.push_back(wide_job_walk(tape_of(grid, c).size(), rounds, search));
             if (walks.empty()) continue;
-            std::vector<uint64_t> dealt(std::min<size_t>(kWideGroups, walks.size()), 0);
+            const size_t groups = std::min<size_t>(kWideGroups, walks.size());
+            std::vector<uint64_t> dealt(groups, 0);
             uint64_t longest = 0, words = 0;
             for (size_t j = 0; j < walks.size(); ++j) {
-                dealt[j % dealt.size()] += walks[j];
+                dealt[j % groups] += walks[j];
                 longest = std::max(longest, walks[j]);
                 words += walks[j];
             }
@@ -348,7 +349,7 @@ int main(int argc, char** argv) {
                 "%llu\n",
                 l + 1, walks.size(), l, kWideGroups,
                 (unsigned long long)*std::max_element(dealt.begin(), dealt.end()),
-                (unsigned long long)end_on_slots(walks, kWideGroups),
+                (unsigned long long)end_on_slots(walks, groups),
                 (unsigned long long)std::max(longest, (words + kWideGroups - 1) / kWideGroups));
         }
         return 0;

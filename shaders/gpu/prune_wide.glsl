@@ -526,32 +526,21 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
 
 // Parts taken as workgroups come free (push flag 8192, as the team steps' take_jobs): a
 // workgroup that is done with a part takes the next from the step's counter (jobs_taken, zeroed
-// before each dispatch, shared by a step's dispatches side by side), instead of the parts
-// dealt out in advance (workgroup w's are w, w + groups, ...): one that drew long tapes no
-// longer keeps the step waiting while others stand idle. The counter's takes go through the
-// parts in the order of the dealing: take k = q · share + r (share: the parts a workgroup is
-// dealt) is part r · groups + q, workgroup q's r-th when dealt. So a workgroup that takes
-// `share` times in a row, as lavapipe's first workgroups do (it runs a few at a time), takes the
-// parts it would have been dealt, not `share` neighbouring parents with alike tapes; the
-// holes past the last part are passed over. Under a loop limit (lavapipe: push budget other
-// than 0xffffffff) a workgroup takes at most `share` times, so that every part is taken and none
-// passes the limit. Gives the part, the same for all lanes, or `end` where none is left. Called
-// by every lane of the workgroup.
+// before each dispatch, shared by a step's dispatches side by side), in order, instead of the
+// parts dealt out in advance (workgroup w's are w, w + groups, ...): one that drew long tapes
+// no longer keeps the step waiting while others stand idle. Under a loop limit (lavapipe: push
+// budget other than 0xffffffff) a workgroup takes at most as many as it would be dealt, so that
+// every part is taken and none passes the limit. Gives the part, the same for all lanes, or
+// `end` where none is left. Called by every lane of the workgroup.
 shared uint s_part;
 uint take_part(uint taken, uint first, uint end, uint groups) {
     barrier();  // every lane has read the workgroup's last take
     if (gl_LocalInvocationID.x == 0u) {
-        uint parts = end - first, share = (parts + groups - 1u) / groups, part = end;
-        if (pc.budget == 0xffffffffu || taken < share)
-            for (;;) {
-                uint k = atomicAdd(jobs_taken, 1u);
-                if (k >= share * groups) break;
-                uint p = (k % share) * groups + k / share;
-                if (p < parts) {
-                    part = first + p;
-                    break;
-                }
-            }
+        uint part = end;
+        if (pc.budget == 0xffffffffu || taken < (end - first + groups - 1u) / groups) {
+            uint k = atomicAdd(jobs_taken, 1u);
+            if (k < end - first) part = first + k;
+        }
         s_part = part;
     }
     memoryBarrierShared();
