@@ -353,6 +353,26 @@ void list_near_cell(uint dest, uint root_node, uint len, float value, bool may_d
     }
 }
 
+// A workgroup's take from the step's counter (jobs_taken, zeroed before each dispatch; push
+// flag 8192: prune_team.glsl's take_jobs, prune_wide.glsl's take_part): the first of the next
+// `count` of [first, end), the same for every lane, or `end` where none is left or the
+// workgroup may not take (`may_take`, its lane 0's). Called by every lane of the workgroup.
+shared uint s_taken;
+uint take_from_counter(bool may_take, uint count, uint first, uint end) {
+    barrier();  // every lane has read the workgroup's last take
+    if (gl_LocalInvocationID.x == 0u) {
+        uint next = end;
+        if (may_take) {
+            uint k = atomicAdd(jobs_taken, count);
+            if (k < end - first) next = first + k;
+        }
+        s_taken = next;
+    }
+    memoryBarrierShared();
+    barrier();
+    return s_taken;
+}
+
 // Jobs dealt out in a snake: takers (teams, lanes) 0 .. width − 1 take the jobs [first, end) in
 // rounds of `width` (taker t's are first + t + k · width), the odd rounds from the last taker to
 // the first (a round short of takers: from its last job). Job j of that deal is the one this

@@ -274,20 +274,8 @@ uint ordered_job(uint j, uint teams) {
 // lanes, or pc.jobs where none is left or the workgroup has taken `cap` times (under a loop
 // limit: the jobs a team takes at most when dealt, so that every job is taken and none passes
 // the limit). Called by every lane of the workgroup.
-shared uint s_taken;
 uint take_jobs(uint group_teams, uint taken, uint cap) {
-    barrier();  // every lane has read the workgroup's last take
-    if (gl_LocalInvocationID.x == 0u) {
-        uint first = pc.jobs;
-        if (taken < cap) {
-            uint k = atomicAdd(jobs_taken, group_teams);
-            if (k < pc.jobs - pc.first_job) first = pc.first_job + k;
-        }
-        s_taken = first;
-    }
-    memoryBarrierShared();
-    barrier();
-    return s_taken;
+    return take_from_counter(taken < cap, group_teams, pc.first_job, pc.jobs);
 }
 
 void main() {

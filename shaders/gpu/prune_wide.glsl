@@ -532,20 +532,9 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
 // budget other than 0xffffffff) a workgroup takes at most as many as it would be dealt, so that
 // every part is taken and none passes the limit. Gives the part, the same for all lanes, or
 // `end` where none is left. Called by every lane of the workgroup.
-shared uint s_part;
 uint take_part(uint taken, uint first, uint end, uint groups) {
-    barrier();  // every lane has read the workgroup's last take
-    if (gl_LocalInvocationID.x == 0u) {
-        uint part = end;
-        if (pc.budget == 0xffffffffu || taken < (end - first + groups - 1u) / groups) {
-            uint k = atomicAdd(jobs_taken, 1u);
-            if (k < end - first) part = first + k;
-        }
-        s_part = part;
-    }
-    memoryBarrierShared();
-    barrier();
-    return s_part;
+    bool may_take = pc.budget == 0xffffffffu || taken < (end - first + groups - 1u) / groups;
+    return take_from_counter(may_take, 1u, first, end);
 }
 
 void main() {
