@@ -30,8 +30,7 @@
 // parent instead, and the finest level's octants run in teams): their critical path on an
 // H100's 1,056 resident workgroups of 256 when the jobs are dealt out in advance (workgroup w's
 // are w, w + 1,056, ...) or taken as workgroups come free (take_part), each job's walk as
-// plan_wide models it (gpu_prune_plan.cpp: a share of the tape per lane in the sort and the
-// compaction, a step per round, at most a height of the scene, in the evaluation and the sweep).
+// plan_wide models it (src/gpu/device_layout.hpp: prune_wide_job_walk).
 //
 // Usage: sdfprune_order_model SCENE [GRID]
 #include <algorithm>
@@ -45,6 +44,7 @@
 
 #include "sdfprune/io.hpp"
 #include "sdfprune/prune.hpp"
+#include "src/gpu/device_layout.hpp"
 
 using namespace sdfprune;
 
@@ -146,15 +146,6 @@ uint64_t ideal(const std::vector<uint32_t>& lengths, uint32_t group) {
     uint64_t words = 0;
     for (const uint32_t len : lengths) words += len;
     return (words + group - 1) / group;
-}
-
-// A wide job's walk over a parent tape of n entries (gpu_prune_plan.cpp: plan_wide's job_walk,
-// one workgroup a job of 8 boxes): `rounds` the scene's heights, `search` its steps an entry.
-uint64_t wide_job_walk(uint64_t n, uint64_t rounds, uint64_t search) {
-    constexpr uint64_t kWide = 256, kBoxes = 8;
-    return (n + kWide - 1) / kWide * (2 + search) +
-           2 * (std::min(rounds, n / 2 + 1) + (n * kBoxes + kWide - 1) / kWide) +
-           2 * ((n + kWide / kBoxes - 1) / (kWide / kBoxes));
 }
 
 std::span<const uint32_t> tape_of(const PrunedGrid& grid, const PrunedCell& c) {
@@ -333,7 +324,8 @@ int main(int argc, char** argv) {
             std::vector<uint64_t> walks;
             for (const PrunedCell& c : grid.level_cells(l))
                 if (c.tape != PrunedCell::kFarField)
-                    walks.push_back(wide_job_walk(tape_of(grid, c).size(), rounds, search));
+                    walks.push_back(gpu::prune_wide_job_walk(tape_of(grid, c).size(), rounds,
+                                                             gpu::kPruneTeam, search));
             if (walks.empty()) continue;
             const size_t groups = std::min<size_t>(kWideGroups, walks.size());
             std::vector<uint64_t> dealt(groups, 0);

@@ -99,6 +99,19 @@ inline constexpr uint64_t prune_wide_item_words(uint64_t items) {
     return items * 3 + (items + 3) / 4;
 }
 inline constexpr uint64_t kPruneWideHeightWords = 12;
+// The walk of one of its workgroups over a job's parent tape of n entries, as gpu_prune_plan.cpp
+// (plan_wide) and tools/prune_order_model.cpp model it: `boxes` boxes a workgroup, `rounds`
+// the tape's rounds at most (a height of the scene each), `search` steps a search. Each lane's
+// share of the entries in the sort with its searches; a step a round (at most n / 2 + 1) and
+// its share of each round's items in the evaluation and the top-down pass; its slice of a
+// box's tape in the compaction's two passes.
+inline constexpr uint64_t prune_wide_job_walk(uint64_t n, uint64_t rounds, uint64_t boxes,
+                                              uint64_t search) {
+    const auto up = [](uint64_t a, uint64_t b) { return (a + b - 1) / b; };
+    const uint64_t job_rounds = rounds < n / 2 + 1 ? rounds : n / 2 + 1;
+    return up(n, kPruneWide) * (2 + search) + 2 * (job_rounds + up(n * boxes, kPruneWide)) +
+           2 * up(n, kPruneWide / boxes);
+}
 inline constexpr uint64_t kPruneWideRunChunk = 32;  // prune_wide.glsl: kRunChunk
 struct PrunePush {                                  // prune.comp and prune_wide.comp: Push
     vec4 origin, csize;

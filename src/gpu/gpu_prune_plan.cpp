@@ -454,9 +454,7 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_word
         w.group_bytes = group_bytes_for(split);
         // A job's walk over a tape of `n` entries, `search` steps a search.
         const auto job_walk = [&](uint64_t n, uint64_t search) {
-            return ceil_div(n, kPruneWide) * (2 + search) +
-                   2 * (std::min(rounds, n / 2 + 1) + ceil_div(n * boxes, kPruneWide)) +
-                   2 * ceil_div(n, kPruneWide / boxes);
+            return prune_wide_job_walk(n, rounds, boxes, search);
         };
         const uint64_t walk_job = job_walk(len, wide_search_steps);
         // (Under a loop limit, with every search as long as the whole tape's.)
@@ -548,7 +546,8 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_word
     // (Or any number of jobs where at most a quarter of the rounds end at a barrier: a chain's
     // steps, whose runs are long, as molecule's level-2 octants, 1,675 jobs. The staged walk
     // is what kWideRunRoundCost was measured on.)
-    const bool mostly_runs = wide_chains && 4 * barrier_rounds <= rounds;
+    // (Never without the chains' model, whose barrier rounds are then all the rounds.)
+    const bool mostly_runs = 4 * barrier_rounds <= rounds;
     const bool runs =
         wide_runs_override == 1 || (wide_runs_override != 0 && rounds >= kWideRunsRounds &&
                                     (s.team_jobs <= kWideRunsJobs || mostly_runs));
