@@ -309,16 +309,8 @@ int main(int argc, char** argv) {
               kSubgroup);
 
         // The wide steps: the scene's heights and search steps as gpu_prune.cpp counts them.
-        std::vector<uint32_t> first(sc.size()), height(sc.size());
-        uint64_t search_steps = 0;
-        for (uint32_t n = 0; n < sc.size(); ++n) {
-            const bool prim = sc.is_primitive(n);
-            first[n] = prim ? n : first[sc.left[n]];
-            height[n] = prim ? 0 : 1 + std::max(height[sc.left[n]], height[sc.right[n]]);
-            if (!prim) search_steps += std::bit_width(sc.right[n] - first[sc.right[n]]);
-        }
-        const uint64_t rounds = uint64_t(height[sc.root()]) + 1;
-        const uint64_t search = (search_steps + sc.size() - 1) / sc.size() + 1;
+        const gpu::WideSceneShape wide = gpu::wide_scene_shape(sc);
+        const uint64_t rounds = uint64_t(wide.height) + 1, search = wide.search_steps;
         constexpr uint32_t kWideGroups = kResident / 256;
         for (uint32_t l = 0; l < finest; ++l) {
             std::vector<uint64_t> walks;

@@ -4,8 +4,11 @@
 // and array strides glslc gave the GLSL side (SPIR-V reflection) and checks they match.
 #pragma once
 
+#include <algorithm>
+#include <bit>
 #include <cstddef>
 #include <cstdint>
+#include <vector>
 
 #include "sdfprune/prune.hpp"
 
@@ -113,7 +116,47 @@ inline constexpr uint64_t prune_wide_job_walk(uint64_t n, uint64_t rounds, uint6
            2 * up(n, kPruneWide / boxes);
 }
 inline constexpr uint64_t kPruneWideRunChunk = 32;  // prune_wide.glsl: kRunChunk
-struct PrunePush {                                  // prune.comp and prune_wide.comp: Push
+// A scene's figures for the wide kernel, from one pass over its nodes (post-order: operands
+// first), as gpu_prune.cpp uploads them and plan_wide and tools/prune_order_model.cpp count:
+// - spans: per node n, the first node of its subtree (2n) and its height (2n + 1);
+// - height: the root's, so height + 1 rounds at most a tape;
+// - shared_heights: the heights above the primitives' that more than one operator shares. Only
+//   those can be a round of more than one entry in a tape, with a barrier of its own; the rest
+//   are a chain's rounds, walked in runs (none but chain rounds in a left-deep chain, the
+//   reference molecule);
+// - search_steps: the steps of the search for an operator's left operand (prune_wide.glsl), back
+//   from the right operand over at most that operand's subtree: the bit width of its nodes less
+//   one, a step per level of a balanced subtree, none for a primitive (a left-deep chain's); per
+//   entry, rounded up, and a step more for the lanes' spread (the generated fluid's 13,988
+//   operators take 20,967 steps, 1 an entry, so 2).
+struct WideSceneShape {
+    std::vector<uint32_t> spans;
+    uint32_t height = 0, shared_heights = 0, search_steps = 0;
+};
+inline WideSceneShape wide_scene_shape(const Scene& sc) {
+    WideSceneShape shape;
+    std::vector<uint32_t>& spans = shape.spans;
+    spans.resize(2 * uint64_t(sc.size()));
+    uint64_t steps = 0;
+    for (uint32_t n = 0; n < sc.size(); ++n) {
+        const bool prim = sc.is_primitive(n);
+        spans[2 * n] = prim ? n : spans[2 * sc.left[n]];
+        spans[2 * n + 1] =
+            prim ? 0 : 1 + std::max(spans[2 * sc.left[n] + 1], spans[2 * sc.right[n] + 1]);
+        if (!prim) steps += std::bit_width(sc.right[n] - spans[2 * sc.right[n]]);
+    }
+    const uint64_t count = std::max(sc.size(), 1u);
+    shape.search_steps = uint32_t((steps + count - 1) / count + 1);
+    if (sc.size() == 0) return shape;
+    shape.height = spans[2 * sc.root() + 1];
+    std::vector<uint32_t> height_operators(uint64_t(shape.height) + 1, 0);
+    for (uint32_t n = 0; n < sc.size(); ++n)
+        if (!sc.is_primitive(n)) ++height_operators[spans[2 * n + 1]];
+    shape.shared_heights = uint32_t(std::count_if(height_operators.begin(), height_operators.end(),
+                                                  [](uint32_t c) { return c > 1; }));
+    return shape;
+}
+struct PrunePush {  // prune.comp and prune_wide.comp: Push
     vec4 origin, csize;
     uint32_t mode, factor, jobs, threads, max_len, max_stack, flags, pool_start, first_job;
     uint32_t round, budget, refine, octant_start, list_start, lane_tape, wide_split;

@@ -110,32 +110,13 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
     g.nodes = ctx.create_buffer(bytes_of(nodes));
     g.params = ctx.create_buffer(bytes_of(params));
     g.extras = ctx.create_buffer(bytes_of(extras));
-    // For prune_wide.comp: per node the first node of its subtree and its height (post-order:
-    // operands first, so one pass), and the highest, the root's. And the steps of its search
-    // for an operator's left operand, back from the right operand over at most that operand's
-    // subtree (prune_wide.glsl): the bit width of its nodes less one, a step per level of a
-    // balanced subtree, none for a primitive (a left-deep chain's); per entry, rounded up, and
-    // a step more for the lanes' spread (the generated fluid's 13,988 operators take 20,967
-    // steps, 1 an entry, so 2).
-    std::vector<uint32_t> spans(2 * uint64_t(sc.size()));
-    uint64_t search_steps = 0;
-    for (uint32_t n = 0; n < sc.size(); ++n) {
-        const bool prim = sc.is_primitive(n);
-        spans[2 * n] = prim ? n : spans[2 * sc.left[n]];
-        spans[2 * n + 1] =
-            prim ? 0 : 1 + std::max(spans[2 * sc.left[n] + 1], spans[2 * sc.right[n] + 1]);
-        if (!prim) search_steps += std::bit_width(sc.right[n] - spans[2 * sc.right[n]]);
-    }
-    scene_height = spans[2 * sc.root() + 1];
-    // The heights above the primitives' that more than one operator of the scene shares: only
-    // those can be a round of more than one entry in a tape (plan_wide: a round with a barrier
-    // of its own, not in a run). None in a left-deep chain (the reference molecule).
-    std::vector<uint32_t> height_operators(uint64_t(scene_height) + 1, 0);
-    for (uint32_t n = 0; n < sc.size(); ++n)
-        if (!sc.is_primitive(n)) ++height_operators[spans[2 * n + 1]];
-    shared_heights = uint32_t(std::count_if(height_operators.begin(), height_operators.end(),
-                                            [](uint32_t c) { return c > 1; }));
-    wide_search_steps = uint32_t(ceil_div(search_steps, std::max<uint64_t>(sc.size(), 1)) + 1);
+    // For prune_wide.comp: per node the first node of its subtree and its height, and the
+    // scene's figures plan_wide counts (device_layout.hpp: wide_scene_shape).
+    const WideSceneShape wide = wide_scene_shape(sc);
+    const std::vector<uint32_t>& spans = wide.spans;
+    scene_height = wide.height;
+    shared_heights = wide.shared_heights;
+    wide_search_steps = wide.search_steps;
     node_spans = ctx.create_buffer(spans.size() * 4);
 
     // Each level's tapes go to a pool of its own (g.pool while the level is made; it grows on
