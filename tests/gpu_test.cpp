@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <initializer_list>
 #include <memory>
 #include <optional>
 #include <set>
@@ -51,6 +52,49 @@ gpu::Device* device(std::string& why) {
     std::string why_;                                                                  \
     gpu::Device* var = device(why_);                                                   \
     ASSERT_NE(var, nullptr) << "no Vulkan device (install mesa-vulkan-drivers): " << why_
+
+// Environment variables, each a name and a value.
+using EnvSettings = std::initializer_list<std::pair<const char*, const char*>>;
+
+// Environment variables set for a scope (settings the device reads as it is made, or the pruner
+// as it runs), then put back as they were, last set first back: unset where they were unset,
+// else their value before (a run may set some for all tests). A failed assertion that returns
+// early puts them back too.
+class ScopedEnv {
+  public:
+    explicit ScopedEnv(EnvSettings settings) {
+        for (const auto& [name, value] : settings) {
+            const char* was = std::getenv(name);
+            before_.emplace_back(name, was ? std::optional<std::string>(was) : std::nullopt);
+            ::setenv(name, value, 1);
+        }
+    }
+    ScopedEnv(const char* name, const char* value) : ScopedEnv({{name, value}}) {}
+    ~ScopedEnv() {
+        for (auto it = before_.rbegin(); it != before_.rend(); ++it) {
+            if (it->second)
+                ::setenv(it->first.c_str(), it->second->c_str(), 1);
+            else
+                ::unsetenv(it->first.c_str());
+        }
+    }
+    ScopedEnv(const ScopedEnv&) = delete;
+    ScopedEnv& operator=(const ScopedEnv&) = delete;
+
+  private:
+    std::vector<std::pair<std::string, std::optional<std::string>>> before_;  // name, value
+};
+
+// A pruning with the environment variables `settings` set for its duration.
+gpu::Grid prune_with_env(gpu::Device& dev, const Scene& sc, const PruneOptions& o,
+                         EnvSettings settings) {
+    const ScopedEnv env(settings);
+    return gpu::prune(dev, sc, o);
+}
+gpu::Grid prune_with_env(gpu::Device& dev, const Scene& sc, const PruneOptions& o, const char* name,
+                         const char* value) {
+    return prune_with_env(dev, sc, o, {{name, value}});
+}
 
 // Whether the device should give the CPU's grids bit for bit: lavapipe (the same LLVM code
 // generation rules as the CPU build, no fused multiply-add). Other drivers may round a centre
@@ -211,9 +255,10 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
     const Placement places[] = {Placement::kRigid, Placement::kUniform, Placement::kNonUniform,
                                 Placement::kSheared, Placement::kMixed};
     // The same device without subgroup operations (their setting is read when it opens).
-    ::setenv("SDFPRUNE_VULKAN_SUBGROUPS", "0", 1);
-    gpu::Device plain;
-    ::unsetenv("SDFPRUNE_VULKAN_SUBGROUPS");
+    gpu::Device plain = [] {
+        const ScopedEnv no_subgroups("SDFPRUNE_VULKAN_SUBGROUPS", "0");
+        return gpu::Device();
+    }();
     for (uint64_t seed = 1; seed <= 12; ++seed) {
         RandomSceneSpec spec;
         spec.primitives = 4 + uint32_t(seed * 7 % 29);
@@ -244,18 +289,16 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
         // then lanes up to 16 words, then lanes up to 4 words (with the teams taking their
         // jobs block by block, SDFPRUNE_VULKAN_TEAM_ORDER=0).
         for (int variant = 0; variant < 4; ++variant) {
-            ::setenv("SDFPRUNE_VULKAN_WIDE", variant == 3 ? "0" : variant > 0 ? "1" : "", 1);
-            ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE",
-                     variant == 1   ? "0"
-                     : variant == 2 ? "16"
-                     : variant == 3 ? "4"
-                                    : "",
-                     1);
-            ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", variant == 3 ? "0" : "", 1);
-            const gpu::Grid gpu = gpu::prune(variant == 2 ? plain : *dev, sc, o);
-            ::unsetenv("SDFPRUNE_VULKAN_WIDE");
-            ::unsetenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE");
-            ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
+            const char* const wide = variant == 3 ? "0" : variant > 0 ? "1" : "";
+            const char* const lane_tape = variant == 1   ? "0"
+                                          : variant == 2 ? "16"
+                                          : variant == 3 ? "4"
+                                                         : "";
+            const char* const team_order = variant == 3 ? "0" : "";
+            const gpu::Grid gpu = prune_with_env(variant == 2 ? plain : *dev, sc, o,
+                                                 {{"SDFPRUNE_VULKAN_WIDE", wide},
+                                                  {"SDFPRUNE_VULKAN_REFINE_LANE_TAPE", lane_tape},
+                                                  {"SDFPRUNE_VULKAN_TEAM_ORDER", team_order}});
             if (variant == 2) {
                 EXPECT_FALSE(gpu.stats().subgroups);
             }
@@ -296,9 +339,7 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
     }
     // Without that, the demo's tapes at 64³ outgrow the initial pools (1 Mi words, 64 Ki for
     // the octants'): they grow and their levels are redone.
-    ::setenv("SDFPRUNE_VULKAN_PRESIZE_WORDS", "0", 1);
-    const gpu::Grid gpu = gpu::prune(*dev, sc, o);
-    ::unsetenv("SDFPRUNE_VULKAN_PRESIZE_WORDS");
+    const gpu::Grid gpu = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_PRESIZE_WORDS", "0");
     EXPECT_GT(gpu.stats().pool_grows, 0u);
     EXPECT_GT(gpu.stats().submissions, submissions);
     EXPECT_LE(gpu.stats().submissions, submissions + gpu.stats().pool_grows);
@@ -306,41 +347,22 @@ TEST(Gpu, PoolGrowsAndTheStepIsRedone) {
     // The same through the wide kernel wherever it fits (at 32³, where its tapes outgrow the
     // pools too: on lavapipe it is slow over many jobs).
     o.resolution = 32;
-    ::setenv("SDFPRUNE_VULKAN_PRESIZE_WORDS", "0", 1);
-    ::setenv("SDFPRUNE_VULKAN_WIDE", "1", 1);
-    const gpu::Grid wide = gpu::prune(*dev, sc, o);
-    ::unsetenv("SDFPRUNE_VULKAN_PRESIZE_WORDS");
-    ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+    const gpu::Grid wide = prune_with_env(
+        *dev, sc, o, {{"SDFPRUNE_VULKAN_PRESIZE_WORDS", "0"}, {"SDFPRUNE_VULKAN_WIDE", "1"}});
     EXPECT_GT(wide.stats().pool_grows, 0u);
     EXPECT_TRUE(wide.stats().steps[0].wide);
     expect_matches_cpu(sc, prune(sc, o), wide, *dev, "demo 32³, wide");
 }
 
-// A device made with an environment variable set (for the figures it reads once).
-std::unique_ptr<gpu::Device> device_with_envs(
-    std::initializer_list<std::pair<const char*, const char*>> settings) {
-    // (Each setting's value before, put back after: a run may set some for all tests.)
-    std::vector<std::optional<std::string>> before;
-    for (const auto& [name, value] : settings) {
-        const char* was = std::getenv(name);
-        before.push_back(was ? std::optional<std::string>(was) : std::nullopt);
-        setenv(name, value, 1);
-    }
-    std::unique_ptr<gpu::Device> d;
+// A device made with environment variables set (for the figures it reads once).
+std::unique_ptr<gpu::Device> device_with_envs(EnvSettings settings) {
+    const ScopedEnv env(settings);
     try {
-        d = std::make_unique<gpu::Device>();
+        return std::make_unique<gpu::Device>();
     } catch (const gpu::GpuError& e) {
         ADD_FAILURE() << "no Vulkan device (install mesa-vulkan-drivers): " << e.what();
+        return nullptr;
     }
-    size_t i = 0;
-    for (const auto& setting : settings) {
-        const std::optional<std::string>& was = before[i++];
-        if (was)
-            setenv(setting.first, was->c_str(), 1);
-        else
-            unsetenv(setting.first);
-    }
-    return d;
 }
 std::unique_ptr<gpu::Device> device_with_env(const char* name, const char* value) {
     return device_with_envs({{name, value}});
@@ -349,23 +371,6 @@ std::unique_ptr<gpu::Device> device_with_env(const char* name, const char* value
 // that lavapipe takes the shapes a GPU takes.
 std::unique_ptr<gpu::Device> device_planned_as_h100() {
     return device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "270336");
-}
-
-// An environment variable set for the setting's lifetime (a setting the pruner reads), then
-// unset.
-struct EnvSetting {
-    const char* name;
-    EnvSetting(const char* n, const char* value) : name(n) { ::setenv(name, value, 1); }
-    ~EnvSetting() { ::unsetenv(name); }
-    EnvSetting(const EnvSetting&) = delete;
-    EnvSetting& operator=(const EnvSetting&) = delete;
-};
-
-// A pruning with the environment variable `name` set to `value` for its duration.
-gpu::Grid prune_with_env(gpu::Device& dev, const Scene& sc, const PruneOptions& o, const char* name,
-                         const char* value) {
-    const EnvSetting setting(name, value);
-    return gpu::prune(dev, sc, o);
 }
 
 // A right-deep chain of `depth` smooth unions of small spheres on a helix: its evaluation
@@ -403,9 +408,10 @@ TEST(Gpu, SubgroupSizeIsTheOneAskedFor) {
         EXPECT_LE(size, 128u);
     }
     // Without subgroup operations the kernels use none, and the size says so.
-    ::setenv("SDFPRUNE_VULKAN_SUBGROUPS", "0", 1);
-    gpu::Device without;
-    ::unsetenv("SDFPRUNE_VULKAN_SUBGROUPS");
+    gpu::Device without = [] {
+        const ScopedEnv no_subgroups("SDFPRUNE_VULKAN_SUBGROUPS", "0");
+        return gpu::Device();
+    }();
     const gpu::Grid g = gpu::prune(without, sc, o);
     EXPECT_EQ(g.stats().subgroup_size, 0u);
     EXPECT_FALSE(g.stats().subgroups);
@@ -423,14 +429,11 @@ TEST(Gpu, StepShapesFollowTheLevels) {
     PruneOptions o;
     o.resolution = 64;  // levels 4, 16, 64
     // Teams, and refinement on squads alone (no lane pass).
-    ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
-    ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE", "0", 1);
-    const gpu::Grid gpu = gpu::prune(*dev, sc, o);
+    const gpu::Grid gpu = prune_with_env(
+        *dev, sc, o, {{"SDFPRUNE_VULKAN_WIDE", "0"}, {"SDFPRUNE_VULKAN_REFINE_LANE_TAPE", "0"}});
     // Then refinement's lane pass for tapes of up to 4 words, the squads for the rest.
-    ::setenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE", "4", 1);
-    const gpu::Grid passes = gpu::prune(*dev, sc, o);
-    ::unsetenv("SDFPRUNE_VULKAN_WIDE");
-    ::unsetenv("SDFPRUNE_VULKAN_REFINE_LANE_TAPE");
+    const gpu::Grid passes = prune_with_env(
+        *dev, sc, o, {{"SDFPRUNE_VULKAN_WIDE", "0"}, {"SDFPRUNE_VULKAN_REFINE_LANE_TAPE", "4"}});
     const std::vector<gpu::GpuStepShape>& steps = gpu.stats().steps;
     ASSERT_EQ(steps.size(), 5u);
     const uint32_t levels[] = {0, 1, 2, 2, 2}, modes[] = {0, 0, 1, 2, 3};
@@ -544,11 +547,11 @@ TEST(Gpu, RefinementTakesTheNearFieldCellsOnly) {
         PruneOptions unrefined = o;
         unrefined.refine = 1;
         const uint64_t near_before = prune(sc, unrefined).stats().near_field_cells;
-        if (c.grow) ::setenv("SDFPRUNE_VULKAN_PRESIZE_WORDS", "0", 1);
-        ::setenv("SDFPRUNE_VULKAN_WIDE", c.wide ? "1" : "0", 1);
-        const gpu::Grid gpu = gpu::prune(*dev, sc, o);
-        ::unsetenv("SDFPRUNE_VULKAN_PRESIZE_WORDS");
-        ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+        const gpu::Grid gpu = [&] {
+            std::optional<ScopedEnv> unsized;  // (only where the case's pools grow)
+            if (c.grow) unsized.emplace("SDFPRUNE_VULKAN_PRESIZE_WORDS", "0");
+            return prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_WIDE", c.wide ? "1" : "0");
+        }();
         const std::vector<gpu::GpuStepShape>& steps = gpu.stats().steps;
         ASSERT_GE(steps.size(), 2u);
         const gpu::GpuStepShape &cells = steps[steps.size() - 2], &refine = steps.back();
@@ -728,7 +731,7 @@ TEST(Gpu, RefinementOnlyCopiesTheCellsItHasNothingToTry) {
                  {&demo, 32, false, "demo 32³, no far field"},
                  {&random, 32, true, "random scene 32³"}};
     // Teams: the wide kernel does not look for operators refinement might decide.
-    ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
+    const ScopedEnv teams("SDFPRUNE_VULKAN_WIDE", "0");
     for (const Case& c : cases) {
         SCOPED_TRACE(c.what);
         PruneOptions o;
@@ -742,7 +745,6 @@ TEST(Gpu, RefinementOnlyCopiesTheCellsItHasNothingToTry) {
         EXPECT_LT(st.copy_jobs, st.jobs);
         expect_matches_cpu(*c.sc, prune(*c.sc, o), gpu, *dev, c.what);
     }
-    ::unsetenv("SDFPRUNE_VULKAN_WIDE");
 }
 
 // Refinement's lane pass takes its cells to decide again sorted by walk class, longest tapes
@@ -794,11 +796,14 @@ TEST(Gpu, TeamJobOrderChangesNoCell) {
     for (const bool teams_only : {true, false})
         for (const char* order : {"1", "2"}) {
             SCOPED_TRACE(std::string(teams_only ? "teams" : "default") + ", order " + order);
-            if (teams_only) ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
-            const gpu::Grid ordered =
-                prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_TEAM_ORDER", order);
-            const gpu::Grid blocks = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_TEAM_ORDER", "0");
-            ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+            // (In teams throughout only where teams_only says so.)
+            const auto prune_in_order = [&](const char* team_order) {
+                std::optional<ScopedEnv> teams;
+                if (teams_only) teams.emplace("SDFPRUNE_VULKAN_WIDE", "0");
+                return prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_TEAM_ORDER", team_order);
+            };
+            const gpu::Grid ordered = prune_in_order(order);
+            const gpu::Grid blocks = prune_in_order("0");
             const std::vector<gpu::GpuStepShape>&a = ordered.stats().steps,
                   &b = blocks.stats().steps;
             ASSERT_EQ(a.size(), b.size());
@@ -820,15 +825,14 @@ TEST(Gpu, TeamJobOrderChangesNoCell) {
         device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", "448");
     ASSERT_TRUE(few_lanes);
     for (const char* order : {"1", "2", "3"}) {
-        ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", order[0] == '3' ? "1" : order, 1);
-        if (order[0] == '3') {
-            ::setenv("SDFPRUNE_VULKAN_TAKE", "0", 1);
-            ::setenv("SDFPRUNE_VULKAN_SNAKE", "0", 1);
-        }
-        const gpu::Grid few = gpu::prune(*few_lanes, sc, o);
-        ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
-        ::unsetenv("SDFPRUNE_VULKAN_TAKE");
-        ::unsetenv("SDFPRUNE_VULKAN_SNAKE");
+        const gpu::Grid few = [&] {
+            if (order[0] != '3')
+                return prune_with_env(*few_lanes, sc, o, "SDFPRUNE_VULKAN_TEAM_ORDER", order);
+            return prune_with_env(*few_lanes, sc, o,
+                                  {{"SDFPRUNE_VULKAN_TEAM_ORDER", "1"},
+                                   {"SDFPRUNE_VULKAN_TAKE", "0"},
+                                   {"SDFPRUNE_VULKAN_SNAKE", "0"}});
+        }();
         uint64_t rounds = 0;
         for (const gpu::GpuStepShape& st : few.stats().steps)
             if (in_order(st)) {
@@ -871,14 +875,16 @@ TEST(Gpu, TakenJobsChangeNoCell) {
         const std::unique_ptr<gpu::Device> own =
             c.threads ? device_with_env("SDFPRUNE_VULKAN_RESIDENT_THREADS", c.threads) : nullptr;
         gpu::Device& d = own ? *own : *dev;
-        if (c.wide) ::setenv("SDFPRUNE_VULKAN_WIDE", c.wide, 1);
-        ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", c.order, 1);
-        const gpu::Grid taken = gpu::prune(d, sc, o);
-        ::setenv("SDFPRUNE_VULKAN_WIDE_TAKE", "0", 1);
-        const gpu::Grid dealt = prune_with_env(d, sc, o, "SDFPRUNE_VULKAN_TAKE", "0");
-        ::unsetenv("SDFPRUNE_VULKAN_WIDE_TAKE");
-        ::unsetenv("SDFPRUNE_VULKAN_WIDE");
-        ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
+        // (The case's kernels, SDFPRUNE_VULKAN_WIDE only where it names one, and order.)
+        const auto prune_case = [&](EnvSettings more) {
+            std::optional<ScopedEnv> wide;
+            if (c.wide) wide.emplace("SDFPRUNE_VULKAN_WIDE", c.wide);
+            const ScopedEnv order("SDFPRUNE_VULKAN_TEAM_ORDER", c.order);
+            return prune_with_env(d, sc, o, more);
+        };
+        const gpu::Grid taken = prune_case({});
+        const gpu::Grid dealt =
+            prune_case({{"SDFPRUNE_VULKAN_WIDE_TAKE", "0"}, {"SDFPRUNE_VULKAN_TAKE", "0"}});
         const std::vector<gpu::GpuStepShape>&a = taken.stats().steps, &b = dealt.stats().steps;
         ASSERT_EQ(a.size(), b.size());
         uint32_t taking_steps = 0;
@@ -962,10 +968,10 @@ TEST(Gpu, ClaimsChangeNoCell) {
             gpu::Device& d = c.wide ? *h100_like : *dev;
             PruneOptions o;
             o.resolution = c.resolution;
-            ::setenv("SDFPRUNE_VULKAN_WIDE", wide ? "1" : "0", 1);
-            const gpu::Grid claims = gpu::prune(d, c.sc, o);
-            const gpu::Grid longest = prune_with_env(d, c.sc, o, "SDFPRUNE_VULKAN_CLAIMS", "0");
-            ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+            const char* const kernels = wide ? "1" : "0";  // SDFPRUNE_VULKAN_WIDE
+            const gpu::Grid claims = prune_with_env(d, c.sc, o, "SDFPRUNE_VULKAN_WIDE", kernels);
+            const gpu::Grid longest = prune_with_env(
+                d, c.sc, o, {{"SDFPRUNE_VULKAN_WIDE", kernels}, {"SDFPRUNE_VULKAN_CLAIMS", "0"}});
             const std::vector<gpu::GpuStepShape>&a = claims.stats().steps,
                   &b = longest.stats().steps;
             ASSERT_EQ(a.size(), b.size());
@@ -1010,11 +1016,10 @@ TEST(Gpu, ByteFlagsChangeNoCell) {
         SCOPED_TRACE(c.what);
         PruneOptions o;
         o.resolution = c.resolution;
-        ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
-        const gpu::Grid bytes = gpu::prune(*c.device, c.sc, o);
+        const gpu::Grid bytes = prune_with_env(*c.device, c.sc, o, "SDFPRUNE_VULKAN_WIDE", "0");
         const gpu::Grid word =
-            prune_with_env(*c.device, c.sc, o, "SDFPRUNE_VULKAN_BYTE_FLAGS", "0");
-        ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+            prune_with_env(*c.device, c.sc, o,
+                           {{"SDFPRUNE_VULKAN_WIDE", "0"}, {"SDFPRUNE_VULKAN_BYTE_FLAGS", "0"}});
         if (!bytes.stats().byte_flags) GTEST_SKIP() << "the device has no 8-bit storage buffers";
         EXPECT_FALSE(word.stats().byte_flags);
         const std::vector<gpu::GpuStepShape>&a = bytes.stats().steps, &b = word.stats().steps;
@@ -1058,9 +1063,7 @@ TEST(Gpu, TopLevelsRunWide) {
     const Scene sc = builtin_scene("demo");  // 617 nodes
     PruneOptions o;
     o.resolution = 64;
-    ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
-    const gpu::Grid teams = gpu::prune(*dev, sc, o);
-    ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+    const gpu::Grid teams = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_WIDE", "0");
     const gpu::Grid gpu = gpu::prune(*dev, sc, o);
     const std::vector<gpu::GpuStepShape>& steps = gpu.stats().steps;
     ASSERT_EQ(steps.size(), teams.stats().steps.size());
@@ -1084,11 +1087,9 @@ TEST(Gpu, TopLevelsRunWide) {
     small.resolution = 32;
     std::optional<gpu::Grid> whole;
     for (const char* split : {"1", "2", "8"}) {
-        ::setenv("SDFPRUNE_VULKAN_WIDE", "1", 1);
-        ::setenv("SDFPRUNE_VULKAN_WIDE_SPLIT", split, 1);
-        gpu::Grid shared = gpu::prune(*dev, sc, small);
-        ::unsetenv("SDFPRUNE_VULKAN_WIDE");
-        ::unsetenv("SDFPRUNE_VULKAN_WIDE_SPLIT");
+        gpu::Grid shared =
+            prune_with_env(*dev, sc, small,
+                           {{"SDFPRUNE_VULKAN_WIDE", "1"}, {"SDFPRUNE_VULKAN_WIDE_SPLIT", split}});
         const std::string what = std::string("wide, split ") + split;
         for (const gpu::GpuStepShape& st : shared.stats().steps)
             if (st.wide) {
@@ -1118,7 +1119,7 @@ TEST(Gpu, WideStepsSplitWhereTheirWalkFalls) {
     const std::unique_ptr<gpu::Device> h100 = device_planned_as_h100();
     ASSERT_TRUE(h100);
     // (The wide steps' jobs dealt, whose walks lavapipe measures as a GPU would.)
-    const EnvSetting dealt("SDFPRUNE_VULKAN_WIDE_TAKE", "0");
+    const ScopedEnv dealt("SDFPRUNE_VULKAN_WIDE_TAKE", "0");
     PruneOptions o;
     o.resolution = 64;
     o.refine = 1;
@@ -1191,19 +1192,22 @@ TEST(Gpu, ScratchLimitedStepsRunWide) {
     const Scene sc = generate_scene("fluid", 1, 1000);
     PruneOptions o;
     o.resolution = 64;
-    ::setenv("SDFPRUNE_VULKAN_SCRATCH_BYTES", "786432", 1);
-    ::setenv("SDFPRUNE_VULKAN_SCRATCH_BUFFERS", "4", 1);
-    const gpu::Grid spread = gpu::prune(*dev, sc, o);
-    ::setenv("SDFPRUNE_VULKAN_SCRATCH_BUFFERS", "1", 1);
-    ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
-    const gpu::Grid teams = gpu::prune(*dev, sc, o);
-    ::unsetenv("SDFPRUNE_VULKAN_WIDE");
-    ::setenv("SDFPRUNE_VULKAN_WIDE_SPLIT", "1", 1);
-    const gpu::Grid unsplit = gpu::prune(*dev, sc, o);
-    ::unsetenv("SDFPRUNE_VULKAN_WIDE_SPLIT");
-    const gpu::Grid gpu = gpu::prune(*dev, sc, o);
-    ::unsetenv("SDFPRUNE_VULKAN_SCRATCH_BYTES");
-    ::unsetenv("SDFPRUNE_VULKAN_SCRATCH_BUFFERS");
+    // (The small budget over 4 buffers, then over one.)
+    const char* const budget = "786432";  // SDFPRUNE_VULKAN_SCRATCH_BYTES
+    const gpu::Grid spread = prune_with_env(
+        *dev, sc, o,
+        {{"SDFPRUNE_VULKAN_SCRATCH_BYTES", budget}, {"SDFPRUNE_VULKAN_SCRATCH_BUFFERS", "4"}});
+    const gpu::Grid teams = prune_with_env(*dev, sc, o,
+                                           {{"SDFPRUNE_VULKAN_SCRATCH_BYTES", budget},
+                                            {"SDFPRUNE_VULKAN_SCRATCH_BUFFERS", "1"},
+                                            {"SDFPRUNE_VULKAN_WIDE", "0"}});
+    const gpu::Grid unsplit = prune_with_env(*dev, sc, o,
+                                             {{"SDFPRUNE_VULKAN_SCRATCH_BYTES", budget},
+                                              {"SDFPRUNE_VULKAN_SCRATCH_BUFFERS", "1"},
+                                              {"SDFPRUNE_VULKAN_WIDE_SPLIT", "1"}});
+    const gpu::Grid gpu = prune_with_env(
+        *dev, sc, o,
+        {{"SDFPRUNE_VULKAN_SCRATCH_BYTES", budget}, {"SDFPRUNE_VULKAN_SCRATCH_BUFFERS", "1"}});
     ASSERT_EQ(unsplit.stats().steps.size(), gpu.stats().steps.size());
     ASSERT_EQ(spread.stats().steps.size(), gpu.stats().steps.size());
     bool spread_wider = false;
@@ -1618,10 +1622,9 @@ TEST(Gpu, SweepsEndAtTheirLastKeptEntry) {
         PruneOptions o;
         o.resolution = name == "left-deep chain" ? 64 : 32;
         const PrunedGrid cpu = prune(sc, o);
-        ::setenv("SDFPRUNE_VULKAN_WIDE", "0", 1);
-        const gpu::Grid ended = gpu::prune(*dev, sc, o);
-        const gpu::Grid whole = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_SWEEP_END", "0");
-        ::unsetenv("SDFPRUNE_VULKAN_WIDE");
+        const gpu::Grid ended = prune_with_env(*dev, sc, o, "SDFPRUNE_VULKAN_WIDE", "0");
+        const gpu::Grid whole = prune_with_env(
+            *dev, sc, o, {{"SDFPRUNE_VULKAN_WIDE", "0"}, {"SDFPRUNE_VULKAN_SWEEP_END", "0"}});
         expect_same_stats(ended.stats(), whole.stats(), "sweeps ended against whole");
         expect_same_device_cells(ended, whole, "sweeps ended against whole");
         expect_matches_cpu(sc, cpu, ended, *dev, name);
@@ -1652,7 +1655,7 @@ TEST(Gpu, WideStepsWalkAChainsRoundsWithoutBarriers) {
     ASSERT_TRUE(h100);
     // (The wide steps' jobs dealt: lavapipe, which runs a few workgroups at a time, measures
     // the walks of dealt jobs as a GPU would, not those of jobs taken as workgroups come free.)
-    const EnvSetting dealt("SDFPRUNE_VULKAN_WIDE_TAKE", "0");
+    const ScopedEnv dealt("SDFPRUNE_VULKAN_WIDE_TAKE", "0");
     PruneOptions o;
     o.resolution = 64;
     o.refine = 1;
@@ -1739,13 +1742,10 @@ TEST(Gpu, WideKernelWalksChainsSerially) {
         for (const auto& [runs, scan] : {std::pair{"0", "1"}, {"1", "1"}, {"1", "0"}}) {
             const std::string what =
                 name + ", wide, runs kernel " + runs + ", scanned sweep " + scan;
-            ::setenv("SDFPRUNE_VULKAN_WIDE", "1", 1);
-            ::setenv("SDFPRUNE_VULKAN_WIDE_RUNS", runs, 1);
-            ::setenv("SDFPRUNE_VULKAN_WIDE_SCAN", scan, 1);
-            const gpu::Grid gpu = gpu::prune(*dev, sc, o);
-            ::unsetenv("SDFPRUNE_VULKAN_WIDE");
-            ::unsetenv("SDFPRUNE_VULKAN_WIDE_RUNS");
-            ::unsetenv("SDFPRUNE_VULKAN_WIDE_SCAN");
+            const gpu::Grid gpu = prune_with_env(*dev, sc, o,
+                                                 {{"SDFPRUNE_VULKAN_WIDE", "1"},
+                                                  {"SDFPRUNE_VULKAN_WIDE_RUNS", runs},
+                                                  {"SDFPRUNE_VULKAN_WIDE_SCAN", scan}});
             (std::string(scan) == "1" ? scanned_walk : serial_walk) =
                 gpu.stats().steps[0].walked_words;
             EXPECT_TRUE(gpu.stats().steps[0].wide) << what;
@@ -1979,10 +1979,11 @@ TEST(Gpu, StacksAreSizedFromThePrunedTapes) {
     EXPECT_GT(gs.full_tree_pixels, 0u) << "no pixel went through the full-tree pass";
 
     // A deferred list of 8 items overflows: each chunk runs again with a longer one.
-    setenv("SDFPRUNE_VULKAN_DEFERRED_LIST", "8", 1);
     RenderStats short_list;
-    const Image again = gpu::render(*dev, gpu, ro, &short_list);
-    unsetenv("SDFPRUNE_VULKAN_DEFERRED_LIST");
+    const Image again = [&] {
+        const ScopedEnv short_deferred("SDFPRUNE_VULKAN_DEFERRED_LIST", "8");
+        return gpu::render(*dev, gpu, ro, &short_list);
+    }();
     EXPECT_TRUE(again.rgb == image.rgb);
     EXPECT_EQ(short_list.full_tree_pixels, gs.full_tree_pixels);
 
@@ -2005,15 +2006,15 @@ TEST(Gpu, StacksAreSizedFromThePrunedTapes) {
 // clear error instead of being addressed out of range.
 TEST(Gpu, SmallBufferRangeSplitsTheWork) {
     if (!gpu::built_with_vulkan()) GTEST_SKIP() << "built without the Vulkan backend";
-    setenv("SDFPRUNE_VULKAN_MAX_BUFFER", "1048576", 1);
     std::unique_ptr<gpu::Device> small;
-    try {
-        small = std::make_unique<gpu::Device>();
-    } catch (const gpu::GpuError& e) {
-        unsetenv("SDFPRUNE_VULKAN_MAX_BUFFER");
-        FAIL() << "no Vulkan device (install mesa-vulkan-drivers): " << e.what();
+    {
+        const ScopedEnv max_buffer("SDFPRUNE_VULKAN_MAX_BUFFER", "1048576");
+        try {
+            small = std::make_unique<gpu::Device>();
+        } catch (const gpu::GpuError& e) {
+            FAIL() << "no Vulkan device (install mesa-vulkan-drivers): " << e.what();
+        }
     }
-    unsetenv("SDFPRUNE_VULKAN_MAX_BUFFER");
     RandomSceneSpec spec;
     spec.primitives = 24;
     spec.placement = Placement::kMixed;
@@ -2088,9 +2089,7 @@ TEST(Gpu, LevelsTooLargeForOneBufferArePrunedInSlices) {
         EXPECT_TRUE(seen.insert({s.level, s.mode}).second)
             << "level " << s.level << " mode " << s.mode << " reported twice";
     // The teams taking their jobs block by block (SDFPRUNE_VULKAN_TEAM_ORDER=0), slice by slice.
-    ::setenv("SDFPRUNE_VULKAN_TEAM_ORDER", "0", 1);
-    const gpu::Grid blocks = gpu::prune(*small, sc, o);
-    ::unsetenv("SDFPRUNE_VULKAN_TEAM_ORDER");
+    const gpu::Grid blocks = prune_with_env(*small, sc, o, "SDFPRUNE_VULKAN_TEAM_ORDER", "0");
     EXPECT_GT(blocks.stats().slices, levels) << "no level was sliced";
     expect_matches_cpu(sc, cpu, blocks, *small, "city 32³ in slices, teams block by block");
     // On the device as it is, the same scene needs a slice a level.
