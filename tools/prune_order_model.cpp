@@ -24,13 +24,14 @@
 // GPU's equal: the octants' pruned from their blocks' tapes (the coarse level's, kept), the
 // cells' as the grid without refinement has them. The orders are the level's storage order, about
 // the order the device lists the blocks and cells in (its atomics spread the cells further).
-// And the octants steps of the levels above the finest as wide steps
+// And the octants steps of the levels between the top and the finest as wide steps
 // (shaders/gpu/prune_wide.glsl), a workgroup of 256 lanes a job of a block's 8 octants, the
-// jobs' parents each coarse level's near cells (a top level without octants takes 8 jobs a
-// parent instead, and the finest level's octants run in teams): their critical path on an
-// H100's 1,056 resident workgroups of 256 when the jobs are dealt out in advance (workgroup w's
-// are w, w + 1,056, ...) or taken as workgroups come free (take_part), each job's walk as
-// plan_wide models it (src/gpu/device_layout.hpp: prune_wide_job_walk).
+// jobs' parents each coarse level's near cells (only where the level has an octants step: a
+// top level without octants takes 8 jobs a parent instead, and the finest level's octants run
+// in teams, as above): their critical path on an H100's 1,056 resident workgroups of 256 when
+// the jobs are dealt out in advance (workgroup w's are w, w + 1,056, ...) or taken as
+// workgroups come free (take_part), each job's walk as plan_wide models it
+// (src/gpu/device_layout.hpp: prune_wide_job_walk).
 //
 // Usage: sdfprune_order_model SCENE [GRID]
 #include <algorithm>
@@ -312,7 +313,13 @@ int main(int argc, char** argv) {
         const gpu::WideSceneShape wide = gpu::wide_scene_shape(sc);
         const uint64_t rounds = uint64_t(wide.height) + 1, search = wide.search_steps;
         constexpr uint32_t kWideGroups = kResident / 256;
-        for (uint32_t l = 0; l < finest; ++l) {
+        // Only the levels above the finest that have an octants step, as gpu_prune.cpp splits
+        // them (a level's cells then come from octants of at most 1,024 cells a block).
+        for (uint32_t l = 0; l + 1 < finest; ++l) {
+            const uint32_t res = grid.level_resolution(l + 1),
+                           factor = res / grid.level_resolution(l);
+            if (!splits_into_octants(sc, o, res, factor) || 1024 % (factor * factor * factor) != 0)
+                continue;
             std::vector<uint64_t> walks;
             for (const PrunedCell& c : grid.level_cells(l))
                 if (c.tape != PrunedCell::kFarField)
