@@ -253,6 +253,10 @@ Context::Context() {
     max_groups_ = props.limits.maxComputeWorkGroupCount[0];
     loop_limited_ = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU &&
                     device_name_.find("llvmpipe") != std::string::npos;
+    // For tests: SDFPRUNE_VULKAN_LOOP_LIMITED=0 plans lavapipe as a GPU (a step in one
+    // dispatch, jobs taken uncapped), right only where no invocation reaches the limit; 1 plans
+    // a GPU as lavapipe.
+    loop_limited_ = env_flag("SDFPRUNE_VULKAN_LOOP_LIMITED", loop_limited_);
     timestamp_ns_ = double(props.limits.timestampPeriod);
     {
         auto sg = vk_struct<VkPhysicalDeviceSubgroupProperties>(
