@@ -99,14 +99,20 @@ void expect_same_stats(const PruneStats& cpu, const PruneStats& gpu, const std::
 
 void expect_walks_within_bound(const gpu::Device& dev, const gpu::GpuStepShape& st,
                                const std::string& what, uint64_t slack) {
-    const bool takes_uncapped = st.taken && dev.name().find("llvmpipe") == std::string::npos;
+    const bool lavapipe = dev.name().find("llvmpipe") != std::string::npos;
+    const char* limited = std::getenv("SDFPRUNE_VULKAN_LOOP_LIMITED");
+    const bool takes_uncapped = st.taken && (!lavapipe || (limited && std::string(limited) == "0"));
     SCOPED_TRACE(what + ": level " + std::to_string(st.level) + " mode " + std::to_string(st.mode) +
                  (st.wide ? " wide" : "") + (st.wide_runs ? " runs" : "") +
                  (st.taken ? " taken" : "") + ", " + std::to_string(st.jobs) + " jobs, " +
                  std::to_string(st.workgroups) + " workgroups, " +
                  std::to_string(st.lanes_per_tape) + " lanes a tape");
     EXPECT_GT(st.walked_words, 0u);
-    EXPECT_LE(st.walked_words, (takes_uncapped ? 2 : 1) * slack * st.longest_walk_words);
+    // (Lavapipe planned as a GPU runs a few workgroups at a time: its first take most of the
+    // jobs, which no plan bounds.)
+    if (!(lavapipe && takes_uncapped)) {
+        EXPECT_LE(st.walked_words, (takes_uncapped ? 2 : 1) * slack * st.longest_walk_words);
+    }
     EXPECT_GE(st.walked_sum_words, st.walked_words);
     EXPECT_LE(st.walked_sum_words, st.workgroups * st.walked_words);
 }

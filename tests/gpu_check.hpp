@@ -87,7 +87,8 @@ void expect_same_stats(const PruneStats& cpu, const PruneStats& gpu, const std::
 // took their jobs as they came free on a device without a loop limit (not lavapipe, which caps
 // a workgroup's takes at its dealt share), twice that again: a workgroup that runs early may
 // take more than its dealt share, up to as many times more as the planned workgroups
-// outnumber those that fit the device at once (an H100 fits 2,376 of the team steps' 4,224).
+// outnumber those that fit the device at once (an H100 fits 2,376 of the team steps' 4,224);
+// lavapipe planned as a GPU (SDFPRUNE_VULKAN_LOOP_LIMITED=0) is not held to the bound there.
 void expect_walks_within_bound(const gpu::Device& dev, const gpu::GpuStepShape& st,
                                const std::string& what, uint64_t slack = 2);
 
