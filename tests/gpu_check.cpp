@@ -100,8 +100,7 @@ void expect_same_stats(const PruneStats& cpu, const PruneStats& gpu, const std::
 void expect_walks_within_bound(const gpu::Device& dev, const gpu::GpuStepShape& st,
                                const std::string& what, uint64_t slack) {
     const bool lavapipe = dev.name().find("llvmpipe") != std::string::npos;
-    const char* limited = std::getenv("SDFPRUNE_VULKAN_LOOP_LIMITED");
-    const bool takes_uncapped = st.taken && (!lavapipe || (limited && std::string(limited) == "0"));
+    const bool takes_uncapped = st.taken && !dev.loop_limited();
     SCOPED_TRACE(what + ": level " + std::to_string(st.level) + " mode " + std::to_string(st.mode) +
                  (st.wide ? " wide" : "") + (st.wide_runs ? " runs" : "") +
                  (st.taken ? " taken" : "") + ", " + std::to_string(st.jobs) + " jobs, " +

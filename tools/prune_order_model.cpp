@@ -314,11 +314,10 @@ int main(int argc, char** argv) {
         const uint64_t rounds = uint64_t(wide.height) + 1, search = wide.search_steps;
         constexpr uint32_t kWideGroups = kResident / 256;
         // Only the levels above the finest that have an octants step, as gpu_prune.cpp splits
-        // them (a level's cells then come from octants of at most 1,024 cells a block).
+        // them.
         for (uint32_t l = 0; l + 1 < finest; ++l) {
-            const uint32_t res = grid.level_resolution(l + 1),
-                           factor = res / grid.level_resolution(l);
-            if (!splits_into_octants(sc, o, res, factor) || 1024 % (factor * factor * factor) != 0)
+            const uint32_t res = grid.level_resolution(l + 1);
+            if (!gpu::level_splits_into_octants(sc, o, res, res / grid.level_resolution(l)))
                 continue;
             std::vector<uint64_t> walks;
             for (const PrunedCell& c : grid.level_cells(l))

@@ -62,6 +62,11 @@ class Device {
     // milliseconds its thread took to allocate it. Both wait for the thread.
     uint64_t memory_reserved() const;
     double reserve_ms() const;
+    // Whether the device ends a shader invocation's loops after a count (lavapipe: 65,535
+    // iterations in all), so that the pruner runs long steps in resumable rounds and caps the
+    // jobs a workgroup takes at its dealt share; SDFPRUNE_VULKAN_LOOP_LIMITED=0 or 1 overrides
+    // it, for tests.
+    bool loop_limited() const;
     Context& context() { return *context_; }
 
   private:

@@ -1,7 +1,10 @@
 // device_layout.hpp — the host's mirrors of every struct, buffer block and push-constant block
 // the kernels (shaders/gpu/*) share with it, in std430 / push-constant layout. The
 // static_asserts pin them on the C++ side; tests/gpu_layout_test.cpp reads the member offsets
-// and array strides glslc gave the GLSL side (SPIR-V reflection) and checks they match.
+// and array strides glslc gave the GLSL side (SPIR-V reflection) and checks they match. Also
+// the few figures of the pruning's plan that tools/prune_order_model.cpp models as well (a wide
+// job's walk, a scene's shape for the wide kernel, which levels split into octants), so that
+// the tool builds without the Vulkan backend's sources.
 #pragma once
 
 #include <algorithm>
@@ -155,6 +158,15 @@ inline WideSceneShape wide_scene_shape(const Scene& sc) {
     shape.shared_heights = uint32_t(std::count_if(height_operators.begin(), height_operators.end(),
                                                   [](uint32_t c) { return c > 1; }));
     return shape;
+}
+// Whether the Vulkan backend makes a level of `res` cells a side, `factor` a block, from octants
+// first (an octants step, then a cells step from them), as gpu_prune.cpp does and
+// tools/prune_order_model.cpp models: where the CPU splits it (splits_into_octants) and a
+// block's cells divide 1,024.
+inline bool level_splits_into_octants(const Scene& sc, const PruneOptions& opt, uint32_t res,
+                                      uint32_t factor) {
+    return splits_into_octants(sc, opt, res, factor) &&
+           1024 % (uint64_t(factor) * factor * factor) == 0;
 }
 struct PrunePush {  // prune.comp and prune_wide.comp: Push
     vec4 origin, csize;

@@ -37,6 +37,10 @@ double Device::reserve_ms() const {
     return context_->reserve_ms();
 }
 
+bool Device::loop_limited() const {
+    return context_->loop_limited();
+}
+
 Grid::Grid() = default;
 Grid::~Grid() = default;
 Grid::Grid(Grid&&) noexcept = default;

@@ -218,7 +218,7 @@ void Pruner::prune_level(uint32_t li) {
     if (lv.total > 0xfffffffeull) throw std::length_error("too many cells in one level");
     lv.csize = extent / float(res[li]);
     // The same split as the CPU backend (prune.cpp): octants first where it applies.
-    lv.split = splits_into_octants(sc, opt, res[li], lv.f) && 1024 % lv.per_block == 0;
+    lv.split = level_splits_into_octants(sc, opt, res[li], lv.f);
     lv.nf = lv.finest ? 0 : res[li + 1] / res[li];
     // Every cell's tape (with its header) is at most its parent's: the octants' go to the
     // octant pool, the cells' to the main pool (or first to the octant pool, refined into the

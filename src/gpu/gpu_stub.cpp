@@ -42,6 +42,9 @@ uint64_t Device::memory_reserved() const {
 double Device::reserve_ms() const {
     missing();
 }
+bool Device::loop_limited() const {
+    missing();
+}
 Grid::Grid() = default;
 Grid::~Grid() = default;
 Grid::Grid(Grid&&) noexcept = default;
