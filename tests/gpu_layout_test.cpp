@@ -1,7 +1,8 @@
 // gpu_layout_test.cpp — the layouts the kernels and the host share, checked on both sides: the
 // member offsets and array strides glslc gave every named struct and block of each kernel
 // (read from unoptimized SPIR-V, which keeps the names) against the C++ mirrors
-// (src/gpu/device_layout.hpp, math::PrimitiveParams, PrunedCell). Needs no Vulkan device.
+// (src/gpu/device_layout.hpp, math::PrimitiveParams, PrunedCell); and each kernel's workgroup
+// size against the one the host plans its dispatches with. Needs no Vulkan device.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -16,6 +17,9 @@
 #include <vector>
 
 #include "src/gpu/device_layout.hpp"
+#ifdef SDFPRUNE_REFLECT_SPV
+#include "src/gpu/vk_context.hpp"  // kWorkgroupSize
+#endif
 
 namespace sdfprune::test {
 namespace {
@@ -24,6 +28,7 @@ namespace {
 
 enum Op : uint32_t {
     kOpName = 5,
+    kOpExecutionMode = 16,
     kOpMemberName = 6,
     kOpTypeInt = 21,
     kOpTypeFloat = 22,
@@ -37,6 +42,7 @@ enum Op : uint32_t {
 };
 constexpr uint32_t kDecorationBlock = 2, kDecorationBufferBlock = 3, kDecorationArrayStride = 6,
                    kDecorationOffset = 35;
+constexpr uint32_t kExecutionModeLocalSize = 17;
 
 struct SpirvType {
     uint32_t op = 0;
@@ -52,6 +58,7 @@ struct SpirvModule {
     std::set<uint32_t> blocks;                                  // Block or BufferBlock
     std::map<uint32_t, SpirvType> types;
     std::map<uint32_t, uint32_t> constants;  // first word of each OpConstant
+    uint32_t local_size[3] = {0, 0, 0};      // the entry point's LocalSize execution mode
 
     std::string name(uint32_t id) const {
         auto it = names.find(id);
@@ -119,6 +126,10 @@ SpirvModule read_spirv(std::span<const uint32_t> words, const std::string& path)
             case kOpConstant:
                 if (n >= 3) m.constants[w[1]] = w[2];
                 break;
+            case kOpExecutionMode:
+                if (n >= 5 && w[1] == kExecutionModeLocalSize)
+                    std::copy(w + 2, w + 5, m.local_size);
+                break;
         }
         at += count;
     }
@@ -185,10 +196,9 @@ struct Member {
     std::string name;
     size_t offset, size;
 };
-// Where a mirror applies: kShared, in whichever kernel declares a struct of that name; kKernel,
-// only in its kernels (prune.comp's Counters: expand.comp sees the same buffer as uint[]);
+// Where a mirror applies: kShared, in whichever kernel declares a struct of that name;
 // kPush, a kernel's push-constant block, of which the C++ struct holds exactly the bytes.
-enum class Scope { kShared, kKernel, kPush };
+enum class Scope { kShared, kPush };
 struct Mirror {
     std::string name;                  // the GLSL struct or block name
     size_t size;                       // sizeof the C++ mirror
@@ -257,7 +267,7 @@ const std::vector<Mirror>& mirrors() {
         mirror<GpuCounters>(
             "Counters",
             {"prune", "prune_bytes", "prune_refine_lanes", "prune_refine_lanes_long",
-             "prune_refine", "prune_wide", "prune_wide_subgroups", "prune_wide_runs"},
+             "prune_refine", "prune_wide", "prune_wide_subgroups", "prune_wide_runs", "expand"},
             {SDFPRUNE_MEMBER(GpuCounters, pool_used),
              SDFPRUNE_MEMBER(GpuCounters, pool_capacity),
              SDFPRUNE_MEMBER(GpuCounters, overflow),
@@ -282,8 +292,7 @@ const std::vector<Mirror>& mirrors() {
              SDFPRUNE_MEMBER(GpuCounters, jobs_taken),
              SDFPRUNE_MEMBER(GpuCounters, walk_words),
              SDFPRUNE_MEMBER(GpuCounters, walk_sum),
-             SDFPRUNE_MEMBER(GpuCounters, more_class)},
-            Scope::kKernel),
+             SDFPRUNE_MEMBER(GpuCounters, more_class)}),
         mirror<TraceParams>(
             "TraceParams", {"trace"},
             {SDFPRUNE_MEMBER(TraceParams, grid), SDFPRUNE_MEMBER(TraceParams, march_min),
@@ -478,6 +487,16 @@ void check_kernel(const std::string& kernel) {
     const SpirvModule m = read_spirv(found_kernel->words, kernel + ".reflect.spv");
     ASSERT_EQ(m.error, "");
     ASSERT_FALSE(m.names.empty()) << kernel << ".reflect.spv has no OpName: compiled with -O?";
+#ifdef SDFPRUNE_REFLECT_SPV
+    // The workgroup size the host counts lanes and workgroups with (gpu_prune_plan.cpp,
+    // gpu_render.cpp): the wide kernels' kPruneWide lanes, every other kernel's kWorkgroupSize.
+    const uint32_t lanes =
+        kernel.starts_with("prune_wide") ? uint32_t(gpu::kPruneWide) : gpu::kWorkgroupSize;
+    EXPECT_EQ(m.local_size[0], lanes) << kernel << ".comp: local_size_x " << m.local_size[0]
+                                      << ", the host plans " << lanes << " lanes a workgroup";
+    EXPECT_EQ(m.local_size[1], 1u) << kernel << ".comp: local_size_y";
+    EXPECT_EQ(m.local_size[2], 1u) << kernel << ".comp: local_size_z";
+#endif
 
     std::map<std::string, const Mirror*> table;
     for (const Mirror& mirror : mirrors()) {

@@ -2,8 +2,8 @@
 // expand.comp — the next level's blocks: one per near-field cell of this level, allocated with
 // an atomic counter (block order does not matter: each cell records where its block went).
 // With bound_only, on the finest level's final cells instead: the bounds of its near-field
-// cells (counters[11..16]: GpuCounters's near_lo, near_hi, in finest cells, [lo, hi)), from
-// which the host makes PrunedGrid::near_box, the box the tracer marches in.
+// cells (near_lo, near_hi in counters.glsl, in finest cells, [lo, hi)), from which the host
+// makes PrunedGrid::near_box, the box the tracer marches in.
 #extension GL_GOOGLE_include_directive : require
 #include "cells.glsl"
 
@@ -12,7 +12,8 @@ layout(local_size_x = 64) in;
 layout(std430, binding = 0) readonly buffer Blocks { Block blocks[]; };
 layout(std430, binding = 1) buffer Cells { Cell cells[]; };
 layout(std430, binding = 2) writeonly buffer Next { Block next[]; };
-layout(std430, binding = 3) buffer Counters { uint counters[]; };  // [5]: blocks allocated
+#define COUNTERS_BINDING 3
+#include "counters.glsl"
 
 layout(push_constant) uniform Push {
     uint factor;       // f: cells per axis of this level's blocks
@@ -21,7 +22,6 @@ layout(push_constant) uniform Push {
     uint bound_only;   // 1: bound this level's near-field cells, make no blocks
 } pc;
 
-const uint kNearLo = 11u, kNearHi = 14u;
 shared uint group_lo[3], group_hi[3];
 
 void bound_near_cells() {
@@ -51,8 +51,8 @@ void bound_near_cells() {
     barrier();
     if (gl_LocalInvocationIndex == 0u && group_lo[0] <= group_hi[0]) {
         for (int a = 0; a < 3; ++a) {
-            atomicMin(counters[kNearLo + uint(a)], group_lo[a]);
-            atomicMax(counters[kNearHi + uint(a)], group_hi[a]);
+            atomicMin(near_lo[a], group_lo[a]);
+            atomicMax(near_hi[a], group_hi[a]);
         }
     }
 }
@@ -67,7 +67,7 @@ void main() {
     Cell c = cells[i];
     if (c.tape == kFarField) continue;
     uint f = pc.factor, nf = pc.next_factor, per_block = f * f * f;
-    uint idx = atomicAdd(counters[5], 1u);
+    uint idx = atomicAdd(next_blocks, 1u);
     cells[i].children = idx * nf * nf * nf;
     Block b = blocks[i / per_block];
     uint local = i % per_block;

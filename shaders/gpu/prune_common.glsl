@@ -4,7 +4,8 @@
 // short tape) and prune_refine.comp (a squad of lanes per finest cell, a lane per sub-box): the
 // step's buffers (bindings 4–11) and push constants, the tape pools, the boxes of a job
 // (modes 0–2) and the store of a box's result.
-// Include after scene.glsl and cells.glsl.
+// Include after scene.glsl and cells.glsl. The modes, flags and sizes the host plans with are
+// prune_constants.h's.
 // PRUNE_SUBGROUPS (prune_bytes.comp, prune_refine_lanes.comp; built only where the device has
 // subgroup arithmetic and ballot): a subgroup's lanes that append to a pool or to refinement's
 // list together take their places with one atomic (pool_allocate, list_near_cell).
@@ -28,54 +29,13 @@
 // entries, prune_wide.glsl's items): its tape word's sign, and whether it is a primitive.
 const uint kFlagNegated = 64u, kFlagPrimitive = 128u;
 
-const uint kTeam = 8u;  // boxes per job: lanes per team (gpu_prune.cpp: kPruneTeam)
-const uint kWalkClasses = 16u;  // refine_walk_class's (device_layout.hpp: kRefineWalkClasses)
-// The team steps' order classes (prune_team.glsl: parent_class; device_layout.hpp:
-// kPruneOrderClasses).
-const uint kOrderClasses = 32u;
-// The steps of a submission whose walks are measured (walk_words, walk_sum; device_layout.hpp:
-// kPruneWalkSlots).
-const uint kWalkSlots = 8u;
+#include "prune_constants.h"
 
 layout(std430, binding = 4) restrict readonly buffer Blocks { Block blocks[]; };
 layout(std430, binding = 5) buffer Octants { Cell octants[]; };
 layout(std430, binding = 6) buffer Cells { Cell cells[]; };
-layout(std430, binding = 7) buffer Counters {
-    uint pool_used;
-    uint pool_capacity;
-    uint overflow;  // 1: the main pool overflowed, 2: the octant pool
-    uint max_len;  // longest tape written or shared in this step
-    uint near_jobs;  // near-field cells (octants) in this step
-    uint next_blocks;
-    uint max_depth;  // deepest evaluation stack of the tapes written or shared in this step
-    uint octant_used;      // the octant pool, as pool_used, pool_capacity
-    uint octant_capacity;
-    uint near_words;  // words of the near-field cells' tapes with their headers (modes 0 and 2;
-                      // mode 1: the octants' tapes, shared ones too)
-    uint refine_cells;  // entries of refine_list
-    uint near_lo[3];    // expand.comp's (GpuCounters)
-    uint near_hi[3];
-    uint long_jobs;  // entries of refinement's long list (prune_refine_lanes.comp)
-    uint more_jobs;  // entries of the lane pass's second list (prune_refine_lanes.comp)
-    uint copy_cells;  // entries of refine_list that refinement only copies (list_near_cell)
-    // Per walk class (refine_walk_class) the cells listed to decide again, and in refinement's
-    // order pass the places of that class taken so far (prune_refine_lanes.comp).
-    uint walk_cells[kWalkClasses];
-    uint walk_placed[kWalkClasses];
-    uint scratch_claimed;  // scratch words the jobs of a team step claimed (prune_team.glsl)
-    // The team steps' order passes (prune_team.glsl: order_parents), the octants step's then
-    // the cells step's: per class, the parents counted (mode 4) and the places taken (mode 5).
-    uint order_count[2u * kOrderClasses];
-    uint order_placed[2u * kOrderClasses];
-    uint jobs_taken;  // a team step's jobs taken so far (prune_team.glsl: take_jobs, flag 8192)
-    // Per step of a submission (pc.walk_slot), the longest walk of a workgroup in one dispatch,
-    // in tape entries (note_walk), and the walks of all its workgroups summed.
-    uint walk_words[kWalkSlots];
-    uint walk_sum[kWalkSlots];
-    // Refinement's second list by walk class (refine_lanes.glsl: more_place), its cells of each
-    // class listed so far.
-    uint more_class[kWalkClasses];
-};
+#define COUNTERS_BINDING 7
+#include "counters.glsl"
 // The kernel's scratch (its layout is the kernel's own). Coherent: lanes read what other lanes
 // of their workgroup wrote at earlier steps (a barrier between). In refinement, from
 // pc.list_start, the long list: the cells its lane pass (prune_refine_lanes.comp) leaves to the
@@ -83,12 +43,12 @@ layout(std430, binding = 7) buffer Counters {
 layout(std430, binding = 8) coherent buffer Scratch { uint scratch[]; };
 // Octants' tapes (mode 1) live in a pool of their own, dropped after the level: a reference
 // with kInOctantPool set points there. So do the finest cells' tapes that refinement (mode 3)
-// replaces (flag 4). Tapes for the main pool never share one of these: they copy it.
+// replaces (kStepTransientTapes). Tapes for the main pool never share one of these: they copy it.
 layout(std430, binding = 9) buffer OctantPool { uint octant_pool[]; };
 const uint kInOctantPool = 0x80000000u;
 // The finest near-field cells, the only ones refinement (mode 3) has work for: the step that
-// makes the finest cells (flag 4) lists each near one's index (list_near_cell); mode 3 takes
-// its jobs from here (refine_job; the far ones stay as they are: refinement rewrites the near
+// makes the finest cells (kStepTransientTapes) lists each near one's index (list_near_cell); mode 3
+// takes its jobs from here (refine_job; the far ones stay as they are: refinement rewrites the near
 // ones in place).
 layout(std430, binding = 10) buffer RefineList { uint refine_list[]; };
 // The level's own pool, where its cells' tapes go; a main-pool reference read (tape_read) is a
@@ -100,27 +60,14 @@ layout(std430, binding = 11) writeonly buffer LevelPool { uint level_pool[]; };
 layout(push_constant) uniform Push {
     vec4 origin;  // AABB min; w: Lipschitz bound of the root
     vec4 csize;   // cell size of this level; w: far-field C
-    uint mode;
+    uint mode;    // kMode* (prune_constants.h)
     uint factor;  // f: cells per axis of a block
     uint jobs;    // team jobs (see prune.comp)
     uint threads;  // lanes that take jobs (whole teams or workgroups)
     uint max_len;    // longest parent tape (scratch per team or workgroup)
     uint max_stack;  // prune.comp: deepest evaluation stack of the parent tapes;
                      // prune_wide.comp: the highest node's height (scene_height)
-    uint flags;      // 1: far field on; 2: interval bounds; 4: new tapes go to the octant pool
-                     // (the finest cells before refinement: near ones listed in refine_list);
-                     // 8: prune_refine.comp takes its jobs from the long list;
-                     // 32: prune_refine_lanes.comp's second pass (its jobs: the more list);
-                     // 64: prune_refine_lanes.comp in one pass (every sub-box);
-                     // 128: prune_refine_lanes.comp's order pass; 256: refinement's walks
-                     // taken from the order list (refine_job); 512: modes 1 and 2's team jobs
-                     // taken from the order list (prune_team.glsl: ordered_job); 1024: modes
-                     // 4 and 5 order blocks (else octants); 2048: mode 5 sorts each window
-                     // apart; 4096: ordered jobs dealt in rounds, not in a snake (snake_deal);
-                     // 8192: modes 0-2's team jobs taken as workgroups come free (take_jobs);
-                     // 16384: the sweeps pass over the whole tape (no early end);
-                     // 32768: refinement's second list in the order listed (refine_lanes.glsl);
-                     // 65536: prune_wide.comp sweeps long runs round by round (no scan)
+    uint flags;      // kStep* bits (prune_constants.h)
     uint pool_start;  // pool words in use before this step
     uint first_job;   // this dispatch's team jobs: [first_job, jobs)
     uint round;       // 0: start the jobs; later rounds resume them (prune.comp)
@@ -132,8 +79,10 @@ layout(push_constant) uniform Push {
     uint wide_split;    // prune_wide.comp: workgroups per job (a share of its kTeam boxes each)
     uint more_start;    // prune_refine_lanes.comp: where its more list starts in scratch
     uint group_base;    // prune_wide.comp: the dispatch's first workgroup among the step's
-    uint order_start;   // where the order list starts in scratch (flags 128, 256, 512; mode 5)
-    uint order_first;   // modes 1, 2 (flag 512), 4, 5: the step's first parent (block, octant)
+    uint order_start;   // where the order list starts in scratch (kStepRefineOrderPass,
+                        // kStepRefineOrdered, kStepTeamsOrdered; kModeOrderPlace)
+    uint order_first;   // modes 1, 2 (kStepTeamsOrdered), 4, 5: the step's first parent (block,
+                        // octant)
     uint claim_words;   // modes 0-2 in teams: the words its jobs may claim (0: no claims)
     uint walk_slot;     // the step's walk_words and walk_sum (kWalkSlots or more: none)
 } pc;
@@ -272,7 +221,7 @@ vec3 combine_operator(Node nd, float spread_r, bool interval, bool refining, vec
 // Mode 3 writes the refined cell `c` (to binding 5, the cells' own buffer, bound twice: a job
 // reads its cell from binding 6 before it writes it, and no other job touches it).
 void store(uint dest, bool near, float value, float constant, uint tape, uint words, Cell c) {
-    if (pc.mode == 3u) {
+    if (pc.mode == kModeRefine) {
         if (near) {
             c.tape = tape;
         } else {
@@ -283,7 +232,7 @@ void store(uint dest, bool near, float value, float constant, uint tape, uint wo
         return;
     }
     Cell result = Cell(near ? tape : kFarField, 0u, value, constant);
-    if (pc.mode == 1u) {
+    if (pc.mode == kModeOctants) {
         // The near octants and their tape words (shared ones too), which bound their cells'
         // (gpu_prune.cpp: the cells to list for refinement, their tapes' words).
         if (near) {
@@ -305,7 +254,7 @@ void store(uint dest, bool near, float value, float constant, uint tape, uint wo
 // src/prune/prune_cell.cpp: the far field on, and refine_far_possible, with a lone primitive's
 // similarity scale).
 bool refine_far_may_pass(uint root_node, uint len, float value) {
-    if ((pc.flags & 1u) == 0u) return false;
+    if ((pc.flags & kStepFarField) == 0u) return false;
     vec3 half_cell = pc.csize.xyz * 0.5;
     Node root = nodes[root_node];
     float clearance = far_field_clearance(pc.csize.w, root.lipschitz, length(half_cell));
@@ -313,9 +262,9 @@ bool refine_far_may_pass(uint root_node, uint len, float value) {
     return refine_far_possible(value, clearance, sigma, half_cell);
 }
 
-// Lists a near cell that the step making the finest cells (flag 4, modes 0 and 2) stores, with
-// its tape's length and root node and its centre value, for refinement (which runs after the
-// step: the tape may be written after it is listed). From the list's front
+// Lists a near cell that the step making the finest cells (kStepTransientTapes, modes 0 and 2)
+// stores, with its tape's length and root node and its centre value, for refinement (which runs
+// after the step: the tape may be written after it is listed). From the list's front
 // (refine_cells), the cells it decides again; from its back, the last entry first
 // (copy_cells), those it only copies into the level's pool: where it has nothing to try
 // (refine_need), no operator of the tape that a sub-box might decide (`may_decide`: the compaction
@@ -333,7 +282,7 @@ uint refine_walk_class(uint len) { return min((len - 1u) / 4u, kWalkClasses - 1u
 // With PRUNE_SUBGROUPS, the lanes of a subgroup that list cells together take their places in
 // both lists with one atomic each (as pool_allocate).
 void list_near_cell(uint dest, uint root_node, uint len, float value, bool may_decide) {
-    if ((pc.flags & 4u) == 0u || pc.mode == 1u) return;
+    if ((pc.flags & kStepTransientTapes) == 0u || pc.mode == kModeOctants) return;
     bool decide =
         len <= kRefineMaxTape && (may_decide || refine_far_may_pass(root_node, len, value));
 #ifdef PRUNE_SUBGROUPS
@@ -354,7 +303,7 @@ void list_near_cell(uint dest, uint root_node, uint len, float value, bool may_d
 }
 
 // A workgroup's take from the step's counter (jobs_taken, zeroed before each dispatch; push
-// flag 8192: prune_team.glsl's take_jobs, prune_wide.glsl's take_part): the first of the next
+// kStepTakeJobs: prune_team.glsl's take_jobs, prune_wide.glsl's take_part): the first of the next
 // `count` of [first, end), the same for every lane, or `end` where none is left or the
 // workgroup may not take (`may_take`, its lane 0's). Called by every lane of the workgroup.
 shared uint s_taken;
@@ -377,19 +326,20 @@ uint take_from_counter(bool may_take, uint count, uint first, uint end) {
 // rounds of `width` (taker t's are first + t + k · width), the odd rounds from the last taker to
 // the first (a round short of takers: from its last job). Job j of that deal is the one this
 // gives. With the jobs in order, longest first, no taker takes the longest of every round.
-// Push flag 4096 (SDFPRUNE_VULKAN_SNAKE=0): every round from the first taker, to compare.
+// Push kStepDealInRounds (SDFPRUNE_VULKAN_SNAKE=0): every round from the first taker, to compare.
 uint snake_deal(uint j, uint first, uint width, uint end) {
-    if ((pc.flags & 4096u) != 0u) return j;
+    if ((pc.flags & kStepDealInRounds) != 0u) return j;
     uint r = (j - first) / width, r0 = first + r * width;
     return (r & 1u) != 0u ? r0 + (min(width, end - r0) - 1u) - (j - r0) : j;
 }
 
 // Refinement's job k, below refine_cells + copy_cells: its cell, with kCopyOnly set where the
 // cell is only copied (list_near_cell). The cells to decide again come first, in the order
-// pass's order where it ran (flag 256), longest walks first.
+// pass's order where it ran (kStepRefineOrdered), longest walks first.
 uint refine_job(uint k) {
     if (k < refine_cells) {
-        uint entry = (pc.flags & 256u) != 0u ? scratch[pc.order_start + k] : refine_list[k];
+        bool ordered = (pc.flags & kStepRefineOrdered) != 0u;
+        uint entry = ordered ? scratch[pc.order_start + k] : refine_list[k];
         return entry & kCellBits;
     }
     return refine_list[uint(refine_list.length()) - 1u - (k - refine_cells)] | kCopyOnly;
@@ -414,7 +364,7 @@ bool job_box(uint job, uint lane, out vec3 centre_out, out vec3 half_size, out f
     valid = true;
     half_size = half_cell;
     R = radius;
-    if (pc.mode == 1u) {
+    if (pc.mode == kModeOctants) {
         Block b = blocks[job];
         uint o = lane;
         uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
@@ -428,7 +378,7 @@ bool job_box(uint job, uint lane, out vec3 centre_out, out vec3 half_size, out f
         return true;
     }
     uint bi, local;
-    if (pc.mode == 0u) {
+    if (pc.mode == kModeCells) {
         uint per_team = (per_block + kTeam - 1u) / kTeam;
         bi = job / per_team;
         local = (job % per_team) * kTeam + lane;
@@ -453,7 +403,7 @@ bool job_box(uint job, uint lane, out vec3 centre_out, out vec3 half_size, out f
     centre_out = centre;
     dest = bi * per_block + local;
     parent = b.tape;
-    if (pc.mode == 2u) {
+    if (pc.mode == kModeOctantCells) {
         uint o = (lc.x >= hf ? 1u : 0u) | (lc.y >= hf ? 2u : 0u) | (lc.z >= hf ? 4u : 0u);
         Cell oct = octants[bi * 8u + o];
         if (oct.tape == kFarField) {

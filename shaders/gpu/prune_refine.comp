@@ -19,8 +19,7 @@ layout(local_size_x = 64) in;
 #include "cells.glsl"
 #include "prune_common.glsl"
 
-const uint kSquad = 32u;            // lanes per cell
-const uint kSquads = 64u / kSquad;  // cells per workgroup
+const uint kSquads = 64u / kSquad;  // cells per workgroup (kSquad lanes a cell)
 
 // A squad's cell: its tape's words (the nodes are read where they are: every lane reads the
 // same, and shared memory is kept for occupancy), per entry the decisions its lanes made, the
@@ -58,8 +57,8 @@ void main() {
 
     vec3 half_cell = pc.csize.xyz * 0.5;
     float radius = length(half_cell);
-    bool interval = (pc.flags & 2u) != 0u;
-    bool far_field = (pc.flags & 1u) != 0u;
+    bool interval = (pc.flags & kStepIntervalBounds) != 0u;
+    bool far_field = (pc.flags & kStepFarField) != 0u;
     uint subs = pc.refine;
     uint nsub = subs * subs * subs;
     uint nbatch = (nsub + kSquad - 1u) / kSquad;
@@ -67,10 +66,10 @@ void main() {
     float sub_R = length(sub_half);
 
     // The host records the dispatches for every finest cell; the jobs are the cells the lanes
-    // listed (flag 8), or without a lane pass every listed near cell (refine_job; the same count
-    // in every lane: an earlier step wrote it). Every lane of a workgroup sees the same trip
+    // listed (kStepLongList), or without a lane pass every listed near cell (refine_job; the same
+    // count in every lane: an earlier step wrote it). Every lane of a workgroup sees the same trip
     // count (barriers inside).
-    bool listed = (pc.flags & 8u) != 0u;
+    bool listed = (pc.flags & kStepLongList) != 0u;
     uint jobs = min(pc.jobs, listed ? long_jobs : refine_cells + copy_cells);
     uint walked = 0u;  // tape entries this lane walked (note_walk)
     for (uint first = pc.first_job; first < jobs; first += squads) {

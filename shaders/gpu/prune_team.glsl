@@ -24,14 +24,12 @@
 // all, gets as many jobs per team and dispatch as fit that, or one job over as many rounds as
 // its steps need (gpu_prune.cpp counts them).
 #include "scene.glsl"
+#include "prune_constants.h"
 
-layout(local_size_x = 64) in;
+const uint kTeams = 8u;  // teams per workgroup
+layout(local_size_x = kTeams * kTeam) in;
 
 #include "cells.glsl"
-
-const uint kTeams = 8u;    // teams per workgroup
-const uint kWindow = 64u;  // tape entries a lane advances per step (gpu_prune.cpp: kPruneWindow)
-
 #include "prune_common.glsl"
 
 // Per team (team_words): the lanes' job state (kStateWords each) and 4 words per stack slot and
@@ -60,7 +58,6 @@ layout(std430, binding = 12) buffer LaneScratch { uint lane_scratch[]; };
 // kTeam-th; the walk then knows a primitive from its word and reads the primitive's parameters
 // (in node order, scene.glsl) beside its node, where it read them after the node.
 shared uint s_word[kTeams * kWindow];
-const uint kStagedPrimitive = 1u << 30;  // device_layout.hpp: kStagedPrimitiveBit
 uint staged_node(uint w) { return w & (kStagedPrimitive - 1u); }
 // Lanes still busy after a step, counted in one word while the other is reset.
 shared uint s_busy[2];
@@ -81,7 +78,6 @@ shared uint s_sweeping[2];
 // steps and phases is how long it walked, in words (note_walk).
 shared uint s_walked[2 * 3];
 
-const uint kStateWords = 16u;
 const uint kPhaseEvaluate = 0u, kPhaseSweep = 1u, kPhaseWrite = 2u, kPhaseDone = 3u;
 // Swept: the lane's sweep has ended, but a lane of its workgroup still sweeps; it takes its new
 // tape's place and writes once none does (s_sweeping).
@@ -172,15 +168,15 @@ void store_slot(uint at, vec3 x, uint entry) {
     lane_scratch[at + 3u * kTeam] = entry;
 }
 
-// Jobs in order (push flag 512, modes 1 and 2): a workgroup's 8 teams run as long as their
+// Jobs in order (kStepTeamsOrdered, modes 1 and 2): a workgroup's 8 teams run as long as their
 // longest walk, and in block order they take the 8 octants of one block (mode 2), whose tapes
 // differ widely in length (molecule's finest level: from 1 word to 597, or none where the
 // octant is far-field), or 8 neighbouring blocks (mode 1). A pass before the step sorts the
-// step's parents (octants; blocks with flag 1024) by class of tape length, the longest first
+// step's parents (octants; blocks with kStepOrderBlocks) by class of tape length, the longest first
 // (class 0: far-field, last), into the order list (pc.order_start in scratch, rank 0 the
-// first): by default (flag 2048) each window of kOrderWindow parents (32 neighbouring blocks'
-// octants: a workgroup's teams read nearby nodes) apart, in mode 5; else the whole step, mode 4
-// counting each class (order_count) and mode 5 placing each parent after the longer classes
+// first): by default (kStepOrderWindows) each window of kOrderWindow parents (32 neighbouring
+// blocks' octants: a workgroup's teams read nearby nodes) apart, in mode 5; else the whole step,
+// mode 4 counting each class (order_count) and mode 5 placing each parent after the longer classes
 // and the parents of its class placed before it (order_placed). Within a class the order is
 // the atomics': the cells do not depend on it. The step's jobs then take the parents in that
 // order, dealt out in a snake (ordered_job), so that no team takes the longest parent of every
@@ -188,9 +184,8 @@ void store_slot(uint at, vec3 x, uint entry) {
 // of 376 words in windows (578 dealt in rounds), 183 sorted whole (floor: 151, its longest
 // tape; tools/prune_order_model.cpp). A parent's class: 0 far-field, else 1 + 2k (+ 1 in the
 // upper half of the octave) for a tape of 2^k to 2^(k+1) − 1 words.
-const uint kOrderWindow = 256u;  // parents a workgroup takes at a time (device_layout.hpp)
 uint parent_class(uint parent) {
-    uint tape = (pc.flags & 1024u) != 0u ? blocks[parent].tape : octants[parent].tape;
+    uint tape = (pc.flags & kStepOrderBlocks) != 0u ? blocks[parent].tape : octants[parent].tape;
     if (tape == kFarField) return 0u;
     uint len = tape_read(tape, 0u);
     uint k = uint(findMSB(len));
@@ -203,9 +198,9 @@ shared uint s_order_count[kOrderClasses];
 void order_parents() {
     const uint kPerLane = kOrderWindow / 64u;
     uint lane = gl_LocalInvocationID.x;
-    // The octants step's order (flag 1024) and the cells step's count apart: both may run in
+    // The octants step's order (kStepOrderBlocks) and the cells step's count apart: both may run in
     // one submission.
-    uint which = (pc.flags & 1024u) != 0u ? 0u : kOrderClasses;
+    uint which = (pc.flags & kStepOrderBlocks) != 0u ? 0u : kOrderClasses;
     for (uint w0 = pc.first_job + gl_WorkGroupID.x * kOrderWindow; w0 < pc.jobs;
          w0 += gl_NumWorkGroups.x * kOrderWindow) {
         if (lane < kOrderClasses) s_order_count[lane] = 0u;
@@ -219,15 +214,15 @@ void order_parents() {
         }
         memoryBarrierShared();
         barrier();
-        // Each class's first place: in windows (flag 2048, SDFPRUNE_VULKAN_TEAM_ORDER=1), past
-        // the window's longer classes in the window's places; else past every longer class's
+        // Each class's first place: in windows (kStepOrderWindows, SDFPRUNE_VULKAN_TEAM_ORDER=1),
+        // past the window's longer classes in the window's places; else past every longer class's
         // parents of the step and this class's placed so far.
         uint first_place = 0u;
         if (lane < kOrderClasses) {
             uint count = s_order_count[lane];
-            if (pc.mode == 4u) {
+            if (pc.mode == kModeOrderCount) {
                 if (count != 0u) atomicAdd(order_count[which + lane], count);
-            } else if ((pc.flags & 2048u) != 0u) {
+            } else if ((pc.flags & kStepOrderWindows) != 0u) {
                 first_place = w0;
                 for (uint c = lane + 1u; c < kOrderClasses; ++c) first_place += s_order_count[c];
             } else {
@@ -241,7 +236,7 @@ void order_parents() {
         if (lane < kOrderClasses) s_order_count[lane] = first_place;
         memoryBarrierShared();
         barrier();
-        if (pc.mode == 5u)
+        if (pc.mode == kModeOrderPlace)
             for (uint k = 0u; k < kPerLane; ++k) {
                 uint i = w0 + k * 64u + lane;
                 if (i < pc.jobs)
@@ -251,20 +246,20 @@ void order_parents() {
         barrier();  // the places read before the next window resets them
     }
 }
-// Team job j under flag 512: dealt in a snake to the teams (snake_deal over this dispatch's
-// jobs [first_job, jobs)), then the job at the same place of its parent (in mode 2 a team takes
-// kTeam of an octant's cells; in mode 1 a block is one job) of the parent of that rank /
+// Team job j under kStepTeamsOrdered: dealt in a snake to the teams (snake_deal over this
+// dispatch's jobs [first_job, jobs)), then the job at the same place of its parent (in mode 2 a
+// team takes kTeam of an octant's cells; in mode 1 a block is one job) of the parent of that rank /
 // per_team in the order list.
-// Jobs taken as workgroups come free (flag 8192, take_jobs) take the order list as it is.
+// Jobs taken as workgroups come free (kStepTakeJobs, take_jobs) take the order list as it is.
 uint ordered_job(uint j, uint teams) {
-    if ((pc.flags & 8192u) == 0u) j = snake_deal(j, pc.first_job, teams, pc.jobs);
+    if ((pc.flags & kStepTakeJobs) == 0u) j = snake_deal(j, pc.first_job, teams, pc.jobs);
     uint hf = pc.factor / 2u;
-    uint per_team = pc.mode == 2u ? (hf * hf * hf + kTeam - 1u) / kTeam : 1u;
+    uint per_team = pc.mode == kModeOctantCells ? (hf * hf * hf + kTeam - 1u) / kTeam : 1u;
     uint parent = lane_scratch[pc.order_start + j / per_team - pc.order_first];
     return parent * per_team + j % per_team;
 }
 
-// Jobs taken as workgroups come free (push flag 8192): a workgroup that is done with its jobs
+// Jobs taken as workgroups come free (kStepTakeJobs): a workgroup that is done with its jobs
 // takes the next one for each of its teams (`group_teams`) from the step's counter
 // (jobs_taken, zeroed before each dispatch), instead of the jobs dealt out in advance (team t's
 // are first_job + t + k · teams). With the jobs in order, longest first, no workgroup waits
@@ -279,7 +274,7 @@ uint take_jobs(uint group_teams, uint taken, uint cap) {
 }
 
 void main() {
-    if (pc.mode >= 4u) {
+    if (pc.mode >= kModeOrderCount) {
         order_parents();
         return;
     }
@@ -291,17 +286,17 @@ void main() {
     uint st = tbase + lane;                    // state word k at st + k · kTeam
     uint sbase = tbase + kStateWords * kTeam;  // stack slot j, word c at sbase + (4j + c) · kTeam
     uint win = tl * kWindow;                   // the team's window in shared memory
-    bool interval = (pc.flags & 2u) != 0u;
-    bool transient = pc.mode == 1u || (pc.flags & 4u) != 0u;
+    bool interval = (pc.flags & kStepIntervalBounds) != 0u;
+    bool transient = pc.mode == kModeOctants || (pc.flags & kStepTransientTapes) != 0u;
     // The step lists its near cells for refinement (list_near_cell), which reads bit 5.
-    bool lists = pc.mode != 1u && (pc.flags & 4u) != 0u;
+    bool lists = pc.mode != kModeOctants && (pc.flags & kStepTransientTapes) != 0u;
     const Cell kNoCell = Cell(kFarField, 0u, 0.0, 0.0);  // store()'s, for refinement only
 
     // Every lane of a workgroup sees the same trip count (barriers inside); teams past
     // pc.threads / kTeam hold no scratch and take no jobs. Jobs dealt out in advance (team t's
     // are first + t, first = first_job + k · teams) or taken (take_jobs: the workgroup's teams
     // take first + tl).
-    bool taking = (pc.flags & 8192u) != 0u;
+    bool taking = (pc.flags & kStepTakeJobs) != 0u;
     uint group_teams = min(kTeams, teams - min(teams, gl_WorkGroupID.x * kTeams));
     uint cap = pc.budget == 0xffffffffu ? 0xffffffffu
                                         : (pc.jobs - pc.first_job + teams - 1u) / teams;
@@ -312,7 +307,7 @@ void main() {
         if (first >= pc.jobs) break;
         uint job = first + (taking ? tl : team);
         bool has_job = (taking ? tl < group_teams : team < teams) && job < pc.jobs;
-        if (has_job && (pc.flags & 512u) != 0u) job = ordered_job(job, teams);
+        if (has_job && (pc.flags & kStepTeamsOrdered) != 0u) job = ordered_job(job, teams);
         // This lane's box and the team's parent tape; `valid`: the lane stores a result.
         bool valid = has_job, walk = has_job;
         uint parent = 0u, dest = 0u;
@@ -440,7 +435,7 @@ void main() {
                     float L = nodes[staged_node(s_word[win + len - 1u - w0])].lipschitz;
                     vec2 range = far_field_range(value, tx.y, tx.z, L, R);
                     float clearance = far_field_clearance(pc.csize.w, L, R);
-                    bool far_field = (pc.flags & 1u) != 0u;
+                    bool far_field = (pc.flags & kStepFarField) != 0u;
                     bool above = far_field && clears_above(range.x, clearance);
                     bool below = far_field && clears_below(range.y, clearance);
                     if (above || below) {
@@ -475,7 +470,7 @@ void main() {
                     if ((fl & kFlagPrimitive) != 0u) {
                         ++out_len;
                         ++prims;
-                        if (--top == 0u && (pc.flags & 16384u) == 0u) {
+                        if (--top == 0u && (pc.flags & kStepWholeSweeps) == 0u) {
                             first_kept = e;
                             ended = true;
                             break;

@@ -27,6 +27,7 @@
 // runs walked from shared memory (below).
 #extension GL_EXT_shader_8bit_storage : require
 #include "scene.glsl"
+#include "prune_constants.h"
 #ifdef PRUNE_WIDE_SUBGROUPS
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
@@ -34,7 +35,6 @@
 #define PRUNE_SUBGROUPS  // the pool appends and refinement's list (prune_common.glsl)
 #endif
 
-const uint kWide = 256u;  // lanes per workgroup (gpu_prune.cpp: kPruneWide)
 const uint kSearchTurn = 37u;  // (stage 1: odd, so that a lane takes every place in turn)
 layout(local_size_x = kWide) in;
 
@@ -51,8 +51,7 @@ layout(std430, binding = 12) restrict readonly buffer NodeSpans { uvec2 node_spa
 // then per entry and box of the workgroup's the value and range (kWideValueWords, item
 // (e · g_boxes + b − g_b0)), then each item's flags, a byte (8-bit storage: the wide kernels
 // are built only where the device has it): 13 bytes an item instead of 16.
-const uint kWideValueWords = 3u;
-// The words of `items` items (device_layout.hpp: kPruneWideItemBytes).
+// The words of `items` items (device_layout.hpp: prune_wide_item_words).
 uint item_words(uint items) { return items * kWideValueWords + (items + 3u) / 4u; }
 // Scratch as bytes, for the items' flags.
 layout(std430, binding = 8) coherent buffer ScratchBytes { uint8_t scratch_bytes[]; };
@@ -60,12 +59,9 @@ layout(std430, binding = 8) coherent buffer ScratchBytes { uint8_t scratch_bytes
 // run (rounds 1 and up of one entry each: a chain's operators), the run's first round and the
 // round after its last (for any other round: itself and the next); in a run, its one entry's
 // record (kRunEntry...): the entry, its left operand, its tape word, and the tape signs of its
-// operands (1: the left's, 2: the right's).
-const uint kRoundWords = 8u;
+// operands (1: the left's, 2: the right's). kRoundWords words a round, and kWideHeightWords per
+// scene height (prune_constants.h).
 const uint kRunEntry = 4u, kRunLeft = 5u, kRunWord = 6u, kRunSigns = 7u;
-// Words per scene height: 3 per height, kRoundWords per round, 1 in the list of breaks
-// (device_layout.hpp: kPruneWideHeightWords).
-const uint kWideHeightWords = 3u + kRoundWords + 1u;
 // Where the step's jobs claim their items (pc.claim_words > 0, gpu_prune_plan.cpp: their
 // tapes sum to less than the longest tape per workgroup), a workgroup holds none, and each job
 // claims its own tape's, past the workgroups' scratch (claim_items).
@@ -234,7 +230,6 @@ uint run_entry(uint rbase, uint q) { return scratch[rbase + kRoundWords * q + kR
 // operand's value, an entry's flags) it keeps in shared memory too, per round and box, and
 // reads from there; what earlier chunks made is in scratch before the chunk is staged.
 #ifdef PRUNE_WIDE_RUNS
-const uint kRunChunk = 32u;  // gpu_prune.cpp: kPruneWideRunChunk
 // A run shorter than this is walked from scratch as it is: staging costs two barriers more.
 const uint kRunStaged = 8u;
 const uint kNotInChunk = 0xffu;
@@ -474,7 +469,7 @@ void sweep_run_scanned(uint r0, uint end, uint rbase) {
 // its operands' decisions (the low two bits of their flags) do not change in this stage.
 void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
     uint id = gl_LocalInvocationID.x, b = g_b0 + id;
-    if (end - r0 >= kRunScanned && (pc.flags & 65536u) == 0u) {
+    if (end - r0 >= kRunScanned && (pc.flags & kStepWideNoScan) == 0u) {
         sweep_run_scanned(r0, end, rbase);
         return;
     }
@@ -524,7 +519,7 @@ void sweep_run(uint r0, uint end, uint rbase, uint vbase) {
 #endif
 }
 
-// Parts taken as workgroups come free (push flag 8192, as the team steps' take_jobs): a
+// Parts taken as workgroups come free (kStepTakeJobs, as the team steps' take_jobs): a
 // workgroup that is done with a part takes the next from the step's counter (jobs_taken, zeroed
 // before each dispatch, shared by a step's dispatches side by side), in order, instead of the
 // parts dealt out in advance (workgroup w's are w, w + groups, ...): one that drew long tapes
@@ -561,14 +556,14 @@ void main() {
     uint rbase = hbase + 3u * (pc.max_stack + 1u);  // per round: kRoundWords
     uint bbase = rbase + kRoundWords * (pc.max_stack + 1u);  // the rounds in no run, in order
     uint own_items = bbase + (pc.max_stack + 1u);  // items (item_at): v, lo, hi; then flags
-    bool interval = (pc.flags & 2u) != 0u;
-    bool transient = pc.mode == 1u || (pc.flags & 4u) != 0u;
+    bool interval = (pc.flags & kStepIntervalBounds) != 0u;
+    bool transient = pc.mode == kModeOctants || (pc.flags & kStepTransientTapes) != 0u;
 
     // Every lane of a workgroup sees the same trip count and the same job (and boxes).
     // (A step whose scratch is spread over several buffers runs as several dispatches side by
     // side, one a buffer: the dispatch's workgroups are the step's from pc.group_base on, its
     // scratch its own buffer's.)
-    bool taking = (pc.flags & 8192u) != 0u;
+    bool taking = (pc.flags & kStepTakeJobs) != 0u;
     uint first_part = pc.first_job * split, end = pc.jobs * split, taken = 0u;
     for (uint part = taking ? take_part(taken++, first_part, end, groups)
                             : first_part + pc.group_base + gl_WorkGroupID.x;
@@ -739,7 +734,7 @@ void main() {
             float clearance = far_field_clearance(pc.csize.w, L, R);
             vec2 range = far_field_range(v, uintBitsToFloat(scratch[s0 + 1u]),
                                          uintBitsToFloat(scratch[s0 + 2u]), L, R);
-            uint far_flags = (pc.flags & 1u) != 0u ? 3u : 0u;
+            uint far_flags = (pc.flags & kStepFarField) != 0u ? 3u : 0u;
             if (!clears_above(range.x, clearance)) far_flags &= ~1u;
             if (!clears_below(range.y, clearance)) far_flags &= ~2u;
             float lowest = min(kInfinity, range.x), highest = max(-kInfinity, range.y);

@@ -94,7 +94,7 @@ uint refine_write(uint cell, uint len, Cell c0) {
         if (REFINE_IS_PRIMITIVE(e)) {
             ++out_len;
             ++prims;
-            if (--pending == 0u && (pc.flags & 16384u) == 0u) {
+            if (--pending == 0u && (pc.flags & kStepWholeSweeps) == 0u) {
                 first_kept = e;
                 break;
             }

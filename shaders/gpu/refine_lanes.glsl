@@ -33,7 +33,7 @@ layout(local_size_x = 64) in;
 // A set of a tape's entries, a bit each (entry i: bit i % 32 of word i / 32): mask_bit(m, i),
 // mask_of(i) (the set of entry i alone), any_entry(m); its low and high words (the more list's).
 #ifdef REFINE_LANES_LONG
-const uint kLaneTape = 64u;  // the longest tape a lane refines (device_layout.hpp)
+const uint kLaneTape = kLaneTapeMax;  // the longest tape a lane refines
 #define EntrySet uvec2
 const uvec2 kNoEntries = uvec2(0u);
 uint mask_bit(uvec2 m, uint i) { return (m[i >> 5] >> (i & 31u)) & 1u; }
@@ -43,7 +43,7 @@ uint low_word(uvec2 m) { return m.x; }
 uint high_word(uvec2 m) { return m.y; }
 uvec2 entry_set(uint low, uint high) { return uvec2(low, high); }
 #else
-const uint kLaneTape = 32u;
+const uint kLaneTape = kRefineLaneTape;
 #define EntrySet uint
 const uint kNoEntries = 0u;
 uint mask_bit(uint m, uint i) { return (m >> i) & 1u; }
@@ -104,9 +104,8 @@ bool any_open_operator() { return any_entry((r_seen1 ^ r_seen2) & ~r_seen0); }
 // change their result. The first pass walks the first boxes for every cell and finishes those;
 // it lists the others, with what it found, for a second pass over the other sub-boxes. A pass's
 // lanes do the same walks, so a subgroup does not wait for its one cell that needs them all.
-// With push flag 64 the first pass walks every sub-box and lists nothing (one pass, as before;
-// SDFPRUNE_VULKAN_REFINE_SECOND_PASS=0, for comparisons).
-const uint kFirstBoxes = 9u;  // device_layout.hpp: kRefineFirstBoxes
+// With kStepRefineOnePass the first pass walks every sub-box and lists nothing (one pass, as
+// before; SDFPRUNE_VULKAN_REFINE_SECOND_PASS=0, for comparisons).
 // Sub-box k (< kFirstBoxes) of the first ones: corner k (bit 0: x, 1: y, 2: z at the far end),
 // then the middle. Sub-box b of all, x fastest, is one of them where is_first_box(b).
 uvec3 first_box(uint k, uint subs) {
@@ -132,9 +131,8 @@ uint first_count(uint subs) {
 // A cell's refinement state between the passes, in the more list: the cell, its far-field flags
 // and range, its entries' decisions (seen0, seen1, seen2: their low words, then where the lanes
 // take tapes of more than 32 words their high words), kMoreWords words a cell, or 3 fewer
-// (device_layout.hpp: refine_more_words).
-const uint kMoreWords = 10u;
-uint more_words() { return pc.lane_tape > 32u ? kMoreWords : kMoreWords - 3u; }
+// (prune_constants.h).
+uint more_words() { return refine_more_words(pc.lane_tape); }
 
 // The first place of walk class c in a list of the cells to decide again sorted by class, the
 // longest first (the order list, the more list): the cells of the longer classes.
@@ -144,7 +142,7 @@ uint class_start(uint c) {
     return start;
 }
 
-// The order pass (push flag 128), before the first pass: the list's cells to decide again
+// The order pass (kStepRefineOrderPass), before the first pass: the list's cells to decide again
 // (refine_cells of them, each with its walk class) sorted by class into the order list
 // (scratch[pc.order_start]), the longest walks first, so that the first pass's neighbouring
 // jobs, which a subgroup's lanes take together, walk tapes of about one length: a subgroup
@@ -185,7 +183,7 @@ void order_walks() {
 // takes the places from class_start(c) on (room for all its cells to decide, more than it
 // lists), so that the second pass's subgroups, which take neighbouring jobs, walk tapes of
 // about one length, as the first pass's do. A subgroup's listing lanes take their places with
-// an atomic per class among them (more_place). With push flag 32768, in the order they were
+// an atomic per class among them (more_place). With kStepMoreAsListed, in the order they were
 // listed instead (SDFPRUNE_VULKAN_REFINE_SORTED_MORE=0: as before stop 48, for comparisons),
 // where a subgroup's cells come from several of the first pass's subgroups.
 // The place of a cell of walk class `c` in the more list (all the subgroup's active lanes call
@@ -212,22 +210,22 @@ uint more_job(uint k) {
 }
 
 void main() {
-    if ((pc.flags & 128u) != 0u) {
+    if ((pc.flags & kStepRefineOrderPass) != 0u) {
         order_walks();
         return;
     }
     counts_begin();
     vec3 half_cell = pc.csize.xyz * 0.5;
     float radius = length(half_cell);
-    bool interval = (pc.flags & 2u) != 0u;
-    bool far_field = (pc.flags & 1u) != 0u;
-    bool second = (pc.flags & 32u) != 0u;
+    bool interval = (pc.flags & kStepIntervalBounds) != 0u;
+    bool far_field = (pc.flags & kStepFarField) != 0u;
+    bool second = (pc.flags & kStepRefineSecondPass) != 0u;
     uint subs = pc.refine;
     uint nsub = subs * subs * subs;
     uint nfirst = first_count(subs);
     // The pass's sub-boxes in visiting order: [k0, k1).
     uint k0 = second ? nfirst : 0u;
-    uint k1 = second || (pc.flags & 64u) != 0u ? nsub : nfirst;
+    uint k1 = second || (pc.flags & kStepRefineOnePass) != 0u ? nsub : nfirst;
     vec3 sub_half = half_cell / float(subs);
     float sub_R = length(sub_half);
     uint lane_tape = min(pc.lane_tape, kLaneTape);
@@ -237,10 +235,10 @@ void main() {
     uint jobs = min(pc.jobs, second ? more_jobs : refine_cells + copy_cells);
     uint walked = 0u;  // tape entries this lane walked (note_walk)
     for (uint j = pc.first_job + gl_GlobalInvocationID.x; j < jobs; j += pc.threads) {
-        // In order (flag 256), the jobs dealt in a snake: on an H100's lanes molecule's critical
-        // path goes from 38 to 31 words (tools/prune_order_model.cpp).
-        bool sorted_more = (pc.flags & 32768u) == 0u;
-        bool in_order = (!second || sorted_more) && (pc.flags & 256u) != 0u;
+        // In order (kStepRefineOrdered), the jobs dealt in a snake: on an H100's lanes molecule's
+        // critical path goes from 38 to 31 words (tools/prune_order_model.cpp).
+        bool sorted_more = (pc.flags & kStepMoreAsListed) == 0u;
+        bool in_order = (!second || sorted_more) && (pc.flags & kStepRefineOrdered) != 0u;
         uint job = in_order ? snake_deal(j, pc.first_job, pc.threads, jobs) : j;
         uint cell;
         bool copy = false;

@@ -4,7 +4,9 @@
 // and array strides glslc gave the GLSL side (SPIR-V reflection) and checks they match. Also
 // the few figures of the pruning's plan that tools/prune_order_model.cpp models as well (a wide
 // job's walk, a scene's shape for the wide kernel, which levels split into octants), so that
-// the tool builds without the Vulkan backend's sources.
+// the tool builds without the Vulkan backend's sources. The pruning kernels' modes, flags and
+// sizes are written once, in shaders/gpu/prune_constants.h; here the sizes take the 64-bit types
+// the plans count in.
 #pragma once
 
 #include <algorithm>
@@ -13,6 +15,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "../../shaders/gpu/prune_constants.h"
 #include "sdfprune/prune.hpp"
 
 namespace sdfprune::gpu {
@@ -21,8 +24,7 @@ using math::vec4;
 
 // The scene (scene.glsl). PrimitiveParams is sdf_math.h's, the same struct on both sides.
 // Parameters and extras are in node order: node n's at n (gpu_prune.cpp).
-// kStagedPrimitiveBit: bit 30 of a tape word staged by prune_team.glsl, set for a primitive.
-inline constexpr uint32_t kStagedPrimitiveBit = 1u << 30;
+inline constexpr uint32_t kStagedPrimitiveBit = kernel::kStagedPrimitive;
 struct GpuNode {  // Node
     uint32_t kind, primitive;
     float blend, lipschitz;
@@ -42,7 +44,7 @@ struct GpuGridParams {  // GridParams
     vec4 aabb_min, aabb_max, cell_size, inv_cell;
 };
 
-// prune.comp: Counters (expand.comp sees the same buffer as uint[]: [5] is next_blocks).
+// counters.glsl: Counters (the pruning kernels' and expand.comp's).
 // refine_cells: the entries of the refinement's list (prune_common.glsl: RefineList).
 // near_lo, near_hi: expand.comp's bounds of the finest level's near-field cells ([lo, hi)).
 // more_jobs: the cells the lane pass's first walks left to its second (its more list).
@@ -51,9 +53,9 @@ struct GpuGridParams {  // GridParams
 // copy_cells: the entries at the back of refinement's list, the cells it only copies.
 // walk_cells: the cells listed to decide again, per walk class; walk_placed: the order pass's
 // places taken per class (prune_refine_lanes.comp).
-inline constexpr uint32_t kRefineWalkClasses = 16;  // prune_common.glsl: kWalkClasses
-inline constexpr uint32_t kPruneOrderClasses = 32;  // prune_common.glsl: kOrderClasses
-inline constexpr uint32_t kPruneWalkSlots = 8;      // prune_common.glsl: kWalkSlots
+inline constexpr uint32_t kRefineWalkClasses = kernel::kWalkClasses;
+inline constexpr uint32_t kPruneOrderClasses = kernel::kOrderClasses;
+inline constexpr uint32_t kPruneWalkSlots = kernel::kWalkSlots;
 struct GpuCounters {
     uint32_t pool_used, pool_capacity, overflow, max_len, near_jobs, next_blocks, max_depth;
     uint32_t octant_used, octant_capacity, near_words, refine_cells;
@@ -73,38 +75,26 @@ struct GpuCounters {
     // Refinement's second list (refine_lanes.glsl: more_place): its cells of each walk class.
     uint32_t more_class[kRefineWalkClasses];
 };
-// prune.comp: kStateWords, the words of a lane's job state in its team's scratch; kTeam, the
-// lanes that walk one parent tape together; kWindow, the tape entries a lane advances per step
-// and phase. prune_refine.comp: kSquad, the lanes that refine one cell.
-// prune_refine_lanes.comp: kLaneTapeMax, the longest tape a lane may refine alone (the size of
-// its arrays); kRefineLaneTape, the longest it does where few cells have longer tapes
-// (Pruner::choose_lane_tape), unless SDFPRUNE_VULKAN_REFINE_LANE_TAPE says (0: no lane pass,
-// squads for every cell).
-inline constexpr uint64_t kPruneStateWords = 16;
-inline constexpr uint64_t kPruneTeam = 8;
-inline constexpr uint64_t kPruneWindow = 64;
-// prune.comp, modes 4 and 5: the parents a workgroup counts together (prune_team.glsl:
-// kOrderWindow).
-inline constexpr uint64_t kPruneOrderWindow = 256;
-inline constexpr uint64_t kRefineSquad = 32;
-inline constexpr uint32_t kLaneTapeMax = 64;
-inline constexpr uint32_t kRefineLaneTape = 32;
-// prune_refine_lanes.comp: kFirstBoxes, the sub-boxes (the corners and the middle) its first
-// pass walks for every cell; more_words(), the words of a cell's state in the more list (its
-// entries' decisions in two words each where the lanes take tapes of more than 32 words).
-inline constexpr uint64_t kRefineFirstBoxes = 9;
-inline constexpr uint64_t refine_more_words(uint32_t lane_tape) {
-    return lane_tape > kRefineLaneTape ? 10 : 7;
-}
-// prune_wide.comp: kWide, the lanes of a workgroup that takes one team job (kPruneTeam boxes of
-// one parent tape); its scratch words for `items` items (an item per tape entry and box:
-// value and range, then its flags a byte: prune_wide.glsl's item_words); kWideHeightWords, per
-// scene height (the counting sort's, the rounds' and their runs').
-inline constexpr uint64_t kPruneWide = 256;
+// The lane pass of refinement takes tapes up to kRefineLaneTape words where few cells have
+// longer ones (Pruner::choose_lane_tape), unless SDFPRUNE_VULKAN_REFINE_LANE_TAPE says (0: no
+// lane pass, squads for every cell).
+inline constexpr uint64_t kPruneStateWords = kernel::kStateWords;
+inline constexpr uint64_t kPruneTeam = kernel::kTeam;
+inline constexpr uint64_t kPruneWindow = kernel::kWindow;
+inline constexpr uint64_t kPruneOrderWindow = kernel::kOrderWindow;
+inline constexpr uint64_t kRefineSquad = kernel::kSquad;
+inline constexpr uint32_t kLaneTapeMax = kernel::kLaneTapeMax;
+inline constexpr uint32_t kRefineLaneTape = kernel::kRefineLaneTape;
+inline constexpr uint64_t kRefineFirstBoxes = kernel::kFirstBoxes;
+using kernel::refine_more_words;
+// prune_wide.comp: kPruneWide lanes a workgroup; its scratch words for `items` items (an item
+// per tape entry and box: value and range, then its flags a byte: prune_wide.glsl's
+// item_words); kPruneWideHeightWords per scene height.
+inline constexpr uint64_t kPruneWide = kernel::kWide;
 inline constexpr uint64_t prune_wide_item_words(uint64_t items) {
-    return items * 3 + (items + 3) / 4;
+    return items * kernel::kWideValueWords + (items + 3) / 4;
 }
-inline constexpr uint64_t kPruneWideHeightWords = 12;
+inline constexpr uint64_t kPruneWideHeightWords = kernel::kWideHeightWords;
 // The walk of one of its workgroups over a job's parent tape of n entries, as gpu_prune_plan.cpp
 // (plan_wide) and tools/prune_order_model.cpp model it: `boxes` boxes a workgroup, `rounds`
 // the tape's rounds at most (a height of the scene each), `search` steps a search. Each lane's
@@ -118,7 +108,7 @@ inline constexpr uint64_t prune_wide_job_walk(uint64_t n, uint64_t rounds, uint6
     return up(n, kPruneWide) * (2 + search) + 2 * (job_rounds + up(n * boxes, kPruneWide)) +
            2 * up(n, kPruneWide / boxes);
 }
-inline constexpr uint64_t kPruneWideRunChunk = 32;  // prune_wide.glsl: kRunChunk
+inline constexpr uint64_t kPruneWideRunChunk = kernel::kRunChunk;
 // A scene's figures for the wide kernel, from one pass over its nodes (post-order: operands
 // first), as gpu_prune.cpp uploads them and plan_wide and tools/prune_order_model.cpp count:
 // - spans: per node n, the first node of its subtree (2n) and its height (2n + 1);

@@ -54,7 +54,7 @@ static bool measures_walks(const Step& s) {
     switch (s.kernel) {
         case KernelId::kPrune:
         case KernelId::kPruneBytes:
-            return s.push.mode <= 2;
+            return s.push.mode <= kernel::kModeOctantCells;
         case KernelId::kPruneRefineLanes:
         case KernelId::kPruneRefineLanesLong:
             return !s.order_pass;
@@ -187,8 +187,9 @@ Pruner::Pruner(Device& device, const Scene& scene, const PruneOptions& options, 
     origin = sc.aabb.min;
     extent = sc.aabb.max - sc.aabb.min;
     L = sc.lipschitz[sc.root()];
-    flags = (opt.far_field ? 1u : 0u) | (opt.bounds == CellBounds::kInterval ? 2u : 0u) |
-            (sweeps_end ? 0u : 16384u);
+    flags = (opt.far_field ? kernel::kStepFarField : 0u) |
+            (opt.bounds == CellBounds::kInterval ? kernel::kStepIntervalBounds : 0u) |
+            (sweeps_end ? 0u : kernel::kStepWholeSweeps);
 }
 
 void Pruner::run() {
@@ -325,7 +326,8 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             // --lipschitz-bounds were, their finest pool sized by the last level's share),
             // unless the bound passes the device's largest buffer.
             lv.parent_tape_words = parent_words;  // (all the level's blocks': a bound)
-            steps = plan_step(lv, 1, b0, blocks_in, blocks_in * 8, *lv.octants, *lv.cells, false);
+            steps = plan_step(lv, kernel::kModeOctants, b0, blocks_in, blocks_in * 8, *lv.octants,
+                              *lv.cells, false);
             sc = run_steps(lv, steps, false, 0, blocks_in > 1);
             if (!sc) {
                 slice_blocks = blocks_in / 2;
@@ -349,14 +351,14 @@ GpuCounters Pruner::prune_slices(Level& lv) {
                 resize(g.pool, capacity, g.pool_words + cells_bound, g.pool_words);
             }
             lv.parent_tape_words = sc->near_words;  // the octants'
-            steps = plan_step(lv, 2, b0, blocks_in, blocks_in * lv.per_block, *lv.octants,
-                              *lv.cells, lv.refine);
+            steps = plan_step(lv, kernel::kModeOctantCells, b0, blocks_in, blocks_in * lv.per_block,
+                              *lv.octants, *lv.cells, lv.refine);
         } else {
             lv.parent_tape_words = parent_words;
             // Room to list every cell of the slice for refinement.
             if (lv.refine) hold(refine_list, 4 * blocks_in * lv.per_block);
-            steps = plan_step(lv, 0, b0, blocks_in, blocks_in * lv.per_block, *lv.cells, *lv.cells,
-                              lv.refine);
+            steps = plan_step(lv, kernel::kModeCells, b0, blocks_in, blocks_in * lv.per_block,
+                              *lv.cells, *lv.cells, lv.refine);
         }
         lv.listed_cells = lv.copied_cells = 0;
         lv.walk_cells.fill(0);
@@ -386,8 +388,9 @@ GpuCounters Pruner::prune_slices(Level& lv) {
             max_len = std::max(sc->max_len, 1u);
             max_depth = std::max(sc->max_depth, 1u);
             lane_tape = choose_lane_tape(lv);
-            std::vector<Step> refinement = plan_step(lv, 3, b0, blocks_in, blocks_in * lv.per_block,
-                                                     *lv.cells, *lv.cells, false);
+            std::vector<Step> refinement =
+                plan_step(lv, kernel::kModeRefine, b0, blocks_in, blocks_in * lv.per_block,
+                          *lv.cells, *lv.cells, false);
             const GpuCounters rc = *run_steps(lv, refinement, false, sc->octant_used, false,
                                               bound ? lv.cells : nullptr);
             sc->max_depth = rc.max_depth;
@@ -436,13 +439,13 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
             // not the octants'; and after refinement, the refined cells' deepest stack (what
             // the tracing kernels' stacks are sized by; every near-field cell's refinement adds
             // its tape's depth).
-            if (s.push.mode == 2 && !s.listed) {
+            if (s.push.mode == kernel::kModeOctantCells && !s.listed) {
                 ctx.fill(counters, 0, offsetof(GpuCounters, max_len), 4);
                 ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
             }
             // Refinement rewrites the near cells listed by the step before in place (the
             // far-field ones stay as they are).
-            if (s.push.mode == 3 && !s.listed && !s.second_pass)
+            if (s.push.mode == kernel::kModeRefine && !s.listed && !s.second_pass)
                 ctx.fill(counters, 0, offsetof(GpuCounters, max_depth), 4);
             record_step(s);
         }
@@ -468,8 +471,9 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
         // Refinement rewrites its cells in place and cannot run again over them; its pool was
         // made room for first (prune_slices), so only a pool at the device's limit overflows,
         // which grow() reports.
-        const bool refining =
-            std::any_of(steps.begin(), steps.end(), [](const Step& s) { return s.push.mode == 3; });
+        const bool refining = std::any_of(steps.begin(), steps.end(), [](const Step& s) {
+            return s.push.mode == kernel::kModeRefine;
+        });
         if ((counter->overflow & 4u) != 0)
             throw std::logic_error("Vulkan: a step's jobs claimed more scratch than planned");
         if (refining && !(main_over && capacity >= max_pool_words))
@@ -502,7 +506,7 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
             add_shape(lv, s.shape);
             continue;
         }
-        if (s.push.mode == 3) {
+        if (s.push.mode == kernel::kModeRefine) {
             const uint64_t walked = s.listed        ? counter->long_jobs
                                     : s.second_pass ? counter->more_jobs
                                                     : counter->refine_cells;

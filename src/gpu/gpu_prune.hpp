@@ -39,11 +39,12 @@ struct Step {
     // Refinement's squads after its lane pass (prune_refine_lanes.comp), taking the cells it
     // listed: its jobs are the long list's entries.
     bool listed = false;
-    // The lane pass's second pass (push flag 32): its jobs are the cells its first pass listed
-    // in the more list, past the first sub-boxes.
+    // The lane pass's second pass (kStepRefineSecondPass): its jobs are the cells its first pass
+    // listed in the more list, past the first sub-boxes.
     bool second_pass = false;
-    // The lane pass's order pass (push flag 128), before it: the list's cells to decide again
-    // sorted by walk class into the order list, from which the passes take them (flag 256).
+    // The lane pass's order pass (kStepRefineOrderPass), before it: the list's cells to decide
+    // again sorted by walk class into the order list, from which the passes take them
+    // (kStepRefineOrdered).
     bool order_pass = false;
     uint64_t scratch_words = 0;  // the scratch its teams (or wide workgroups) take
     GpuStepShape shape;
@@ -189,7 +190,7 @@ class Pruner {
     // them in a second pass; SDFPRUNE_VULKAN_REFINE_SECOND_PASS=0: all of them in one pass.
     bool refine_second_pass = true;
     // The second pass's list is sorted by walk class as the cells are listed (refine_lanes.glsl:
-    // more_place); SDFPRUNE_VULKAN_REFINE_SORTED_MORE=0: in the order listed (push flag 32768),
+    // more_place); SDFPRUNE_VULKAN_REFINE_SORTED_MORE=0: in the order listed (kStepMoreAsListed),
     // as before stop 48.
     bool refine_sorted_more = true;
     // The lane pass takes its cells longest tapes first, in an order pass before it;
@@ -210,11 +211,11 @@ class Pruner {
     // 0: block by block (none measured on a GPU yet: BENCHMARKS.md, stops 39 and 45).
     uint32_t team_order = 1;
     // The ordered jobs of the team steps and of refinement's lane pass are dealt out in a snake
-    // (prune_common.glsl: snake_deal); SDFPRUNE_VULKAN_SNAKE=0: in rounds (push flag 4096), as
+    // (prune_common.glsl: snake_deal); SDFPRUNE_VULKAN_SNAKE=0: in rounds (kStepDealInRounds), as
     // before stop 45, to compare.
     bool snake = true;
     // The team steps' workgroups take their jobs as they come free, from a counter
-    // (prune_team.glsl: take_jobs; push flag 8192), the order list's longest first: a shorter
+    // (prune_team.glsl: take_jobs; kStepTakeJobs), the order list's longest first: a shorter
     // critical path on an H100 than the snake's, by tools/prune_order_model.cpp (not measured
     // on a GPU yet); SDFPRUNE_VULKAN_TAKE=0: dealt out in advance, as before stop 46.
     bool take_jobs = true;

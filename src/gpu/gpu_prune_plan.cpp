@@ -51,30 +51,37 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
     Step teams = plan_teams(lv, mode, first_block, blocks, jobs, octants, cells, transient);
     // Workgroups take the jobs as they come free (prune_team.glsl: take_jobs), where a job is
     // done in one round (under a loop limit a job resumed over rounds keeps its team).
-    if (take_jobs && mode <= 2 && !teams.wide && teams.rounds == 1) {
-        teams.push.flags |= 8192u;
+    if (take_jobs && mode <= kernel::kModeOctantCells && !teams.wide && teams.rounds == 1) {
+        teams.push.flags |= kernel::kStepTakeJobs;
         teams.shape.taken = true;
     }
-    if ((mode == 1 || mode == 2) && !teams.wide && team_order) {
+    if ((mode == kernel::kModeOctants || mode == kernel::kModeOctantCells) && !teams.wide &&
+        team_order) {
         // The jobs in order of their parents' tape lengths (the blocks', the octants'), listed
         // past the teams' scratch by a pass before them (prune_team.glsl: order_parents), where
         // it fits.
-        const uint64_t parents = mode == 1 ? blocks : blocks * 8, at = teams.scratch_words;
+        const uint64_t parents = mode == kernel::kModeOctants ? blocks : blocks * 8,
+                       at = teams.scratch_words;
         if (parents > 0 && 4 * (at + parents) <= ctx.max_buffer_bytes()) {
             hold(scratch, 4 * (at + parents));
-            teams.push.flags |= 512u | (snake ? 0u : 4096u);
+            teams.push.flags |=
+                kernel::kStepTeamsOrdered | (snake ? 0u : kernel::kStepDealInRounds);
             teams.push.order_start = uint32_t(at);
-            teams.push.order_first = uint32_t(mode == 1 ? first_block : first_block * 8);
+            teams.push.order_first =
+                uint32_t(mode == kernel::kModeOctants ? first_block : first_block * 8);
             if (team_order == 1) {  // each window of parents apart: the places alone
-                Step place = plan_job_order(teams, parents, 5);
-                place.push.flags |= 2048u;
+                Step place = plan_job_order(teams, parents, kernel::kModeOrderPlace);
+                place.push.flags |= kernel::kStepOrderWindows;
                 return {place, teams};
             }
             // The whole step: the classes counted, then the places.
-            return {plan_job_order(teams, parents, 4), plan_job_order(teams, parents, 5), teams};
+            return {plan_job_order(teams, parents, kernel::kModeOrderCount),
+                    plan_job_order(teams, parents, kernel::kModeOrderPlace), teams};
         }
     }
-    if (mode != 3 || lane_tape == 0 || 4 * teams.team_jobs > ctx.max_buffer_bytes()) return {teams};
+    if (mode != kernel::kModeRefine || lane_tape == 0 ||
+        4 * teams.team_jobs > ctx.max_buffer_bytes())
+        return {teams};
     // Scratch: the long list (a word a cell), then the more list (refine_more_words a listed
     // near cell), where the lane pass takes two passes: unless set off, or the lists would not
     // fit a buffer; then the order list (a word a listed near cell), unless set off or it would
@@ -91,14 +98,14 @@ std::vector<Step> Pruner::plan_step(const Level& lv, uint32_t mode, uint64_t fir
     std::vector<Step> steps;
     if (order) {
         lanes.push.order_start = uint32_t(order_at);
-        lanes.push.flags |= 256u | (snake ? 0u : 4096u);
+        lanes.push.flags |= kernel::kStepRefineOrdered | (snake ? 0u : kernel::kStepDealInRounds);
         steps.push_back(plan_refine_order(lanes, lv.listed_cells));
     }
     steps.push_back(lanes);
     if (more) steps.push_back(plan_refine_more(lanes));
     if (max_len <= lane_tape) return steps;
     teams.listed = true;
-    teams.push.flags |= 8u;
+    teams.push.flags |= kernel::kStepLongList;
     teams.shape.jobs = 0;  // the lanes' (one shape, add_shape)
     steps.push_back(teams);
     return steps;
@@ -113,17 +120,17 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
     s.octants = &octants;
     s.cells = &cells;
     // Team jobs run block by block in every mode (prune_common.glsl: job_box).
-    const uint64_t per_block_jobs = mode == 0   ? teams_for(lv.per_block)
-                                    : mode == 1 ? 1
-                                    : mode == 2 ? 8 * teams_for(hf * hf * hf)
-                                                : lv.per_block;
+    const uint64_t per_block_jobs = mode == kernel::kModeCells         ? teams_for(lv.per_block)
+                                    : mode == kernel::kModeOctants     ? 1
+                                    : mode == kernel::kModeOctantCells ? 8 * teams_for(hf * hf * hf)
+                                                                       : lv.per_block;
     s.first_team_job = first_block * per_block_jobs;
     s.team_jobs = blocks * per_block_jobs;
     // Refinement takes the slice's listed near cells (a list a run, from 0).
-    if (mode == 3) s.first_team_job = 0;
+    if (mode == kernel::kModeRefine) s.first_team_job = 0;
     if (s.first_team_job + s.team_jobs > 0xfffffffeull)
         throw std::length_error("too many cells in one level");
-    if (mode == 3) {
+    if (mode == kernel::kModeRefine) {
         plan_squads(lv, s);
         return s;
     }
@@ -168,7 +175,8 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
     const uint32_t budget = !limited ? 0xffffffffu : uint32_t(s.rounds > 1 ? max_steps : per_job);
     s.per_dispatch = limited ? s.teams * std::max<uint64_t>(1, max_steps / per_job)
                              : std::max<uint64_t>(s.team_jobs, 1);
-    s.push = push_for(lv, mode, s.threads, flags | (transient ? 4u : 0u), budget);
+    s.push = push_for(lv, mode, s.threads, flags | (transient ? kernel::kStepTransientTapes : 0u),
+                      budget);
     s.shape.level = lv.index;
     s.shape.mode = mode;
     s.shape.jobs = jobs;
@@ -182,9 +190,9 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
     // teams' state and stacks, where the jobs' tapes sum to less than a longest tape per team:
     // the finer levels', where most teams take one job and most tapes are far shorter than the
     // longest.
-    const uint64_t parent_jobs = mode == 1   ? 1
-                                 : mode == 2 ? teams_for(hf * hf * hf)
-                                             : teams_for(lv.per_block);
+    const uint64_t parent_jobs = mode == kernel::kModeOctants       ? 1
+                                 : mode == kernel::kModeOctantCells ? teams_for(hf * hf * hf)
+                                                                    : teams_for(lv.per_block);
     const uint64_t claimable_words = parent_jobs * lv.parent_tape_words;
     const uint64_t claim_bytes = claimable_words * entry_bytes;
     if (claims && lv.parent_tape_words > 0 && claim_bytes / 4 <= 0xffffffffull &&
@@ -226,7 +234,7 @@ Step Pruner::plan_teams(const Level& lv, uint32_t mode, uint64_t first_block, ui
 // dispatches are the step's (one shape).
 Step Pruner::plan_order_pass(const Step& step, uint64_t items, uint64_t per_group) const {
     Step s = step;
-    s.push.flags &= ~8192u;
+    s.push.flags &= ~kernel::kStepTakeJobs;
     s.shape.taken = false;
     s.first_team_job = 0;
     s.team_jobs = items;
@@ -244,11 +252,11 @@ Step Pruner::plan_order_pass(const Step& step, uint64_t items, uint64_t per_grou
 }
 
 // An order pass of a step in teams (prune_team.glsl: order_parents; `mode` 4 counts the
-// parents by class, 5 places them; flag 1024 for the octants step's blocks): its `parents`, a
-// window of kPruneOrderWindow a workgroup at a time.
+// parents by class, 5 places them; kStepOrderBlocks for the octants step's blocks): its `parents`,
+// a window of kPruneOrderWindow a workgroup at a time.
 Step Pruner::plan_job_order(const Step& step, uint64_t parents, uint32_t mode) const {
     Step s = plan_order_pass(step, parents, kPruneOrderWindow);
-    if (step.push.mode == 1) s.push.flags |= 1024u;
+    if (step.push.mode == kernel::kModeOctants) s.push.flags |= kernel::kStepOrderBlocks;
     s.push.mode = mode;
     return s;
 }
@@ -328,9 +336,9 @@ Step Pruner::plan_refine_lanes(const Step& squads, bool second_pass) const {
             : std::max<uint64_t>(cells, 1);
     s.push.threads = s.threads;
     s.push.list_start = 0;
-    s.push.more_start = uint32_t(s.team_jobs);        // past the long list
-    if (!second_pass) s.push.flags |= 64u;            // every sub-box in one pass
-    if (!refine_sorted_more) s.push.flags |= 32768u;  // the more list as listed
+    s.push.more_start = uint32_t(s.team_jobs);  // past the long list
+    if (!second_pass) s.push.flags |= kernel::kStepRefineOnePass;
+    if (!refine_sorted_more) s.push.flags |= kernel::kStepMoreAsListed;
     s.push.lane_tape = lane_tape;
     s.shape.lane_tape = lane_tape;
     s.job_walk = walk;
@@ -340,16 +348,16 @@ Step Pruner::plan_refine_lanes(const Step& squads, bool second_pass) const {
     return s;
 }
 
-// The lane pass's order pass (prune_refine_lanes.comp, push flag 128): the `listed` cells to
+// The lane pass's order pass (prune_refine_lanes.comp, kStepRefineOrderPass): the `listed` cells to
 // decide again sorted by walk class into the order list, 64 a workgroup at a time.
 Step Pruner::plan_refine_order(const Step& lanes, uint64_t listed) const {
     Step s = plan_order_pass(lanes, listed, kWorkgroupSize);
     s.order_pass = true;
-    s.push.flags = (s.push.flags & ~256u) | 128u;
+    s.push.flags = (s.push.flags & ~kernel::kStepRefineOrdered) | kernel::kStepRefineOrderPass;
     return s;
 }
 
-// The lane pass's second pass (prune_refine_lanes.comp, push flag 32): the cells its first
+// The lane pass's second pass (prune_refine_lanes.comp, kStepRefineSecondPass): the cells its first
 // pass listed, decided over their other sub-boxes than the first kRefineFirstBoxes. Its jobs'
 // count is the device's (more_jobs): its dispatches are recorded for all the first pass's.
 Step Pruner::plan_refine_more(const Step& lanes) const {
@@ -357,7 +365,7 @@ Step Pruner::plan_refine_more(const Step& lanes) const {
     const uint64_t len = std::min<uint64_t>(max_len, lane_tape);
     const uint64_t subs = uint64_t(opt.refine) * opt.refine * opt.refine;
     s.second_pass = true;
-    s.push.flags |= 32u;
+    s.push.flags |= kernel::kStepRefineSecondPass;
     s.job_walk = (subs - kRefineFirstBoxes) * len;
     s.shape.jobs = 0;                // the first pass's (one shape, add_shape)
     s.shape.longest_walk_words = 0;  // counted once the list is known (run_steps)
@@ -389,11 +397,11 @@ void Pruner::plan_squads(const Level& lv, Step& s) {
     s.per_dispatch = ctx.loop_limited()
                          ? squads * std::max<uint64_t>(1, (Context::kLoopLimit - 1024) / per_job)
                          : std::max<uint64_t>(s.team_jobs, 1);
-    s.push = push_for(lv, 3, s.threads, flags, 0);
+    s.push = push_for(lv, kernel::kModeRefine, s.threads, flags, 0);
     s.job_walk = batches * walked;
     s.wide = false;
     s.shape.level = lv.index;
-    s.shape.mode = 3;
+    s.shape.mode = kernel::kModeRefine;
     s.shape.jobs = s.team_jobs;  // until the device's count is read back
     s.shape.lanes_per_tape = uint32_t(kRefineSquad);
     s.shape.lanes = std::min<uint64_t>(s.team_jobs, squads) * kRefineSquad;
@@ -540,9 +548,9 @@ void Pruner::plan_wide(Step& s, uint64_t& scratch_bytes, uint64_t claimable_word
     // their jobs; under a loop limit (push budget other than 0xffffffff) each workgroup takes
     // at most the parts it would be dealt.
     s.shape.taken = wide_take;
-    if (wide_take) s.push.flags |= 8192u;
+    if (wide_take) s.push.flags |= kernel::kStepTakeJobs;
     s.push.budget = limited ? 1u : 0xffffffffu;
-    if (!wide_scan) s.push.flags |= 65536u;
+    if (!wide_scan) s.push.flags |= kernel::kStepWideNoScan;
     // (Or any number of jobs where at most a quarter of the rounds end at a barrier: a chain's
     // steps, whose runs are long, as molecule's level-2 octants, 1,675 jobs. The staged walk
     // is what kWideRunRoundCost was measured on.)
