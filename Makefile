@@ -13,7 +13,7 @@ FUZZ_SECONDS ?= 600
 # The Python package's test environment (never Debian's system python): a venv in the build tree.
 PYENV = $(BUILD)/pyenv
 
-.PHONY: setup build python test run bench sanitize fuzz format clean
+.PHONY: setup build python test run bench sanitize gpu-rounding fuzz format clean
 
 # Installs every system dependency (as root, non-interactive); does nothing when all are present.
 # Node.js and npm (for the browser tests' playwright-core) come from Debian when not on PATH.
@@ -58,6 +58,18 @@ bench: build python
 	./$(BUILD)/sdfprune_bench --benchmark_min_time=0.2
 	./bench/run_bench.sh $(BUILD)
 	./bench/python.sh $(BUILD)
+
+# The Gpu tests on shaders that round the values of primitives and operators otherwise than the
+# CPU, by a last bit (a stand-in for a GPU whose arithmetic is not IEEE-exact, as NVIDIA's is
+# not in Vulkan), held to what must hold on such a device (SDFPRUNE_GPU_EXACT=0), in
+# build-rounding/. ROUNDING=kernel (default): each kernel its own way (the variants of one
+# kernel's source alike); ROUNDING=shared: every kernel alike. In CI (.ci/run).
+ROUNDING ?= kernel
+gpu-rounding: setup
+	cmake -S . -B build-rounding -G Ninja -DCMAKE_BUILD_TYPE=Release \
+	  -DSDFPRUNE_SHADER_ROUNDING=$(ROUNDING) -DSDFPRUNE_BENCH=OFF
+	cmake --build build-rounding -j $(JOBS) --target sdfprune_tests sdfprune
+	cd build-rounding && SDFPRUNE_GPU_EXACT=0 ./sdfprune_tests --gtest_filter='Gpu*'
 
 # Address + undefined-behaviour sanitizers, separate build tree.
 sanitize: setup

@@ -4,9 +4,14 @@
 
 #include <stdlib.h>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdlib>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -136,39 +141,103 @@ void expect_valid_cells(const Scene& sc, const gpu::Grid& gpu, const std::string
     SCOPED_TRACE(what);
     const uint32_t N = gpu.stats().grid;
     const vec3 cs = (sc.aabb.max - sc.aabb.min) / float(N);
-    std::vector<float> stack(sc.max_stack + 1);
-    uint64_t bad = 0;
-    gpu.for_each_finest_cell([&](uint64_t i, const gpu::Grid::CellContents& c) {
+    // Cell i's point k: its centre (k = 0), then 8 points near its corners.
+    const auto point = [&](uint64_t i, uint32_t k) {
         const uint32_t x = uint32_t(i % N), y = uint32_t(i / N % N), z = uint32_t(i / N / N);
-        const vec3 centre =
-            sc.aabb.min + vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * cs;
-        if (!c.far_field && !runnable_tape(sc, c.tape)) {
-            if (++bad <= 3)
-                ADD_FAILURE() << "cell (" << x << ", " << y << ", " << z << "): a tape of "
-                              << c.tape.size() << " words that no walk can run";
-            return;
-        }
-        for (uint32_t k = 0; k < 9; ++k) {
-            const vec3 d = k == 0 ? vec3(0, 0, 0)
-                                  : vec3(k & 1 ? 0.45f : -0.45f, k & 2 ? 0.45f : -0.45f,
-                                         k & 4 ? 0.45f : -0.45f);
-            const vec3 p = centre + d * cs;
-            const float f = eval_tape(sc, sc.full_tape, p, stack.data());
-            const float tol = 1e-5f * (1 + std::fabs(f));
-            bool ok;
-            if (c.far_field)
-                ok = c.constant > 0 ? f >= c.constant - tol : f <= c.constant + tol;
-            else
-                ok = std::fabs(eval_tape(sc, c.tape, p, stack.data()) - f) <= tol;
-            if (!ok && ++bad <= 3)
-                ADD_FAILURE() << "cell (" << x << ", " << y << ", " << z << ") point " << k
-                              << ": full tree " << f << ", "
-                              << (c.far_field ? "far " + std::to_string(c.constant)
-                                              : "tape gives " + std::to_string(eval_tape(
-                                                                    sc, c.tape, p, stack.data())));
-        }
+        const vec3 d =
+            k == 0 ? vec3(0, 0, 0)
+                   : vec3(k & 1 ? 0.45f : -0.45f, k & 2 ? 0.45f : -0.45f, k & 4 ? 0.45f : -0.45f);
+        return sc.aabb.min + vec3(float(x) + 0.5f, float(y) + 0.5f, float(z) + 0.5f) * cs + d * cs;
+    };
+    const auto where = [&](uint64_t i) {
+        return "cell (" + std::to_string(i % N) + ", " + std::to_string(i / N % N) + ", " +
+               std::to_string(i / N / N) + ")";
+    };
+    constexpr uint32_t kPoints = 9;
+    static_assert(kPoints <= kEvalLanes);
+    // The cells a chunk at a time (a copy: CellContents' tape lives only within the visit), the
+    // full tree at their points, then each cell's own check, both in parallel and in vector
+    // lanes: at 128³ and finer, one point after another took minutes on one core.
+    struct Cell {
+        uint64_t index;
+        bool far_field;
+        float constant;
+        std::vector<uint32_t> tape;
+    };
+    constexpr size_t kChunk = size_t(1) << 16;
+    std::vector<Cell> chunk;
+    std::vector<vec3> points;
+    std::vector<float> full;
+    std::atomic<uint64_t> bad = 0;
+    std::mutex failures_mutex;
+    std::vector<std::string> failures;  // the first 3
+    const auto fail = [&](std::string message) {
+        if (++bad > 3) return;
+        const std::lock_guard<std::mutex> lock(failures_mutex);
+        failures.push_back(std::move(message));
+    };
+    const auto check_chunk = [&] {
+        points.resize(chunk.size() * kPoints);
+        full.resize(points.size());
+        for (size_t c = 0; c < chunk.size(); ++c)
+            for (uint32_t k = 0; k < kPoints; ++k)
+                points[c * kPoints + k] = point(chunk[c].index, k);
+        // The full tree at the chunk's points, kEvalLanes points at a time (eval_tape's values).
+        tbb::parallel_for(
+            tbb::blocked_range<size_t>(0, points.size(), 64 * kEvalLanes), [&](const auto& range) {
+                std::vector<float> stack(size_t(sc.max_stack + 1) * kEvalLanes);
+                PointLanes lanes;
+                for (size_t at = range.begin(); at < range.end(); at += kEvalLanes) {
+                    const uint32_t n = uint32_t(std::min<size_t>(kEvalLanes, range.end() - at));
+                    for (uint32_t j = 0; j < n; ++j) {
+                        lanes.x[j] = points[at + j].x;
+                        lanes.y[j] = points[at + j].y;
+                        lanes.z[j] = points[at + j].z;
+                    }
+                    eval_tape_lanes(sc, sc.full_tape, lanes, n, &full[at], stack.data());
+                }
+            });
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, chunk.size()), [&](const auto& range) {
+            std::vector<float> stack(size_t(sc.max_stack + 1) * kEvalLanes);
+            PointLanes lanes;
+            float own[kEvalLanes];
+            for (size_t c = range.begin(); c < range.end(); ++c) {
+                const Cell& cell = chunk[c];
+                if (!cell.far_field) {
+                    if (!runnable_tape(sc, cell.tape)) {
+                        fail(where(cell.index) + ": a tape of " + std::to_string(cell.tape.size()) +
+                             " words that no walk can run");
+                        continue;
+                    }
+                    for (uint32_t k = 0; k < kPoints; ++k) {
+                        const vec3 p = points[c * kPoints + k];
+                        lanes.x[k] = p.x, lanes.y[k] = p.y, lanes.z[k] = p.z;
+                    }
+                    eval_tape_lanes(sc, cell.tape, lanes, kPoints, own, stack.data());
+                }
+                for (uint32_t k = 0; k < kPoints; ++k) {
+                    const float f = full[c * kPoints + k];
+                    const float tol = 1e-5f * (1 + std::fabs(f));
+                    const bool ok = cell.far_field ? (cell.constant > 0 ? f >= cell.constant - tol
+                                                                        : f <= cell.constant + tol)
+                                                   : std::fabs(own[k] - f) <= tol;
+                    if (!ok)
+                        fail(where(cell.index) + " point " + std::to_string(k) + ": full tree " +
+                             std::to_string(f) + ", " +
+                             (cell.far_field ? "far " + std::to_string(cell.constant)
+                                             : "tape gives " + std::to_string(own[k])));
+                }
+            }
+        });
+        chunk.clear();
+    };
+    gpu.for_each_finest_cell([&](uint64_t i, const gpu::Grid::CellContents& c) {
+        chunk.push_back({i, c.far_field, c.constant, {c.tape.begin(), c.tape.end()}});
+        if (chunk.size() == kChunk) check_chunk();
     });
-    EXPECT_EQ(bad, 0u);
+    check_chunk();
+    for (const std::string& f : failures) ADD_FAILURE() << f;
+    EXPECT_EQ(bad.load(), 0u);
 }
 
 void expect_same_cells(const PrunedGrid& cpu, const gpu::Grid& gpu, const std::string& what) {

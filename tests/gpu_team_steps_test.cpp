@@ -125,8 +125,9 @@ TEST(Gpu, StepShapesFollowTheLevels) {
         if (c.tape != PrunedCell::kFarField && before.tape_at(c.tape).size() > 4) ++long_cells;
     EXPECT_GT(long_cells, 0u);
     EXPECT_EQ(with[4].long_jobs, long_cells);
-    expect_same_stats(gpu.stats(), passes.stats(), "refinement's lane pass");
-    expect_same_device_cells(gpu, passes, "refinement's lane pass");
+    // Refinement in squads alone, and in lanes then squads: other kernels, so bit for bit only
+    // where the device rounds as the CPU does.
+    expect_same_grid_if_exact(sc, gpu, passes, *dev, "refinement's lane pass");
 }
 
 // The octants' and cells' steps in teams take their parents (blocks, octants) longest tapes

@@ -2,6 +2,21 @@
 // tape evaluators. The layouts match src/gpu/device_layout.hpp (checked by the GpuLayout
 // tests); the math is sdf_math.h, the same file the CPU backend compiles.
 #extension GL_GOOGLE_include_directive : require
+#ifdef SDFPRUNE_ROUNDING_SALT
+// A test build's stand-in for a GPU that rounds otherwise than the CPU (NVIDIA's square roots
+// and divisions are not IEEE-exact in Vulkan): every primitive's and operator's value moves by
+// -1, 0 or +1 in its last bit, by a hash of its bits and the salt (CMake:
+// SDFPRUNE_SHADER_ROUNDING; one salt for every kernel, or one per kernel, as if each kernel's
+// compile rounded its own way). Zero, infinities and NaN stay as they are.
+float device_rounding(float x) {
+    uint bits = floatBitsToUint(x);
+    if (x == 0.0 || isinf(x) || isnan(x)) return x;
+    uint h = (bits ^ (bits >> 15) ^ (uint(SDFPRUNE_ROUNDING_SALT) * 0x9e3779b9u)) * 0x85ebca6bu;
+    h ^= h >> 13;
+    return uintBitsToFloat(bits + (h % 3u) - 1u);
+}
+#define SDFPRUNE_DEVICE_ROUNDING(x) device_rounding(x)
+#endif
 #include "../shared/sdf_math.h"
 
 struct Node {

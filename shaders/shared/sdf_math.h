@@ -18,6 +18,12 @@ using namespace sdfprune::glsl;
 #define SDFPRUNE_CONST const
 #define SDFPRUNE_PRECISE precise  // no fused multiply-add: it rounds as on the CPU
 #endif
+// What a primitive's and an operator's values pass through: themselves, but in the shaders of a
+// test build that stands in for a GPU whose rounding differs from the CPU's (scene.glsl:
+// SDFPRUNE_ROUNDING_SALT).
+#ifndef SDFPRUNE_DEVICE_ROUNDING
+#define SDFPRUNE_DEVICE_ROUNDING(x) (x)
+#endif
 
 // ---- ids, defined once ----------------------------------------------------------------------
 // Primitive kinds (a node's kind < kPrimitiveKindCount means it is a primitive).
@@ -218,7 +224,7 @@ SDFPRUNE_FN float eval_primitive_local(uint kind, PrimitiveParams prm, vec3 q) {
 }
 
 SDFPRUNE_FN float eval_primitive(uint kind, PrimitiveParams prm, vec3 p) {
-    return eval_primitive_local(kind, prm, to_local(prm, p));
+    return SDFPRUNE_DEVICE_ROUNDING(eval_primitive_local(kind, prm, to_local(prm, p)));
 }
 
 // Whether a primitive's value is a convex function of the point. The exact signed distance of
@@ -240,7 +246,7 @@ SDFPRUNE_FN float blend_kernel(float x, float k) {
 // s = +1: union; s = -1: intersection (a difference is an intersection whose right operand
 // was negated by its tape sign). a and b are the operands with their signs applied.
 SDFPRUNE_FN float apply_operator(float s, float k, float a, float b) {
-    return s * (min(s * a, s * b) - blend_kernel(abs(a - b), k));
+    return SDFPRUNE_DEVICE_ROUNDING(s * (min(s * a, s * b) - blend_kernel(abs(a - b), k)));
 }
 
 SDFPRUNE_FN float operator_s(uint kind) { return kind == kOpUnion ? 1.0f : -1.0f; }
