@@ -83,9 +83,13 @@ std::unique_ptr<gpu::Device> device_planned_as_h100() {
 
 // ---- checks -------------------------------------------------------------------------------------
 
+bool is_lavapipe(const gpu::Device& dev) {
+    return dev.name().find("llvmpipe") != std::string::npos;
+}
+
 bool exact_device(const gpu::Device& dev) {
     if (const char* env = std::getenv("SDFPRUNE_GPU_EXACT")) return std::string(env) != "0";
-    return dev.name().find("llvmpipe") != std::string::npos;
+    return is_lavapipe(dev);
 }
 
 void expect_same_stats(const PruneStats& cpu, const PruneStats& gpu, const std::string& what,
@@ -104,7 +108,6 @@ void expect_same_stats(const PruneStats& cpu, const PruneStats& gpu, const std::
 
 void expect_walks_within_bound(const gpu::Device& dev, const gpu::GpuStepShape& st,
                                const std::string& what, uint64_t slack) {
-    const bool lavapipe = dev.name().find("llvmpipe") != std::string::npos;
     const bool takes_uncapped = st.taken && !dev.loop_limited();
     SCOPED_TRACE(what + ": level " + std::to_string(st.level) + " mode " + std::to_string(st.mode) +
                  (st.wide ? " wide" : "") + (st.wide_runs ? " runs" : "") +
@@ -114,7 +117,7 @@ void expect_walks_within_bound(const gpu::Device& dev, const gpu::GpuStepShape& 
     EXPECT_GT(st.walked_words, 0u);
     // (Lavapipe planned as a GPU runs a few workgroups at a time: its first take most of the
     // jobs, which no plan bounds.)
-    if (!(lavapipe && takes_uncapped)) {
+    if (!(is_lavapipe(dev) && takes_uncapped)) {
         EXPECT_LE(st.walked_words, (takes_uncapped ? 2 : 1) * slack * st.longest_walk_words);
     }
     EXPECT_GE(st.walked_sum_words, st.walked_words);
@@ -176,6 +179,17 @@ void expect_valid_cells(const Scene& sc, const gpu::Grid& gpu, const std::string
         const std::lock_guard<std::mutex> lock(failures_mutex);
         failures.push_back(std::move(message));
     };
+    // `tape` at points [first, first + n) of the chunk's (n <= kEvalLanes) into out[0, n).
+    const auto eval_in_lanes = [&](std::span<const uint32_t> tape, size_t first, uint32_t n,
+                                   float* out, float* stack) {
+        PointLanes lanes;
+        for (uint32_t j = 0; j < n; ++j) {
+            lanes.x[j] = points[first + j].x;
+            lanes.y[j] = points[first + j].y;
+            lanes.z[j] = points[first + j].z;
+        }
+        eval_tape_lanes(sc, tape, lanes, n, out, stack);
+    };
     const auto check_chunk = [&] {
         points.resize(chunk.size() * kPoints);
         full.resize(points.size());
@@ -186,20 +200,13 @@ void expect_valid_cells(const Scene& sc, const gpu::Grid& gpu, const std::string
         tbb::parallel_for(
             tbb::blocked_range<size_t>(0, points.size(), 64 * kEvalLanes), [&](const auto& range) {
                 std::vector<float> stack(size_t(sc.max_stack + 1) * kEvalLanes);
-                PointLanes lanes;
                 for (size_t at = range.begin(); at < range.end(); at += kEvalLanes) {
                     const uint32_t n = uint32_t(std::min<size_t>(kEvalLanes, range.end() - at));
-                    for (uint32_t j = 0; j < n; ++j) {
-                        lanes.x[j] = points[at + j].x;
-                        lanes.y[j] = points[at + j].y;
-                        lanes.z[j] = points[at + j].z;
-                    }
-                    eval_tape_lanes(sc, sc.full_tape, lanes, n, &full[at], stack.data());
+                    eval_in_lanes(sc.full_tape, at, n, &full[at], stack.data());
                 }
             });
         tbb::parallel_for(tbb::blocked_range<size_t>(0, chunk.size()), [&](const auto& range) {
             std::vector<float> stack(size_t(sc.max_stack + 1) * kEvalLanes);
-            PointLanes lanes;
             float own[kEvalLanes];
             for (size_t c = range.begin(); c < range.end(); ++c) {
                 const Cell& cell = chunk[c];
@@ -209,11 +216,7 @@ void expect_valid_cells(const Scene& sc, const gpu::Grid& gpu, const std::string
                              " words that no walk can run");
                         continue;
                     }
-                    for (uint32_t k = 0; k < kPoints; ++k) {
-                        const vec3 p = points[c * kPoints + k];
-                        lanes.x[k] = p.x, lanes.y[k] = p.y, lanes.z[k] = p.z;
-                    }
-                    eval_tape_lanes(sc, cell.tape, lanes, kPoints, own, stack.data());
+                    eval_in_lanes(cell.tape, c * kPoints, kPoints, own, stack.data());
                 }
                 for (uint32_t k = 0; k < kPoints; ++k) {
                     const float f = full[c * kPoints + k];

@@ -67,6 +67,9 @@ std::unique_ptr<gpu::Device> device_planned_as_h100();
 
 // ---- checks -------------------------------------------------------------------------------------
 
+// Whether the device is Mesa's lavapipe (llvmpipe), the CPU's Vulkan driver.
+bool is_lavapipe(const gpu::Device& dev);
+
 // Whether the device should give the CPU's grids bit for bit: lavapipe (the same LLVM code
 // generation rules as the CPU build, no fused multiply-add). Other drivers may round a centre
 // or a bound differently and so decide a borderline operator or cell the other way; there the

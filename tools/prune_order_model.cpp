@@ -51,7 +51,10 @@ using namespace sdfprune;
 
 namespace {
 
-constexpr uint32_t kTeams = 8, kSubgroup = 32, kLaneTape = 32, kOrderWindow = 256;
+// A team step's workgroup: 8 teams (prune_team.glsl: kTeams). NVIDIA's subgroups: 32 lanes.
+// The kernels' sizes are device_layout.hpp's (shaders/gpu/prune_constants.h).
+constexpr uint32_t kTeams = 8, kSubgroup = 32;
+constexpr uint32_t kLaneTape = gpu::kRefineLaneTape, kOrderWindow = gpu::kPruneOrderWindow;
 
 // prune_team.glsl: parent_class (0: far-field); prune_common.glsl: refine_walk_class.
 uint32_t parent_class(uint32_t len) {
@@ -267,7 +270,7 @@ int main(int argc, char** argv) {
         // (132 SMs of 2,048): the teams steps' 33,792 teams, 8 a workgroup; the lane pass's
         // 270,336 lanes in subgroups of 32. Its floor: the longest tape, or the words over the
         // teams.
-        constexpr uint32_t kResident = 270336;
+        constexpr uint32_t kResident = 270336, kResidentTeams = kResident / gpu::kPruneTeam;
         const auto paths = [&](const char* what, const std::vector<uint32_t>& lengths,
                                const char* order_name, const std::vector<uint32_t>& order,
                                uint32_t teams, uint32_t per_group) {
@@ -287,9 +290,9 @@ int main(int argc, char** argv) {
                 (unsigned long long)std::max(longest, ideal(lengths, teams)));
         };
         paths("octants step", block_lengths, "in windows",
-              ordered(block_lengths, parent_class, kOrderWindow), kResident / kTeams, kTeams);
+              ordered(block_lengths, parent_class, kOrderWindow), kResidentTeams, kTeams);
         paths("cells step", octants, "in windows", ordered(octants, parent_class, kOrderWindow),
-              kResident / kTeams, kTeams);
+              kResidentTeams, kTeams);
         // The team kernel's workgroups that fit an SM at once, by its registers: 56 a lane
         // (BENCHMARKS.md, stop 36) leave room for 18 workgroups of 64 lanes of the 32 planned
         // for, 2,376 of the 4,224 on an H100's 132 SMs. Dealt jobs then wait for the
@@ -300,7 +303,7 @@ int main(int argc, char** argv) {
                 "  %s, critical path with %u workgroups resident (words): in windows dealt in a "
                 "snake %llu, taken as workgroups come free %llu\n",
                 what, kResidentGroups,
-                (unsigned long long)critical_path_in_waves(order, kResident / kTeams, kTeams, true,
+                (unsigned long long)critical_path_in_waves(order, kResidentTeams, kTeams, true,
                                                            kResidentGroups),
                 (unsigned long long)critical_path_taken(order, kResidentGroups * kTeams, kTeams));
         };
@@ -312,7 +315,7 @@ int main(int argc, char** argv) {
         // The wide steps: the scene's heights and search steps as gpu_prune.cpp counts them.
         const gpu::WideSceneShape wide = gpu::wide_scene_shape(sc);
         const uint64_t rounds = uint64_t(wide.height) + 1, search = wide.search_steps;
-        constexpr uint32_t kWideGroups = kResident / 256;
+        constexpr uint32_t kWideGroups = kResident / gpu::kPruneWide;
         // Only the levels above the finest that have an octants step, as gpu_prune.cpp splits
         // them.
         for (uint32_t l = 0; l + 1 < finest; ++l) {
