@@ -10,6 +10,7 @@
 #include <initializer_list>
 #include <memory>
 #include <set>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
@@ -177,6 +178,27 @@ TEST(Gpu, DeepChainPrunes) {
         const std::string what = "chain of " + std::to_string(depth);
         expect_matches_cpu(sc, cpu, gpu, *dev, what);
     }
+}
+
+// Lavapipe ends an invocation's loops after 65,535 iterations in all, and the invocation goes
+// on as if they had ended: a step planned past that limit would make wrong cells without a
+// word. The pruning kernels probe for it (prune_common.glsl: probe_loop_limit) and the pruning
+// throws. Planned as a GPU (a step in one dispatch), the 12,000-deep chain passes the limit;
+// planned for lavapipe, it does not (DeepChainPrunes).
+TEST(Gpu, ReachedLoopLimitIsReported) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    if (!is_lavapipe(*dev)) GTEST_SKIP() << dev->name() << " ends no loops";
+    const Scene sc = right_deep_chain(12000);
+    PruneOptions o;
+    o.resolution = 16;
+    const auto as_a_gpu = device_with_env("SDFPRUNE_VULKAN_LOOP_LIMITED", "0");
+    std::string error;
+    try {
+        gpu::prune(*as_a_gpu, sc, o);
+    } catch (const std::logic_error& e) {
+        error = e.what();
+    }
+    EXPECT_NE(error.find("limit of 65535 loop iterations"), std::string::npos) << error;
 }
 
 TEST(Gpu, ReferenceScenesMatchCpu) {

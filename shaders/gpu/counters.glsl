@@ -9,7 +9,7 @@
 layout(std430, binding = COUNTERS_BINDING) buffer Counters {
     uint pool_used;
     uint pool_capacity;
-    uint overflow;  // 1: the main pool overflowed, 2: the octant pool
+    uint overflow;  // kOverflow* bits (prune_constants.h)
     uint max_len;  // longest tape written or shared in this step
     uint near_jobs;  // near-field cells (octants) in this step
     uint next_blocks;  // the next level's blocks made so far (expand.comp)

@@ -96,7 +96,7 @@ uint claim_scratch(uint words) {
     if (words == 0u) return 0u;
     uint first = atomicAdd(scratch_claimed, words);
     if (first + words > pc.claim_words || first + words < first) {
-        atomicOr(overflow, 4u);
+        atomicOr(overflow, kOverflowClaim);
         return kNoClaim;
     }
     return first;
@@ -115,7 +115,20 @@ void counts_begin() {
     memoryBarrierShared();
     barrier();
 }
+// Lavapipe ends an invocation's loops, all of them together, after 65,535 iterations
+// (Context::kLoopLimit), and the invocation goes on after them as if they had ended: so the
+// host plans a step's work under that limit. Where it is wrong, the cells would come out wrong
+// without a word; so there (pc.flags' probe count not 0) every invocation ends with a loop of
+// that many iterations (a bound the compiler cannot know, so that the loop stays a loop), and
+// one that runs fewer found the limit reached: overflow's kOverflowLoopLimit, which the host
+// reports as an error.
+void probe_loop_limit() {
+    uint want = pc.flags >> kStepLoopProbeShift, ran = 0u;
+    for (uint k = 0u; k < want; ++k) ++ran;
+    if (ran != want) atomicOr(overflow, kOverflowLoopLimit);
+}
 void counts_end() {
+    probe_loop_limit();
     memoryBarrierShared();
     barrier();
     uint k = gl_LocalInvocationIndex;
@@ -174,7 +187,7 @@ uint pool_allocate(bool transient, uint words) {
     uint start = transient ? pc.octant_start : pc.pool_start;
     uint capacity = transient ? octant_capacity : pool_capacity;
     if (at < start || at + words > capacity || at + words < at || at >= kInOctantPool) {
-        atomicOr(overflow, transient ? 2u : 1u);
+        atomicOr(overflow, transient ? kOverflowOctantPool : kOverflowPool);
         return kFarField;
     }
     return transient ? at | kInOctantPool : at;

@@ -61,6 +61,17 @@ SDFPRUNE_KERNEL_CONST uint kStepWholeSweeps = 16384u;
 SDFPRUNE_KERNEL_CONST uint kStepMoreAsListed = 32768u;
 // prune_wide.comp sweeps long runs round by round (no scan).
 SDFPRUNE_KERNEL_CONST uint kStepWideNoScan = 65536u;
+// Bits 24-31 are a count, not a flag: where it is not 0 (on a device with a loop limit), every
+// invocation ends its step with a loop of that many iterations, and one that ran fewer found
+// the limit reached: its loops may have ended early (prune_common.glsl: probe_loop_limit).
+SDFPRUNE_KERNEL_CONST uint kStepLoopProbeShift = 24u;
+SDFPRUNE_KERNEL_CONST uint kLoopProbeIterations = 2u;
+// The bits of the counters' overflow word: the main pool overflowed; the octant pool; a job's
+// scratch claim failed (a bug); an invocation reached the device's loop limit (a bug).
+SDFPRUNE_KERNEL_CONST uint kOverflowPool = 1u;
+SDFPRUNE_KERNEL_CONST uint kOverflowOctantPool = 2u;
+SDFPRUNE_KERNEL_CONST uint kOverflowClaim = 4u;
+SDFPRUNE_KERNEL_CONST uint kOverflowLoopLimit = 8u;
 
 // ---- sizes ------------------------------------------------------------------------------------
 // Boxes per team job: the lanes of a team that walk one parent tape in lockstep, a box each

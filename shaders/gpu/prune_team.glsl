@@ -276,6 +276,7 @@ uint take_jobs(uint group_teams, uint taken, uint cap) {
 void main() {
     if (pc.mode >= kModeOrderCount) {
         order_parents();
+        probe_loop_limit();
         return;
     }
     counts_begin();

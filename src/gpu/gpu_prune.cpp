@@ -463,18 +463,23 @@ std::optional<GpuCounters> Pruner::run_steps(Level& lv, std::vector<Step>& steps
         gpu_ms += ctx.submit();
         ++st.submissions;
         if (!counter->overflow) break;
+        // (Where the device ended an invocation's loops, what the steps made is wrong.)
+        if ((counter->overflow & kernel::kOverflowLoopLimit) != 0)
+            throw std::logic_error("Vulkan: a pruning step reached the device's limit of " +
+                                   std::to_string(Context::kLoopLimit) +
+                                   " loop iterations per invocation (its plan is wrong)");
         // Grow the pool that overflowed (keeping what the steps started with) and run them
         // again. A counter that wrapped past 2^32 words (it reads less than the capacity) asks
         // for the most the device allows.
-        const bool main_over = (counter->overflow & 1u) != 0,
-                   octant_over = (counter->overflow & 2u) != 0;
+        const bool main_over = (counter->overflow & kernel::kOverflowPool) != 0,
+                   octant_over = (counter->overflow & kernel::kOverflowOctantPool) != 0;
         // Refinement rewrites its cells in place and cannot run again over them; its pool was
         // made room for first (prune_slices), so only a pool at the device's limit overflows,
         // which grow() reports.
         const bool refining = std::any_of(steps.begin(), steps.end(), [](const Step& s) {
             return s.push.mode == kernel::kModeRefine;
         });
-        if ((counter->overflow & 4u) != 0)
+        if ((counter->overflow & kernel::kOverflowClaim) != 0)
             throw std::logic_error("Vulkan: a step's jobs claimed more scratch than planned");
         if (refining && !(main_over && capacity >= max_pool_words))
             throw std::logic_error("Vulkan: refinement overflowed a pool made room for");
@@ -570,6 +575,9 @@ void Pruner::record_step(Step& s) {
     s.first_stamp = ctx.stamp();
     PrunePush push = s.push;
     push.pool_start = g.pool_words;
+    // On a device that ends loops (lavapipe), each invocation checks that it did not reach it.
+    if (ctx.device_ends_loops())
+        push.flags |= kernel::kLoopProbeIterations << kernel::kStepLoopProbeShift;
     const uint64_t end = s.first_team_job + s.team_jobs;
     for (uint64_t first = s.first_team_job; first < std::max<uint64_t>(end, 1);
          first += s.per_dispatch)

@@ -251,8 +251,9 @@ Context::Context() {
         memory_limit_ = std::strtoull(env, nullptr, 10);
     max_range_ &= ~uint64_t(15);  // buffer sizes round up to 16
     max_groups_ = props.limits.maxComputeWorkGroupCount[0];
-    loop_limited_ = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU &&
-                    device_name_.find("llvmpipe") != std::string::npos;
+    device_ends_loops_ = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU &&
+                         device_name_.find("llvmpipe") != std::string::npos;
+    loop_limited_ = device_ends_loops_;
     // For tests: SDFPRUNE_VULKAN_LOOP_LIMITED=0 plans lavapipe as a GPU (a step in one
     // dispatch, jobs taken uncapped), right only where no invocation reaches the limit; 1 plans
     // a GPU as lavapipe.

@@ -85,8 +85,12 @@ class Context {
     uint64_t max_buffer_bytes() const { return max_range_; }
     // Mesa's CPU driver (llvmpipe) ends an invocation's loops after kLoopLimit iterations in
     // all; kernels must then keep each invocation's work under it (or report that they can't).
+    // loop_limited(): the steps are planned so (SDFPRUNE_VULKAN_LOOP_LIMITED may say otherwise,
+    // for tests); device_ends_loops(): the device does so, whatever the plan (the pruning
+    // kernels then probe for it: prune_common.glsl, probe_loop_limit).
     static constexpr uint64_t kLoopLimit = 65535;
     bool loop_limited() const { return loop_limited_; }
+    bool device_ends_loops() const { return device_ends_loops_; }
     // Subgroup arithmetic and ballot in compute shaders (Vulkan 1.1), for the kernels that use
     // them; SDFPRUNE_VULKAN_SUBGROUPS=0 turns them off (the fallbacks, for tests).
     bool subgroups() const { return subgroups_; }
@@ -295,7 +299,7 @@ class Context {
     uint32_t max_groups_ = 65535;
     uint64_t resident_threads_ = kAssumedResidentThreads;
     uint64_t device_heap_ = 0;  // the largest device-local heap (or any heap), in bytes
-    bool loop_limited_ = false;
+    bool loop_limited_ = false, device_ends_loops_ = false;
     bool subgroups_ = false;
     uint32_t subgroup_size_ = 0;
     bool byte_storage_ = false;
