@@ -270,7 +270,8 @@ bool refine_far_may_pass(uint root_node, uint len, float value) {
     if ((pc.flags & kStepFarField) == 0u) return false;
     vec3 half_cell = pc.csize.xyz * 0.5;
     Node root = nodes[root_node];
-    float clearance = far_field_clearance(pc.csize.w, root.lipschitz, length(half_cell));
+    float R = SDFPRUNE_DEVICE_ROUNDING(length(half_cell));
+    float clearance = far_field_clearance(pc.csize.w, root.lipschitz, R);
     float sigma = len == 1u ? extras[root.primitive].bound0.w : 0.0;
     return refine_far_possible(value, clearance, sigma, half_cell);
 }
@@ -372,7 +373,7 @@ bool job_box(uint job, uint lane, out vec3 centre_out, out vec3 half_size, out f
     vec3 origin = pc.origin.xyz;
     vec3 cs = pc.csize.xyz;
     vec3 half_cell = cs * 0.5;
-    float radius = length(half_cell);
+    float radius = SDFPRUNE_DEVICE_ROUNDING(length(half_cell));
     precise vec3 centre;
     valid = true;
     half_size = half_cell;
@@ -426,7 +427,7 @@ bool job_box(uint job, uint lane, out vec3 centre_out, out vec3 half_size, out f
                 uvec3 oc = uvec3(b.x + (o & 1u) * hf, b.y + ((o >> 1) & 1u) * hf,
                                  b.z + ((o >> 2) & 1u) * hf);
                 precise vec3 ocentre = origin + (vec3(oc) + 0.5 * float(hf)) * cs;
-                float reach = pc.origin.w * length(centre - ocentre);
+                float reach = pc.origin.w * SDFPRUNE_DEVICE_ROUNDING(length(centre - ocentre));
                 cells[dest] = Cell(kFarField, 0u,
                                    oct.value > 0.0 ? max(oct.value - reach, oct.bound)
                                                    : min(oct.value + reach, oct.bound),

@@ -56,14 +56,14 @@ void main() {
     uint squads = pc.threads / kSquad;
 
     vec3 half_cell = pc.csize.xyz * 0.5;
-    float radius = length(half_cell);
+    float radius = SDFPRUNE_DEVICE_ROUNDING(length(half_cell));
     bool interval = (pc.flags & kStepIntervalBounds) != 0u;
     bool far_field = (pc.flags & kStepFarField) != 0u;
     uint subs = pc.refine;
     uint nsub = subs * subs * subs;
     uint nbatch = (nsub + kSquad - 1u) / kSquad;
     vec3 sub_half = half_cell / float(subs);
-    float sub_R = length(sub_half);
+    float sub_R = SDFPRUNE_DEVICE_ROUNDING(length(sub_half));
 
     // The host records the dispatches for every finest cell; the jobs are the cells the lanes
     // listed (kStepLongList), or without a lane pass every listed near cell (refine_job; the same

@@ -216,7 +216,7 @@ void main() {
     }
     counts_begin();
     vec3 half_cell = pc.csize.xyz * 0.5;
-    float radius = length(half_cell);
+    float radius = SDFPRUNE_DEVICE_ROUNDING(length(half_cell));
     bool interval = (pc.flags & kStepIntervalBounds) != 0u;
     bool far_field = (pc.flags & kStepFarField) != 0u;
     bool second = (pc.flags & kStepRefineSecondPass) != 0u;
@@ -227,7 +227,7 @@ void main() {
     uint k0 = second ? nfirst : 0u;
     uint k1 = second || (pc.flags & kStepRefineOnePass) != 0u ? nsub : nfirst;
     vec3 sub_half = half_cell / float(subs);
-    float sub_R = length(sub_half);
+    float sub_R = SDFPRUNE_DEVICE_ROUNDING(length(sub_half));
     uint lane_tape = min(pc.lane_tape, kLaneTape);
 
     // The host records the dispatches for every finest cell; the jobs are the listed ones only

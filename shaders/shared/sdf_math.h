@@ -18,9 +18,9 @@ using namespace sdfprune::glsl;
 #define SDFPRUNE_CONST const
 #define SDFPRUNE_PRECISE precise  // no fused multiply-add: it rounds as on the CPU
 #endif
-// What a primitive's and an operator's values pass through: themselves, but in the shaders of a
-// test build that stands in for a GPU whose rounding differs from the CPU's (scene.glsl:
-// SDFPRUNE_ROUNDING_SALT).
+// What a primitive's and an operator's values, and the lengths that ranges and far-field tests
+// take, pass through: themselves, but in the shaders of a test build that stands in for a GPU
+// whose rounding differs from the CPU's (scene.glsl: SDFPRUNE_ROUNDING_SALT).
 #ifndef SDFPRUNE_DEVICE_ROUNDING
 #define SDFPRUNE_DEVICE_ROUNDING(x) (x)
 #endif
@@ -312,8 +312,8 @@ SDFPRUNE_FN vec2 operator_range(float s, float k, float a_lo, float a_hi, float 
 // primitive ends up a few 1e-6 beyond f (fuzz/regressions/prune_eval/sphere_far_field_scale.bin).
 SDFPRUNE_FN vec2 similarity_range(vec3 centre, float scale, float f0, float rho, vec3 cc, vec3 hs) {
     vec3 d = abs(centre - cc);
-    float near_dist = length(max(d - hs, 0.0f));
-    float far_dist = length(d + hs);
+    float near_dist = SDFPRUNE_DEVICE_ROUNDING(length(max(d - hs, 0.0f)));
+    float far_dist = SDFPRUNE_DEVICE_ROUNDING(length(d + hs));
     return vec2(scale * near_dist - rho, scale * (1.0f + 6e-6f) * far_dist + f0);
 }
 
@@ -434,7 +434,8 @@ SDFPRUNE_FN float far_field_cell_constant(vec3 origin, vec3 cell, uint scale, fl
                                           float value, float bound, uint x, uint y, uint z) {
     vec3 coarse = cell_centre(origin, cell * float(scale), x / scale, y / scale, z / scale);
     vec3 d = abs(cell_centre(origin, cell, x, y, z) - coarse) + cell * 0.5f;
-    return far_field_combine(value, bound, far_field_reach(lipschitz, length(d)));
+    return far_field_combine(value, bound,
+                             far_field_reach(lipschitz, SDFPRUNE_DEVICE_ROUNDING(length(d))));
 }
 
 #ifdef __cplusplus
