@@ -38,7 +38,15 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
         const ScopedEnv no_subgroups("SDFPRUNE_VULKAN_SUBGROUPS", "0");
         return gpu::Device();
     }();
-    for (uint64_t seed = 1; seed <= 12; ++seed) {
+    // Seeds 1-12; SDFPRUNE_TEST_SEEDS=FIRST-LAST runs others, for a longer campaign by hand.
+    uint64_t first_seed = 1, last_seed = 12;
+    if (const char* env = std::getenv("SDFPRUNE_TEST_SEEDS"); env && *env) {
+        char* end = nullptr;
+        first_seed = std::strtoull(env, &end, 10);
+        last_seed = *end == '-' ? std::strtoull(end + 1, nullptr, 10) : first_seed;
+        ASSERT_GE(first_seed, 1u) << "SDFPRUNE_TEST_SEEDS=" << env;
+    }
+    for (uint64_t seed = first_seed; seed <= last_seed; ++seed) {
         RandomSceneSpec spec;
         spec.primitives = 4 + uint32_t(seed * 7 % 29);
         spec.tree = shapes[seed % 4];
