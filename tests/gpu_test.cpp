@@ -191,18 +191,24 @@ TEST(Gpu, DeepChainPrunes) {
 // Lavapipe ends an invocation's loops after 65,535 iterations in all, and the invocation goes
 // on as if they had ended: a step planned past that limit would make wrong cells without a
 // word. The pruning kernels probe for it (prune_common.glsl: probe_loop_limit) and the pruning
-// throws. Planned as a GPU (a step in one dispatch), the 12,000-deep chain passes the limit;
-// planned for lavapipe, it does not (DeepChainPrunes).
+// throws. Planned as a GPU (a step in one dispatch) on lavapipe's own resident lanes, with the
+// jobs taken, the 12,000-deep chain passes the limit; planned for lavapipe, it does not
+// (DeepChainPrunes). (Those settings are the test's own: with an H100's resident lanes, 32 lanes
+// a subgroup and the jobs dealt, no invocation reaches the limit.)
 TEST(Gpu, ReachedLoopLimitIsReported) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     if (!is_lavapipe(*dev)) GTEST_SKIP() << dev->name() << " ends no loops";
     const Scene sc = right_deep_chain(12000);
     PruneOptions o;
     o.resolution = 16;
-    const auto as_a_gpu = device_with_env("SDFPRUNE_VULKAN_LOOP_LIMITED", "0");
+    const ScopedEnv as_a_gpu_here({{"SDFPRUNE_VULKAN_LOOP_LIMITED", "0"},
+                                   {"SDFPRUNE_VULKAN_RESIDENT_THREADS", ""},
+                                   {"SDFPRUNE_VULKAN_TAKE", ""},
+                                   {"SDFPRUNE_VULKAN_WIDE_TAKE", ""}});
+    gpu::Device as_a_gpu;
     std::string error;
     try {
-        gpu::prune(*as_a_gpu, sc, o);
+        gpu::prune(as_a_gpu, sc, o);
     } catch (const std::logic_error& e) {
         error = e.what();
     }
