@@ -45,6 +45,7 @@ TEST(Gpu, PruningMatchesCpuOnRandomScenes) {
         first_seed = std::strtoull(env, &end, 10);
         last_seed = *end == '-' ? std::strtoull(end + 1, nullptr, 10) : first_seed;
         ASSERT_GE(first_seed, 1u) << "SDFPRUNE_TEST_SEEDS=" << env;
+        ASSERT_GE(last_seed, first_seed) << "SDFPRUNE_TEST_SEEDS=" << env;  // (none run: a typo)
     }
     for (uint64_t seed = first_seed; seed <= last_seed; ++seed) {
         RandomSceneSpec spec;
