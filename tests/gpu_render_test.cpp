@@ -316,6 +316,53 @@ TEST(Gpu, SmallBufferRangeSplitsTheWork) {
     expect_same_stats(cpu.stats(), gpu::prune(*small, sc, o).stats(), "after the error");
 }
 
+// Lavapipe ends an invocation's loops after 65,535 iterations in all, and the invocation goes on
+// as if they had ended: an image whose pixels need more would come out wrong without a word.
+// Such an image is refused (a GpuError; the CLI exits 2), also where lavapipe's pruning is
+// planned as a GPU's (SDFPRUNE_VULKAN_LOOP_LIMITED=0): the limit is the device's, not the
+// plan's. 3,000 equal spheres in a chain of unions: no operator is decided in any cell, so
+// every near-field tape holds all 5,999 words. Pruning walks them within the limit, and so does
+// a sample's one evaluation; a pixel's march evaluates the tape at every step, and does not.
+TEST(Gpu, ImagesPastTheLoopLimitAreRefused) {
+    SDFPRUNE_REQUIRE_DEVICE(dev);
+    if (!is_lavapipe(*dev)) GTEST_SKIP() << dev->name() << " ends no loops";
+    SceneBuilder b;
+    Shape blob = b.sphere(0.5f);
+    for (int i = 1; i < 3000; ++i) blob = blob | b.sphere(0.5f);
+    const Scene sc = b.build(blob);
+    PruneOptions o;
+    o.resolution = 16;
+    o.refine = 1;
+    RenderOptions ro;
+    ro.width = ro.height = 16;
+    ro.camera = orbit_camera(sc.aabb, 30, 20, 0, 40);
+    for (const bool planned_as_a_gpu : {false, true}) {
+        SCOPED_TRACE(planned_as_a_gpu ? "planned as a GPU" : "planned for lavapipe");
+        // (As the ctest Gpu.planned_as_a_gpu plans it, the jobs dealt; lavapipe's own plan
+        // otherwise. The device reads some of these as it opens, the pruning the others.)
+        const ScopedEnv plan(planned_as_a_gpu
+                                 ? EnvSettings{{"SDFPRUNE_VULKAN_LOOP_LIMITED", "0"},
+                                               {"SDFPRUNE_VULKAN_RESIDENT_THREADS", "270336"},
+                                               {"SDFPRUNE_VULKAN_TAKE", "0"},
+                                               {"SDFPRUNE_VULKAN_WIDE_TAKE", "0"}}
+                                 : EnvSettings{{"SDFPRUNE_VULKAN_LOOP_LIMITED", ""}});
+        gpu::Device d;
+        ASSERT_EQ(d.loop_limited(), !planned_as_a_gpu);
+        const gpu::Grid grid = gpu::prune(d, sc, o);
+        ASSERT_EQ(grid.stats().tape_max, sc.size()) << "a tape was pruned";
+        std::string error;
+        try {
+            gpu::render(d, grid, ro);
+        } catch (const gpu::GpuError& e) {
+            error = e.what();
+        }
+        EXPECT_NE(error.find("loop iterations per pixel"), std::string::npos)
+            << (error.empty() ? "the image was made" : error);
+        std::vector<float> samples(8 * 8 * 8);
+        EXPECT_NO_THROW(gpu::discretize(d, grid, 8, samples));
+    }
+}
+
 TEST(GpuCli, StatsOnVulkanEqualCpu) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     const CliResult cpu = run_cli("stats builtin:demo --grid 32 --json");

@@ -142,9 +142,11 @@ ChunkedRun run_in_chunks(Context& ctx, KernelId kernel, const DeviceGrid& g, con
 
 // On a device that ends an invocation's loops early (lavapipe), one evaluation of the longest
 // finest tape must fit the limit: past it an invocation stops partway and its output (and the
-// counts that render checks after) are meaningless.
+// counts that render checks after) are meaningless. The limit is the device's, whatever the
+// pruning's plan (SDFPRUNE_VULKAN_LOOP_LIMITED plans lavapipe's steps as a GPU's, and changes
+// nothing here).
 void check_tape_loops(const Context& ctx, const DeviceGrid& g) {
-    if (ctx.loop_limited() && uint64_t(g.stats.tape_max) + 64 >= Context::kLoopLimit)
+    if (ctx.device_ends_loops() && uint64_t(g.stats.tape_max) + 64 >= Context::kLoopLimit)
         throw GpuError("tapes of " + std::to_string(g.stats.tape_max) +
                        " nodes exceed the loop limit of " + ctx.device_name() +
                        "; use --backend cpu or a GPU");
@@ -181,7 +183,7 @@ Image render(Device& device, const Grid& grid, const RenderOptions& opt, RenderS
     // (The full-tree pass's pixels are checked against the loop limit with all the others.)
     const ChunkedRun run = run_in_chunks(ctx, KernelId::kTrace, g, params, pixels, sizeof(GpuPixel),
                                          pixels, host.data(), [](uint64_t) {});
-    if (ctx.loop_limited()) {
+    if (ctx.device_ends_loops()) {
         // Loop iterations of each pixel's invocation, bounded from above: tape words evaluated,
         // and per step the level walk and the few fixed loops.
         const uint64_t per_step = g.level_info.size() + 8;
@@ -234,7 +236,7 @@ void discretize(Device& device, const Grid& grid, uint32_t n, std::span<float> o
     const Buffer& params = upload_params(ctx, local, prm);
     // A sample on the full tree walks all of it in one invocation.
     const auto check_full_tree = [&](uint64_t samples) {
-        if (ctx.loop_limited() && uint64_t(sc.size()) + 64 >= Context::kLoopLimit)
+        if (ctx.device_ends_loops() && uint64_t(sc.size()) + 64 >= Context::kLoopLimit)
             throw GpuError(std::to_string(samples) + " samples need the full tree of " +
                            std::to_string(sc.size()) + " nodes, beyond the loop limit of " +
                            ctx.device_name() + "; use --backend cpu or a GPU");
