@@ -340,7 +340,7 @@ const std::vector<Mirror>& mirrors() {
             {SDFPRUNE_MEMBER(SlicePush, first), SDFPRUNE_MEMBER(SlicePush, count),
              SDFPRUNE_MEMBER(SlicePush, stack_threads), SDFPRUNE_MEMBER(SlicePush, base),
              SDFPRUNE_MEMBER(SlicePush, full_tree_pass), SDFPRUNE_MEMBER(SlicePush, full_tree_fits),
-             SDFPRUNE_MEMBER(SlicePush, deferred_capacity), SDFPRUNE_MEMBER(SlicePush, pad)},
+             SDFPRUNE_MEMBER(SlicePush, deferred_capacity), SDFPRUNE_MEMBER(SlicePush, loop_probe)},
             Scope::kPush),
     };
     return table;

@@ -323,13 +323,22 @@ TEST(Gpu, SmallBufferRangeSplitsTheWork) {
 // plan's. 3,000 equal spheres in a chain of unions: no operator is decided in any cell, so
 // every near-field tape holds all 5,999 words. Pruning walks them within the limit, and so does
 // a sample's one evaluation; a pixel's march evaluates the tape at every step, and does not.
+// With 20,000, a hit pixel's first evaluation takes most of its iterations, its march ends at
+// the limit as if it missed, and its count of evaluations stays below the limit: until the
+// kernels probed the limit (slice.glsl), lavapipe's image showed no hit at all, without a word.
+// 33,000 such spheres make tapes that not even one evaluation walks within the limit: tracing
+// and discretizing refuse them before their kernels run (pruning these two takes lavapipe's
+// plan, which resumes its steps over several dispatches).
 TEST(Gpu, ImagesPastTheLoopLimitAreRefused) {
     SDFPRUNE_REQUIRE_DEVICE(dev);
     if (!is_lavapipe(*dev)) GTEST_SKIP() << dev->name() << " ends no loops";
-    SceneBuilder b;
-    Shape blob = b.sphere(0.5f);
-    for (int i = 1; i < 3000; ++i) blob = blob | b.sphere(0.5f);
-    const Scene sc = b.build(blob);
+    const auto equal_spheres = [](int count) {
+        SceneBuilder b;
+        Shape blob = b.sphere(0.5f);
+        for (int i = 1; i < count; ++i) blob = blob | b.sphere(0.5f);
+        return b.build(blob);
+    };
+    const Scene sc = equal_spheres(3000);
     PruneOptions o;
     o.resolution = 16;
     o.refine = 1;
@@ -360,6 +369,38 @@ TEST(Gpu, ImagesPastTheLoopLimitAreRefused) {
             << (error.empty() ? "the image was made" : error);
         std::vector<float> samples(8 * 8 * 8);
         EXPECT_NO_THROW(gpu::discretize(d, grid, 8, samples));
+        if (planned_as_a_gpu) continue;
+        PruneOptions coarse = o;
+        coarse.resolution = 4;
+        const Scene many = equal_spheres(20000);
+        const gpu::Grid longer_tapes = gpu::prune(d, many, coarse);
+        ASSERT_EQ(longer_tapes.stats().tape_max, many.size()) << "a tape was pruned";
+        error.clear();
+        try {
+            gpu::render(d, longer_tapes, ro);
+        } catch (const gpu::GpuError& e) {
+            error = e.what();
+        }
+        EXPECT_NE(error.find("loop iterations per pixel"), std::string::npos)
+            << "20,000 spheres: " << (error.empty() ? "the image was made" : error);
+        EXPECT_NO_THROW(gpu::discretize(d, longer_tapes, 8, samples));
+
+        const Scene longest = equal_spheres(33000);
+        const gpu::Grid long_tapes = gpu::prune(d, longest, coarse);
+        ASSERT_EQ(long_tapes.stats().tape_max, longest.size()) << "a tape was pruned";
+        for (const bool tracing : {true, false}) {
+            error.clear();
+            try {
+                if (tracing)
+                    gpu::render(d, long_tapes, ro);
+                else
+                    gpu::discretize(d, long_tapes, 8, samples);
+            } catch (const gpu::GpuError& e) {
+                error = e.what();
+            }
+            EXPECT_NE(error.find("exceed the loop limit"), std::string::npos)
+                << (tracing ? "tracing: " : "discretizing: ") << (error.empty() ? "made" : error);
+        }
     }
 }
 

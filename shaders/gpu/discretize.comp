@@ -42,5 +42,6 @@ void main() {
     } else {
         v = eval_tape(at.c.tape, p, tid, pc.stack_threads);
     }
+    probe_loop_limit();
     values[index - pc.base] = v;
 }

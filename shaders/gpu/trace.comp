@@ -196,6 +196,7 @@ void main() {
             out_color = vec4(c, 1.0);
         }
     }
+    probe_loop_limit();
     pixels[index - pc.base].color = out_color;
     pixels[index - pc.base].evals = g_evals;
     pixels[index - pc.base].steps = g_steps;

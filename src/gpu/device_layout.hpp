@@ -190,10 +190,11 @@ struct DiscretizeParams {
 };
 // trace.comp and discretize.comp: Push (slice.glsl). Items [first, first + count) of a slice,
 // written from index `base` of the output buffer; full_tree_pass 1 takes them from the deferred
-// list instead (slice.glsl says how the two passes share the work).
+// list instead (slice.glsl says how the two passes share the work); loop_probe, the iterations
+// of the loop limit's probe (0: none).
 struct SlicePush {
     uint32_t first, count, stack_threads, base;
-    uint32_t full_tree_pass, full_tree_fits, deferred_capacity, pad;
+    uint32_t full_tree_pass, full_tree_fits, deferred_capacity, loop_probe;
 };
 
 static_assert(sizeof(GpuNode) == 16 && sizeof(GpuPrimitiveExtra) == 48);

@@ -43,6 +43,9 @@ struct ChunkedRun {
     double gpu_ms = 0;
     uint64_t stack_words = 0;      // per thread, in the first pass
     uint64_t full_tree_items = 0;  // items evaluated again in the full-tree pass
+    // An invocation reached the device's loop limit (slice.glsl: probe_loop_limit): the output
+    // is wrong, and the run stopped at that chunk.
+    bool loop_limit_reached = false;
 };
 
 // Threads for the full-tree pass over `items` items: as many as need it, within the scratch
@@ -64,7 +67,9 @@ uint32_t full_tree_threads(const Context& ctx, uint64_t items, uint64_t stack_by
 // every item in dispatches of as many threads as stacks sized for the grid's finest tapes let
 // share the scratch budget; the items that need the full tree are deferred to the second,
 // which takes only them, with full-depth stacks. `check_full_tree` is called with the count of
-// deferred items before the second pass runs (to refuse what the device cannot do).
+// deferred items before the second pass runs (to refuse what the device cannot do). On a device
+// that ends loops early, each pass's probe of that limit is read back, and the run stops where
+// an invocation reached it.
 ChunkedRun run_in_chunks(Context& ctx, KernelId kernel, const DeviceGrid& g, const Buffer& params,
                          uint64_t total, uint64_t item_bytes, uint64_t max_chunk, void* host,
                          const std::function<void(uint64_t)>& check_full_tree) {
@@ -82,7 +87,10 @@ ChunkedRun run_in_chunks(Context& ctx, KernelId kernel, const DeviceGrid& g, con
     const uint64_t chunk = std::min({total, max_chunk, ctx.max_buffer_bytes() / item_bytes});
     Buffer& out = local.create(chunk * item_bytes);
     uint64_t deferred_capacity = std::min(chunk, deferred_list_items());
-    Buffer* deferred = &local.create((1 + deferred_capacity) * 4);
+    // The deferred list: its count, the loop limit's flag, then the items (slice.glsl).
+    constexpr uint64_t kDeferredHeaderBytes = 8;
+    Buffer* deferred = &local.create(kDeferredHeaderBytes + deferred_capacity * 4);
+    const bool probe = ctx.device_ends_loops();
     Buffer& full_stack = local.slot();  // made when an item first needs it
     uint32_t full_threads = 0;
     // One dispatch: `count` items from `first` (of the chunk from `base`, or of the deferred
@@ -97,6 +105,7 @@ ChunkedRun run_in_chunks(Context& ctx, KernelId kernel, const DeviceGrid& g, con
         push.full_tree_pass = full_tree_pass ? 1 : 0;
         push.full_tree_fits = full_tree_fits ? 1 : 0;
         push.deferred_capacity = uint32_t(deferred_capacity);
+        push.loop_probe = probe ? kernel::kLoopProbeIterations : 0;
         ctx.dispatch(kernel,
                      {&g.nodes, &g.params, &g.extras, &g.pool, &g.cells, &g.levels, &params, &out,
                       &stacks, deferred},
@@ -104,21 +113,26 @@ ChunkedRun run_in_chunks(Context& ctx, KernelId kernel, const DeviceGrid& g, con
     };
     for (uint64_t base = 0; base < total; base += chunk) {
         const uint64_t count = std::min(chunk, total - base);
-        uint32_t deferred_count = 0;
+        uint32_t header[2] = {0, 0};  // the deferred count, the loop limit's flag
+        uint32_t& deferred_count = header[0];
         for (;;) {
             ctx.begin();
-            ctx.fill(*deferred, 0, 0, 4);
+            ctx.fill(*deferred, 0, 0, kDeferredHeaderBytes);
             for (uint64_t done = 0; done < count; done += threads)
                 dispatch(base + done, std::min<uint64_t>(threads, count - done), threads, base,
                          false, stack);
             run.gpu_ms += ctx.submit();
-            ctx.download(*deferred, &deferred_count, 4);
+            ctx.download(*deferred, header, kDeferredHeaderBytes);
+            if (header[1] != 0) {
+                run.loop_limit_reached = true;
+                return run;
+            }
             if (deferred_count <= deferred_capacity) break;
             // The list missed some: a list for all of them, and the chunk again (the same
             // items defer).
             deferred_capacity = deferred_count;
             ctx.destroy(*deferred);
-            deferred = &local.create((1 + deferred_capacity) * 4);
+            deferred = &local.create(kDeferredHeaderBytes + deferred_capacity * 4);
         }
         if (deferred_count > 0) {
             check_full_tree(deferred_count);
@@ -134,6 +148,13 @@ ChunkedRun run_in_chunks(Context& ctx, KernelId kernel, const DeviceGrid& g, con
                          full_threads, base, true, full_stack);
             run.gpu_ms += ctx.submit();
             run.full_tree_items += deferred_count;
+            if (probe) {
+                ctx.download(*deferred, header, kDeferredHeaderBytes);
+                if (header[1] != 0) {
+                    run.loop_limit_reached = true;
+                    return run;
+                }
+            }
         }
         ctx.download(out, static_cast<char*>(host) + base * item_bytes, count * item_bytes);
     }
@@ -141,15 +162,22 @@ ChunkedRun run_in_chunks(Context& ctx, KernelId kernel, const DeviceGrid& g, con
 }
 
 // On a device that ends an invocation's loops early (lavapipe), one evaluation of the longest
-// finest tape must fit the limit: past it an invocation stops partway and its output (and the
-// counts that render checks after) are meaningless. The limit is the device's, whatever the
-// pruning's plan (SDFPRUNE_VULKAN_LOOP_LIMITED plans lavapipe's steps as a GPU's, and changes
-// nothing here).
+// finest tape must fit the limit: a grid with a longer tape is refused before any kernel runs
+// (the probe, slice.glsl, would refuse its output after). The limit is the device's, whatever
+// the pruning's plan (SDFPRUNE_VULKAN_LOOP_LIMITED plans lavapipe's steps as a GPU's, and
+// changes nothing here).
 void check_tape_loops(const Context& ctx, const DeviceGrid& g) {
     if (ctx.device_ends_loops() && uint64_t(g.stats.tape_max) + 64 >= Context::kLoopLimit)
         throw GpuError("tapes of " + std::to_string(g.stats.tape_max) +
                        " nodes exceed the loop limit of " + ctx.device_name() +
                        "; use --backend cpu or a GPU");
+}
+
+// An image or samples some of whose invocations reached the device's loop limit (their outputs
+// are wrong): `what` needs more than the device allows.
+[[noreturn]] void refuse_past_loop_limit(const Context& ctx, const char* what) {
+    throw GpuError(std::string(what) + " than " + ctx.device_name() + " allows (" +
+                   std::to_string(Context::kLoopLimit) + "); use --backend cpu or a GPU");
 }
 
 }  // namespace
@@ -180,20 +208,10 @@ Image render(Device& device, const Grid& grid, const RenderOptions& opt, RenderS
     LocalBuffers local(ctx);
     const Buffer& params = upload_params(ctx, local, prm);
     std::vector<GpuPixel> host(pixels);
-    // (The full-tree pass's pixels are checked against the loop limit with all the others.)
     const ChunkedRun run = run_in_chunks(ctx, KernelId::kTrace, g, params, pixels, sizeof(GpuPixel),
                                          pixels, host.data(), [](uint64_t) {});
-    if (ctx.device_ends_loops()) {
-        // Loop iterations of each pixel's invocation, bounded from above: tape words evaluated,
-        // and per step the level walk and the few fixed loops.
-        const uint64_t per_step = g.level_info.size() + 8;
-        for (const GpuPixel& p : host)
-            if (p.evals + (uint64_t(p.steps) + 8) * per_step >= Context::kLoopLimit)
-                throw GpuError("the image needs more loop iterations per pixel than " +
-                               ctx.device_name() + " allows (" +
-                               std::to_string(Context::kLoopLimit) +
-                               "); use --backend cpu or a GPU");
-    }
+    if (run.loop_limit_reached)
+        refuse_past_loop_limit(ctx, "the image needs more loop iterations per pixel");
 
     std::vector<vec3> color(pixels);
     std::vector<uint32_t> evals(pixels);
@@ -245,6 +263,8 @@ void discretize(Device& device, const Grid& grid, uint32_t n, std::span<float> o
     const ChunkedRun run =
         run_in_chunks(ctx, KernelId::kDiscretize, g, params, total, sizeof(float),
                       uint64_t(1) << 26, out.data(), check_full_tree);
+    if (run.loop_limit_reached)
+        refuse_past_loop_limit(ctx, "the samples need more loop iterations per sample");
     if (stats) {
         stats->gpu_ms = run.gpu_ms;
         stats->stack_words = run.stack_words;
