@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <initializer_list>
 #include <memory>
 #include <string>
@@ -338,13 +339,39 @@ TEST(Gpu, ImagesPastTheLoopLimitAreRefused) {
         for (int i = 1; i < count; ++i) blob = blob | b.sphere(0.5f);
         return b.build(blob);
     };
-    const Scene sc = equal_spheres(3000);
-    PruneOptions o;
-    o.resolution = 16;
-    o.refine = 1;
+    // The GpuError's message, or "made" where none is thrown.
+    const auto error_of = [](const std::function<void()>& run) {
+        try {
+            run();
+        } catch (const gpu::GpuError& e) {
+            return std::string(e.what());
+        }
+        return std::string("made");
+    };
     RenderOptions ro;
     ro.width = ro.height = 16;
-    ro.camera = orbit_camera(sc.aabb, 30, 20, 0, 40);
+    std::vector<float> samples(8 * 8 * 8);
+    // The grid's tapes unpruned, the image refused with `expected`; the samples, where they fit
+    // the limit, the CPU's (on lavapipe bit for bit).
+    const auto check = [&](gpu::Device& d, const Scene& sc, uint32_t grid,
+                           const std::string& expected, bool samples_fit) {
+        SCOPED_TRACE(std::to_string(sc.size()) + " nodes, " + std::to_string(grid) + "³");
+        PruneOptions o;
+        o.resolution = grid;
+        o.refine = 1;
+        const gpu::Grid pruned = gpu::prune(d, sc, o);
+        ASSERT_EQ(pruned.stats().tape_max, sc.size()) << "a tape was pruned";
+        ro.camera = orbit_camera(sc.aabb, 30, 20, 0, 40);
+        const std::string traced = error_of([&] { gpu::render(d, pruned, ro); });
+        EXPECT_NE(traced.find(expected), std::string::npos) << "tracing: " << traced;
+        if (samples_fit) {
+            EXPECT_LE(discretize_mismatches(prune(sc, o), d, pruned, 8),
+                      exact_device(d) ? size_t(0) : samples.size());
+        } else {
+            const std::string sampled = error_of([&] { gpu::discretize(d, pruned, 8, samples); });
+            EXPECT_NE(sampled.find(expected), std::string::npos) << "discretizing: " << sampled;
+        }
+    };
     for (const bool planned_as_a_gpu : {false, true}) {
         SCOPED_TRACE(planned_as_a_gpu ? "planned as a GPU" : "planned for lavapipe");
         // (As the ctest Gpu.planned_as_a_gpu plans it, the jobs dealt; lavapipe's own plan
@@ -357,50 +384,10 @@ TEST(Gpu, ImagesPastTheLoopLimitAreRefused) {
                                  : EnvSettings{{"SDFPRUNE_VULKAN_LOOP_LIMITED", ""}});
         gpu::Device d;
         ASSERT_EQ(d.loop_limited(), !planned_as_a_gpu);
-        const gpu::Grid grid = gpu::prune(d, sc, o);
-        ASSERT_EQ(grid.stats().tape_max, sc.size()) << "a tape was pruned";
-        std::string error;
-        try {
-            gpu::render(d, grid, ro);
-        } catch (const gpu::GpuError& e) {
-            error = e.what();
-        }
-        EXPECT_NE(error.find("loop iterations per pixel"), std::string::npos)
-            << (error.empty() ? "the image was made" : error);
-        std::vector<float> samples(8 * 8 * 8);
-        EXPECT_NO_THROW(gpu::discretize(d, grid, 8, samples));
+        check(d, equal_spheres(3000), 16, "loop iterations per pixel", true);
         if (planned_as_a_gpu) continue;
-        PruneOptions coarse = o;
-        coarse.resolution = 4;
-        const Scene many = equal_spheres(20000);
-        const gpu::Grid longer_tapes = gpu::prune(d, many, coarse);
-        ASSERT_EQ(longer_tapes.stats().tape_max, many.size()) << "a tape was pruned";
-        error.clear();
-        try {
-            gpu::render(d, longer_tapes, ro);
-        } catch (const gpu::GpuError& e) {
-            error = e.what();
-        }
-        EXPECT_NE(error.find("loop iterations per pixel"), std::string::npos)
-            << "20,000 spheres: " << (error.empty() ? "the image was made" : error);
-        EXPECT_NO_THROW(gpu::discretize(d, longer_tapes, 8, samples));
-
-        const Scene longest = equal_spheres(33000);
-        const gpu::Grid long_tapes = gpu::prune(d, longest, coarse);
-        ASSERT_EQ(long_tapes.stats().tape_max, longest.size()) << "a tape was pruned";
-        for (const bool tracing : {true, false}) {
-            error.clear();
-            try {
-                if (tracing)
-                    gpu::render(d, long_tapes, ro);
-                else
-                    gpu::discretize(d, long_tapes, 8, samples);
-            } catch (const gpu::GpuError& e) {
-                error = e.what();
-            }
-            EXPECT_NE(error.find("exceed the loop limit"), std::string::npos)
-                << (tracing ? "tracing: " : "discretizing: ") << (error.empty() ? "made" : error);
-        }
+        check(d, equal_spheres(20000), 4, "loop iterations per pixel", true);
+        check(d, equal_spheres(33000), 4, "exceed the loop limit", false);
     }
 }
 
