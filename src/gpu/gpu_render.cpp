@@ -111,10 +111,15 @@ ChunkedRun run_in_chunks(Context& ctx, KernelId kernel, const DeviceGrid& g, con
                       &stacks, deferred},
                      &push, sizeof(push), ctx.groups_for(count));
     };
+    uint32_t header[2] = {0, 0};  // the deferred list's count and loop limit flag, read back
+    uint32_t& deferred_count = header[0];
+    // Reads the header back after a pass: whether an invocation reached the loop limit.
+    const auto limit_reached = [&] {
+        ctx.download(*deferred, header, kDeferredHeaderBytes);
+        return header[1] != 0;
+    };
     for (uint64_t base = 0; base < total; base += chunk) {
         const uint64_t count = std::min(chunk, total - base);
-        uint32_t header[2] = {0, 0};  // the deferred count, the loop limit's flag
-        uint32_t& deferred_count = header[0];
         for (;;) {
             ctx.begin();
             ctx.fill(*deferred, 0, 0, kDeferredHeaderBytes);
@@ -122,8 +127,7 @@ ChunkedRun run_in_chunks(Context& ctx, KernelId kernel, const DeviceGrid& g, con
                 dispatch(base + done, std::min<uint64_t>(threads, count - done), threads, base,
                          false, stack);
             run.gpu_ms += ctx.submit();
-            ctx.download(*deferred, header, kDeferredHeaderBytes);
-            if (header[1] != 0) {
+            if (limit_reached()) {
                 run.loop_limit_reached = true;
                 return run;
             }
@@ -148,12 +152,9 @@ ChunkedRun run_in_chunks(Context& ctx, KernelId kernel, const DeviceGrid& g, con
                          full_threads, base, true, full_stack);
             run.gpu_ms += ctx.submit();
             run.full_tree_items += deferred_count;
-            if (probe) {
-                ctx.download(*deferred, header, kDeferredHeaderBytes);
-                if (header[1] != 0) {
-                    run.loop_limit_reached = true;
-                    return run;
-                }
+            if (probe && limit_reached()) {
+                run.loop_limit_reached = true;
+                return run;
             }
         }
         ctx.download(out, static_cast<char*>(host) + base * item_bytes, count * item_bytes);
